@@ -1,0 +1,1 @@
+"""css subpackage (see DESIGN.md)."""

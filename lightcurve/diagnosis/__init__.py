@@ -1,0 +1,1 @@
+"""diagnosis subpackage (see DESIGN.md)."""

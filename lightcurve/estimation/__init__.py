@@ -1,0 +1,1 @@
+"""estimation subpackage (see DESIGN.md)."""

@@ -1,0 +1,1 @@
+"""filters subpackage (see DESIGN.md)."""

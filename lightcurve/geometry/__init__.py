@@ -1,0 +1,1 @@
+"""geometry subpackage (see DESIGN.md)."""

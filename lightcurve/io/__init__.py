@@ -1,0 +1,1 @@
+"""File input/output: atomic writes, TOML validation, HDF5 lightcurves, CSV recordings."""

@@ -1,0 +1,1 @@
+"""photometry subpackage (see DESIGN.md)."""

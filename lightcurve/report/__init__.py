@@ -1,0 +1,1 @@
+"""report subpackage (see DESIGN.md)."""

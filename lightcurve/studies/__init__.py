@@ -1,0 +1,1 @@
+"""studies subpackage (see DESIGN.md)."""
