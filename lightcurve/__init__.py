@@ -3,10 +3,42 @@
 Conventions (see DESIGN.md): SI units inside; quaternions scalar first, inertial→body
 passive (``v_b = A(q) v_I``); ECI is skyfield's GCRS; time ``t`` in seconds since a scenario
 epoch (UTC).
+
+Top-level API (imported lazily so that ``import lightcurve`` stays fast):
+
+- :func:`simulate` — scenario (object or TOML path) → :class:`Lightcurve`
+- :func:`read_lightcurve` — HDF5 file → :class:`Lightcurve`; :meth:`Lightcurve.write`
+- :func:`load_scenario` — validated scenario from TOML
 """
 
-from .errors import InputError, ConvergenceError
+from .errors import ConvergenceError, InputError
 
 __version__ = "0.1.0"
 
-__all__ = ["InputError", "ConvergenceError", "__version__"]
+__all__ = ["InputError", "ConvergenceError", "__version__", "simulate", "read_lightcurve",
+           "Lightcurve", "load_scenario"]
+
+
+def simulate(scenario, seed=None):
+    """Simulate a lightcurve from a :class:`~lightcurve.studies.scenario.Scenario` or a TOML path.
+
+    Returns a :class:`Lightcurve`; ``seed`` overrides the scenario's seed.
+    """
+    from .studies.scenario import Scenario, load_scenario
+    from .studies.simulate import simulate as _simulate
+
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    return _simulate(scenario, seed=seed)
+
+
+def __getattr__(name):
+    if name in ("read_lightcurve", "Lightcurve"):
+        from .io import lightcurve_h5
+
+        return getattr(lightcurve_h5, name)
+    if name == "load_scenario":
+        from .studies.scenario import load_scenario
+
+        return load_scenario
+    raise AttributeError(f"module 'lightcurve' has no attribute {name!r}")

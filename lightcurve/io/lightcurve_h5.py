@@ -1,0 +1,276 @@
+"""The lightcurve HDF5 file (layout in docs/formats.md) and its in-memory object.
+
+A :class:`Lightcurve` holds apparent magnitudes of one object measured (or simulated) from one
+or more ground sites, the geometry needed to model them (object, site and Sun positions in ECI =
+GCRS, metres) and, for simulated data, the truth attitude and the noise-free magnitudes.
+Writes are atomic (temporary file + rename); reads validate every dataset and raise
+:class:`~lightcurve.errors.InputError` naming the file and the dataset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .atomic import atomic_path
+
+__all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
+
+FORMAT_VERSION = 1
+
+
+@dataclass
+class Lightcurve:
+    """Apparent-magnitude time series with its observation geometry.
+
+    Attributes (N measurements, K sites)
+    ------------------------------------
+    epoch_utc : str
+        ISO 8601 UTC epoch; ``t`` counts seconds from it.
+    t : (N,) float, s
+    mag : (N,) float, apparent magnitude (NaN where not measured)
+    mag_sigma : (N,) float, 1σ magnitude noise
+    site : (N,) int, index into ``site_names``
+    site_names : list[str] (K)
+    site_lla_deg_m : (K, 3) geodetic latitude (deg), longitude (deg), height (m), WGS84
+    r_obj_eci_m, r_site_eci_m, r_sun_eci_m : (N, 3) GCRS positions, m
+    lit_fraction : (N,) fraction of the solar disc seen from the object (1 = full Sun)
+    elevation_rad : (N,) object elevation above the site's horizon, rad
+    truth_q : (N, 4) or None, inertial→body quaternion (scalar first)
+    truth_omega_rad_s : (N, 3) or None, body angular velocity in body axes
+    truth_mag : (N,) or None, noise-free magnitude
+    scenario_toml : str, the scenario that produced the file ('' for imported recordings)
+    attrs : dict, further metadata (e.g. shape name, r_percent)
+    """
+
+    epoch_utc: str
+    t: np.ndarray
+    mag: np.ndarray
+    mag_sigma: np.ndarray
+    site: np.ndarray
+    site_names: list
+    site_lla_deg_m: np.ndarray
+    r_obj_eci_m: np.ndarray
+    r_site_eci_m: np.ndarray
+    r_sun_eci_m: np.ndarray
+    lit_fraction: np.ndarray | None = None
+    elevation_rad: np.ndarray | None = None
+    truth_q: np.ndarray | None = None
+    truth_omega_rad_s: np.ndarray | None = None
+    truth_mag: np.ndarray | None = None
+    scenario_toml: str = ""
+    attrs: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.validate()
+
+    # ------------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return int(np.asarray(self.t).shape[0])
+
+    @property
+    def has_truth(self) -> bool:
+        """True when the file carries the truth attitude (simulated data)."""
+        return self.truth_q is not None
+
+    @property
+    def obj_to_sun_unit(self) -> np.ndarray:
+        """(N,3) unit vector from the object to the Sun, ECI."""
+        d = self.r_sun_eci_m - self.r_obj_eci_m
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    @property
+    def obj_to_obs_unit(self) -> np.ndarray:
+        """(N,3) unit vector from the object to the observing site, ECI."""
+        d = self.r_site_eci_m - self.r_obj_eci_m
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    @property
+    def range_obs_m(self) -> np.ndarray:
+        """(N,) object–observer distance, m."""
+        return np.linalg.norm(self.r_site_eci_m - self.r_obj_eci_m, axis=1)
+
+    @property
+    def range_sun_m(self) -> np.ndarray:
+        """(N,) object–Sun distance, m."""
+        return np.linalg.norm(self.r_sun_eci_m - self.r_obj_eci_m, axis=1)
+
+    @property
+    def phase_angle_rad(self) -> np.ndarray:
+        """(N,) Sun–object–observer angle, rad."""
+        c = np.sum(self.obj_to_sun_unit * self.obj_to_obs_unit, axis=1)
+        return np.arccos(np.clip(c, -1.0, 1.0))
+
+    def subset(self, mask) -> "Lightcurve":
+        """A new Lightcurve with only the rows where ``mask`` is true (or the given indices)."""
+        idx = np.arange(len(self))[mask]
+        kw = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray) and f.name not in ("site_lla_deg_m",) and v.shape[:1] == (len(self),):
+                kw[f.name] = v[idx]
+        return replace(self, **kw)
+
+    # ------------------------------------------------------------------------------------
+    def validate(self, file=None) -> None:
+        """Check shapes, finiteness and ordering; raise InputError naming the field."""
+        n = np.asarray(self.t).shape[0] if np.ndim(self.t) == 1 else -1
+
+        def err(fieldname, msg, value=None, allowed=None):
+            return InputError(msg, file=file, field=fieldname, value=value, allowed=allowed)
+
+        if n < 0:
+            raise err("t", "expected a 1-D array of times")
+        self.t = np.asarray(self.t, dtype=float)
+        if not np.all(np.isfinite(self.t)):
+            raise err("t", "times must be finite")
+        if n > 1 and np.any(np.diff(self.t) < 0):
+            k = int(np.argmax(np.diff(self.t) < 0))
+            raise err("t", f"times must be non-decreasing (row {k + 1} goes back in time)")
+        for name, shape in (("mag", (n,)), ("mag_sigma", (n,)), ("site", (n,)),
+                            ("r_obj_eci_m", (n, 3)), ("r_site_eci_m", (n, 3)), ("r_sun_eci_m", (n, 3)),
+                            ("lit_fraction", (n,)), ("elevation_rad", (n,)), ("truth_q", (n, 4)),
+                            ("truth_omega_rad_s", (n, 3)), ("truth_mag", (n,))):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            v = np.asarray(v, dtype=np.int64 if name == "site" else float)
+            if v.shape != shape:
+                raise err(name, f"expected shape {shape}, got {v.shape}")
+            if name in ("r_obj_eci_m", "r_site_eci_m", "r_sun_eci_m", "truth_q", "truth_omega_rad_s") \
+                    and not np.all(np.isfinite(v)):
+                raise err(name, "contains NaN or infinite values")
+            setattr(self, name, v)
+        if np.any((self.mag_sigma <= 0) & np.isfinite(self.mag)):
+            raise err("mag_sigma", "measurement sigmas must be positive", allowed="> 0")
+        k = len(self.site_names)
+        self.site_names = [str(s) for s in self.site_names]
+        if n and (self.site.min() < 0 or self.site.max() >= k):
+            raise err("site", "site index out of range", allowed=f"0..{k - 1}")
+        self.site_lla_deg_m = np.asarray(self.site_lla_deg_m, dtype=float).reshape(k, 3)
+        if self.truth_q is not None:
+            nq = np.linalg.norm(self.truth_q, axis=1)
+            if np.any(np.abs(nq - 1) > 1e-6):
+                raise err("truth_q", "quaternions must have unit norm")
+
+    # ------------------------------------------------------------------------------------
+    def write(self, path) -> Path:
+        """Write the HDF5 file atomically (temporary file, then rename); return the path."""
+        import h5py
+
+        path = Path(path)
+        with atomic_path(path, suffix=".h5.tmp") as tmp:
+            with h5py.File(tmp, "w") as h:
+                h.attrs["format_version"] = FORMAT_VERSION
+                h.attrs["epoch_utc"] = self.epoch_utc
+                h.attrs["scenario"] = self.scenario_toml
+                for k, v in self.attrs.items():
+                    h.attrs[f"meta_{k}"] = v
+                h["t"] = self.t
+                h["t"].attrs["units"] = "s since epoch_utc"
+                h["mag"] = self.mag
+                h["mag_sigma"] = self.mag_sigma
+                h["site"] = self.site.astype(np.int32)
+                g = h.create_group("sites")
+                g["name"] = np.array(self.site_names, dtype=h5py.string_dtype())
+                g["lla_deg_m"] = self.site_lla_deg_m
+                g = h.create_group("geometry")
+                g["r_obj_eci_m"] = self.r_obj_eci_m
+                g["r_site_eci_m"] = self.r_site_eci_m
+                g["r_sun_eci_m"] = self.r_sun_eci_m
+                if self.lit_fraction is not None:
+                    g["lit_fraction"] = self.lit_fraction
+                if self.elevation_rad is not None:
+                    g["elevation_rad"] = self.elevation_rad
+                if self.truth_q is not None:
+                    g = h.create_group("truth")
+                    g["q"] = self.truth_q
+                    g["omega_rad_s"] = self.truth_omega_rad_s
+                    if self.truth_mag is not None:
+                        g["mag"] = self.truth_mag
+        return path
+
+
+_MAX_ROWS = 50_000_000
+
+
+def read_lightcurve(path) -> Lightcurve:
+    """Read and validate a lightcurve HDF5 file written by :meth:`Lightcurve.write`.
+
+    Raises :class:`InputError` (naming the file and dataset) for a missing, truncated or
+    corrupted file, a wrong format version, missing datasets or inconsistent shapes.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError("file not found", file=path)
+    try:
+        h = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"not a readable HDF5 file (truncated or corrupted?): {exc}", file=path) from None
+    try:
+        with h:
+            ver = h.attrs.get("format_version")
+            if ver is None:
+                raise InputError("missing root attribute", file=path, field="format_version")
+            if int(ver) != FORMAT_VERSION:
+                raise InputError("unsupported format version", file=path, field="format_version",
+                                 value=int(ver), allowed=str(FORMAT_VERSION))
+
+            def ds(name, required=True):
+                if name not in h:
+                    if required:
+                        raise InputError("missing dataset", file=path, field=name)
+                    return None
+                d = h[name]
+                if not isinstance(d, h5py.Dataset):
+                    raise InputError("expected a dataset", file=path, field=name)
+                if d.size > _MAX_ROWS * 4:
+                    raise InputError("dataset too large", file=path, field=name, value=d.shape)
+                try:
+                    return d[()]
+                except (OSError, RuntimeError) as exc:
+                    raise InputError(f"cannot read dataset (corrupted?): {exc}", file=path, field=name) from None
+
+            names = ds("sites/name")
+            names = [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(names)]
+            meta = {k[5:]: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()
+                    if k.startswith("meta_")}
+            epoch = h.attrs.get("epoch_utc")
+            if epoch is None:
+                raise InputError("missing root attribute", file=path, field="epoch_utc")
+            scen = h.attrs.get("scenario", "")
+            kw = dict(
+                epoch_utc=epoch.decode() if isinstance(epoch, bytes) else str(epoch),
+                t=ds("t"), mag=ds("mag"), mag_sigma=ds("mag_sigma"), site=ds("site"),
+                site_names=names, site_lla_deg_m=ds("sites/lla_deg_m"),
+                r_obj_eci_m=ds("geometry/r_obj_eci_m"), r_site_eci_m=ds("geometry/r_site_eci_m"),
+                r_sun_eci_m=ds("geometry/r_sun_eci_m"),
+                lit_fraction=ds("geometry/lit_fraction", False),
+                elevation_rad=ds("geometry/elevation_rad", False),
+                truth_q=ds("truth/q", False), truth_omega_rad_s=ds("truth/omega_rad_s", False),
+                truth_mag=ds("truth/mag", False),
+                scenario_toml=scen.decode() if isinstance(scen, bytes) else str(scen),
+                attrs=meta,
+            )
+    except InputError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise InputError(f"corrupted or unexpected HDF5 content: {exc}", file=path) from None
+    if (kw["truth_q"] is None) != (kw["truth_omega_rad_s"] is None):
+        raise InputError("truth/q and truth/omega_rad_s must both be present or both absent",
+                         file=path, field="truth")
+    try:
+        lc = Lightcurve.__new__(Lightcurve)
+        for k, v in kw.items():
+            setattr(lc, k, v)
+        lc.validate(file=path)
+    except InputError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"inconsistent datasets: {exc}", file=path) from None
+    return lc

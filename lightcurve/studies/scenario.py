@@ -1,0 +1,208 @@
+"""Scenario files: loading and validating the TOML that defines one simulated observation.
+
+Sections (documented in docs/formats.md): ``[scenario]`` (epoch_utc, duration_s, cadence_s,
+seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (library name or
+mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
+ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
+``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
+(physics effects switched on; see the diagnosis issue).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.tomlio import Section, load_toml, loads_toml
+
+__all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario"]
+
+
+@dataclass
+class SiteSpec:
+    """One observing site of a scenario: the resolved site and its observing windows (s)."""
+
+    site: object  # lightcurve.geometry.sites.Site
+    windows_s: list
+
+
+@dataclass
+class AttitudeSpec:
+    """Initial attitude and the truth dynamics.
+
+    ``euler321_deg`` = (φ about z, θ about y, ψ about x), inertial→body (Bernard eq. 3.7);
+    ``omega_deg_s`` body rates in body axes; ``acs_sigma_deg`` the 1σ ACS attitude noise applied
+    at measurement times (controlled model, Bernard eq. 7.8–7.11); ``eta_sigma_deg_s2`` the 1σ
+    white angular-acceleration noise density of the uncontrolled model; ``torques`` the
+    environmental torques of the uncontrolled model; ``inertia_kg_m2`` overrides the shape's.
+    """
+
+    dynamics: str
+    euler321_deg: np.ndarray
+    omega_deg_s: np.ndarray
+    acs_sigma_deg: float = 0.0
+    eta_sigma_deg_s2: float = 0.0
+    torques: tuple = ()
+    inertia_kg_m2: np.ndarray | None = None
+
+
+@dataclass
+class MeasurementSpec:
+    """Measurement model settings.
+
+    ``r_percent``: noise level r of Bernard eq. 9.3 (σ = m·r/3 with r as a fraction);
+    ``ignore_eclipse``: compute magnitudes as if the object were sunlit (thesis cases);
+    ``min_elevation_deg``: lowest usable object elevation; ``require_dark_site`` with
+    ``twilight_deg``: measure only when the Sun is below that altitude at the site;
+    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74).
+    """
+
+    r_percent: float = 1.0
+    ignore_eclipse: bool = False
+    min_elevation_deg: float = 0.0
+    require_dark_site: bool = True
+    twilight_deg: float = -12.0
+    sun_mag: float = -26.74
+
+
+@dataclass
+class Scenario:
+    """A validated scenario (see module docstring)."""
+
+    epoch_utc: str
+    duration_s: float
+    cadence_s: float
+    seed: int
+    orbit: object  # lightcurve.geometry.orbits.Orbit
+    shape: object  # lightcurve.photometry Shape
+    attitude: AttitudeSpec
+    sites: list
+    measurement: MeasurementSpec
+    effects: dict = field(default_factory=dict)
+    name: str = ""
+    source: str = ""
+    text: str = ""
+
+    def with_seed(self, seed: int) -> "Scenario":
+        """A copy with another random seed."""
+        from dataclasses import replace
+
+        return replace(self, seed=int(seed))
+
+
+_DYNAMICS = ("controlled", "uncontrolled")
+_TORQUES = ("gravity_gradient", "srp", "drag")
+
+
+def load_scenario(path, library_dirs=None, site_dirs=None) -> Scenario:
+    """Load and validate a scenario TOML file; relative mesh paths resolve against its folder."""
+    path = Path(path)
+    doc = load_toml(path)
+    return parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"),
+                          library_dirs=library_dirs, site_dirs=site_dirs)
+
+
+def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs=None,
+                   site_dirs=None) -> Scenario:
+    """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`."""
+    from ..geometry.orbits import orbit_from_section
+    from ..geometry.sites import get_site
+    from ..geometry.time import parse_epoch
+    from ..photometry import load_shape
+
+    if isinstance(doc, str):
+        text = doc
+        doc = loads_toml(doc, file=file)
+    root = Section(doc, file=file)
+    sc = root.section("scenario")
+    epoch = sc.str("epoch_utc")
+    parse_epoch(epoch)  # validates ISO 8601 (InputError names the field)
+    duration = sc.float("duration_s", min=0.0, min_open=True, max=30 * 86400.0)
+    cadence = sc.float("cadence_s", 5.0, min=1e-3, max=duration)
+    seed = sc.int("seed", 0, min=0)
+    name = sc.str("name", Path(str(file)).stem)
+    sc.check_unknown(extra_allowed=("description",))
+
+    orbit = orbit_from_section(root.section("orbit"))
+
+    sh = root.section("shape")
+    base = Path(str(file)).parent if file and not str(file).startswith("<") else Path.cwd()
+    if sh.has("mesh"):
+        mesh = base / sh.str("mesh")
+        materials = base / sh.str("materials")
+        spec = (mesh, materials)
+    else:
+        spec = sh.str("name")
+    sh.check_unknown()
+    try:
+        shape = load_shape(spec, library_dirs=library_dirs)
+    except InputError:
+        raise
+    except (FileNotFoundError, KeyError) as exc:
+        raise InputError(f"cannot load shape: {exc}", file=file, field="shape") from None
+
+    at = root.section("attitude")
+    dyn = at.str("dynamics", "controlled", choices=_DYNAMICS)
+    att = AttitudeSpec(
+        dynamics=dyn,
+        euler321_deg=at.vector("euler321_deg", n=3, min=-360.0, max=360.0),
+        omega_deg_s=at.vector("omega_deg_s", n=3, min=-3600.0, max=3600.0),
+        acs_sigma_deg=at.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+        eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
+        inertia_kg_m2=at.matrix("inertia_kg_m2", None, shape=(3, 3)),
+    )
+    torques = at.raw("torques", ["gravity_gradient"] if dyn == "uncontrolled" else [])
+    if not isinstance(torques, list) or any(t not in _TORQUES for t in torques):
+        raise InputError("unknown torque model", file=file, field="attitude.torques", value=torques,
+                         allowed=", ".join(_TORQUES))
+    att.torques = tuple(torques)
+    if att.inertia_kg_m2 is not None:
+        J = att.inertia_kg_m2
+        if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(0.5 * (J + J.T)) <= 0):
+            raise InputError("inertia must be symmetric positive definite", file=file,
+                             field="attitude.inertia_kg_m2", value=J.tolist())
+    at.check_unknown()
+
+    sites = []
+    for s in root.sections("sites"):
+        if s.has("name") and isinstance(s.data.get("name"), str) and not s.has("lat_deg"):
+            site = get_site(s.str("name"), dirs=site_dirs)
+        else:
+            inline = {k: s.raw(k) for k in ("name", "id", "lat_deg", "lon_deg", "height_m") if s.has(k)}
+            site = get_site(inline, dirs=site_dirs)
+        windows = s.raw("windows_s", [[0.0, duration]])
+        ok = isinstance(windows, list) and all(
+            isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
+            and 0 <= w[0] <= w[1] for w in windows)
+        if not ok:
+            raise InputError("expected a list of [start_s, end_s] pairs with 0 <= start <= end",
+                             file=file, field=f"{s.name}.windows_s", value=windows)
+        s.check_unknown(extra_allowed=("lat_deg", "lon_deg", "height_m", "id"))
+        sites.append(SiteSpec(site=site, windows_s=[(float(a), float(b)) for a, b in windows]))
+    if not sites:
+        raise InputError("a scenario needs at least one [[sites]] entry", file=file, field="sites")
+
+    me = root.section("measurement", {})
+    meas = MeasurementSpec(
+        r_percent=me.float("r_percent", 1.0, min=0.0, max=100.0),
+        ignore_eclipse=me.bool("ignore_eclipse", False),
+        min_elevation_deg=me.float("min_elevation_deg", 0.0, min=-5.0, max=90.0),
+        require_dark_site=me.bool("require_dark_site", True),
+        twilight_deg=me.float("twilight_deg", -12.0, min=-90.0, max=10.0),
+        sun_mag=me.float("sun_mag", -26.74, min=-30.0, max=-20.0),
+    )
+    me.check_unknown()
+
+    effects = root.raw("effects", {})
+    if not isinstance(effects, dict):
+        raise InputError("expected a table", file=file, field="effects", value=effects)
+    if effects:
+        raise InputError("no physics effects are available yet (model-mismatch issue); leave "
+                         "[effects] empty", file=file, field="effects", value=sorted(effects))
+    root.check_unknown()
+    return Scenario(epoch_utc=epoch, duration_s=duration, cadence_s=cadence, seed=seed, orbit=orbit,
+                    shape=shape, attitude=att, sites=sites, measurement=meas, effects=effects,
+                    name=name, source=str(file), text=text or "")
