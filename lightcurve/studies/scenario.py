@@ -38,12 +38,16 @@ class AttitudeSpec:
     at measurement times (controlled model, Bernard eq. 7.8–7.11); ``eta_sigma_deg_s2`` the 1σ
     white angular-acceleration noise density of the uncontrolled model; ``torques`` the
     environmental torques of the uncontrolled model; ``inertia_kg_m2`` overrides the shape's.
+    ``frame = "nadir"`` makes ``euler321_deg`` relative to the nadir (LVLH) frame at the epoch
+    (z to the Earth's centre, y along the negative orbit normal) and ``omega_deg_s`` relative to
+    it, so zero angles and rates give a nadir-pointing object turning at the orbit rate.
     """
 
     dynamics: str
     euler321_deg: np.ndarray
     omega_deg_s: np.ndarray
     acs_sigma_deg: float = 0.0
+    frame: str = "inertial"
     eta_sigma_deg_s2: float = 0.0
     torques: tuple = ()
     inertia_kg_m2: np.ndarray | None = None
@@ -151,6 +155,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         euler321_deg=at.vector("euler321_deg", n=3, min=-360.0, max=360.0),
         omega_deg_s=at.vector("omega_deg_s", n=3, min=-3600.0, max=3600.0),
         acs_sigma_deg=at.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+        frame=at.str("frame", "inertial", choices=("inertial", "nadir")),
         eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
         inertia_kg_m2=at.matrix("inertia_kg_m2", None, shape=(3, 3)),
     )

@@ -23,7 +23,7 @@ from ..errors import InputError
 from ..io.lightcurve_h5 import Lightcurve
 from .scenario import Scenario
 
-__all__ = ["simulate", "EclipseWarning", "truth_attitude", "SimulationCounts"]
+__all__ = ["simulate", "EclipseWarning", "initial_attitude", "truth_attitude", "SimulationCounts"]
 
 
 class EclipseWarning(UserWarning):
@@ -47,15 +47,35 @@ def _rngs(seed: int):
     return np.random.default_rng(att), np.random.default_rng(noise)
 
 
+def initial_attitude(scenario: Scenario):
+    """Initial truth quaternion (inertial→body) and body rate (rad/s) at the epoch.
+
+    With ``attitude.frame = "nadir"`` the Euler angles and rates are relative to the nadir
+    (LVLH) frame of the orbit at the epoch (:func:`lightcurve.geometry.frames.nadir_dcm`):
+    ``A_BI = A_BN A_NI`` and ``ω_B = A_BN ω_NI + ω_rel`` with ``ω_NI = [0, −|r×v|/|r|², 0]`` in
+    nadir axes (the frame turns about the orbit normal; its y axis is the negative normal).
+    """
+    from ..geometry.frames import nadir_dcm
+    from ..rotations import dcm_to_quat, euler321_to_quat, quat_mult, quat_rotate
+
+    at = scenario.attitude
+    q_rel = euler321_to_quat(np.radians(at.euler321_deg))
+    w_rel = np.radians(at.omega_deg_s)
+    if at.frame == "inertial":
+        return q_rel, w_rel
+    r, v = scenario.orbit.positions(scenario.epoch_utc, np.array([0.0]))
+    q_ni = dcm_to_quat(nadir_dcm(r[0], v[0]))
+    rate = np.linalg.norm(np.cross(r[0], v[0])) / np.dot(r[0], r[0])
+    w_ni = np.array([0.0, -rate, 0.0])
+    return quat_mult(q_rel, q_ni), quat_rotate(q_rel, w_ni) + w_rel
+
+
 def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v_obj_eci_m=None,
                    r_sun_eci_m=None, lit_fraction=None):
     """Truth quaternions (N,4) and body rates (N,3, rad/s) at sorted unique times ``t_s``."""
     from ..dynamics import ControlledTruth, UncontrolledTruth
-    from ..rotations import euler321_to_quat
-
     at = scenario.attitude
-    q0 = euler321_to_quat(np.radians(at.euler321_deg))
-    w0 = np.radians(at.omega_deg_s)
+    q0, w0 = initial_attitude(scenario)
     if at.dynamics == "controlled":
         model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng)
         return model.simulate(t_s)
