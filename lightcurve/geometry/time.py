@@ -1,0 +1,212 @@
+"""Time scales and solar-system ephemeris, strictly offline.
+
+Everything here goes through skyfield with the files shipped by the ``skyfield-data`` package:
+the JPL ephemeris ``de421.bsp`` (valid 1899-07-29 to 2053-10-09) and skyfield's *builtin*
+timescale (leap seconds and ΔT tables bundled with skyfield itself). Nothing is ever
+downloaded; a missing file raises :class:`FileNotFoundError` with the path that was searched.
+
+Conventions
+-----------
+* A scenario has an epoch ``epoch_utc`` (ISO 8601 text, UTC) and times ``t_s`` in SI seconds
+  since that epoch. :func:`skyfield_times` turns the pair into one vectorised skyfield ``Time``.
+  The seconds are added on the UTC scale (``ts.utc(..., second + t_s)``); across a leap second
+  this follows skyfield's UTC arithmetic.
+* Positions are geocentric **GCRS** (our ECI), in metres, shape ``(N, 3)``. skyfield's
+  geocentric positions are expressed in ICRS-aligned axes, which is the GCRS axis set.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import warnings
+from datetime import datetime, timezone
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = [
+    "AU_M",
+    "DE421_START_UTC",
+    "DE421_END_UTC",
+    "ephemeris_dir",
+    "loader",
+    "timescale",
+    "ephemeris",
+    "parse_epoch",
+    "skyfield_times",
+    "sun_position_gcrs",
+    "moon_position_gcrs",
+]
+
+AU_M = 149_597_870_700.0
+"""Astronomical unit in metres (IAU 2012 Resolution B2, exact)."""
+
+# de421.bsp coverage (JPL header: JED 2414864.5 to 2471184.5); a day of margin either side
+# keeps skyfield's interpolation away from the segment edges.
+DE421_START_UTC = datetime(1899, 7, 30, tzinfo=timezone.utc)
+DE421_END_UTC = datetime(2053, 10, 8, tzinfo=timezone.utc)
+
+
+def ephemeris_dir() -> str:
+    """Folder of the ``skyfield-data`` package's data files (``de421.bsp`` ...).
+
+    We locate the folder directly instead of calling ``skyfield_data.get_skyfield_data_path()``,
+    because that function emits a ``RuntimeWarning`` once ``finals2000A.all`` (the IERS Earth
+    orientation table the package also ships) passes its expiry date. We never read that
+    file: timescales come from skyfield's builtin tables and the ephemeris ``de421.bsp``
+    itself does not expire (it is valid until 2053), so the warning does not apply to us.
+    """
+    try:
+        import skyfield_data
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        raise FileNotFoundError("the 'skyfield-data' package is not installed; it ships "
+                                "de421.bsp (pip install skyfield-data)") from exc
+    path = os.path.join(os.path.dirname(os.path.abspath(skyfield_data.__file__)), "data")
+    if not os.path.isdir(path):  # pragma: no cover - fall back to the package's own function
+        with warnings.catch_warnings():
+            # expiry of finals2000A.all is irrelevant to us (see above)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            path = skyfield_data.get_skyfield_data_path()
+    return path
+
+
+@functools.lru_cache(maxsize=1)
+def loader():
+    """A skyfield ``Loader`` on :func:`ephemeris_dir`, never downloading (cached)."""
+    from skyfield.api import Loader
+
+    return Loader(ephemeris_dir(), verbose=False, expire=False)
+
+
+@functools.lru_cache(maxsize=1)
+def timescale():
+    """skyfield's builtin ``Timescale`` (bundled leap seconds and ΔT; no download; cached)."""
+    return loader().timescale(builtin=True)
+
+
+@functools.lru_cache(maxsize=1)
+def ephemeris():
+    """The JPL DE421 ephemeris from ``skyfield-data`` (cached).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``de421.bsp`` is not in :func:`ephemeris_dir` (we never download it).
+    """
+    path = os.path.join(ephemeris_dir(), "de421.bsp")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"ephemeris file {path} is missing; reinstall 'skyfield-data' "
+                                "(lightcurve never downloads ephemerides)")
+    return loader()("de421.bsp")
+
+
+def parse_epoch(epoch_utc) -> datetime:
+    """Parse an ISO 8601 UTC epoch into a timezone-aware :class:`datetime` in UTC.
+
+    Accepts ``"2020-03-01T08:08:40"``, ``"2020-03-01 08:08:40.5Z"``, ``"...+00:00"`` (any
+    explicit offset is converted to UTC; text without an offset is taken as UTC) or a
+    ``datetime`` (naive = UTC).
+
+    Raises
+    ------
+    InputError
+        Text that is not ISO 8601, or an epoch outside the DE421 range (1899-07-30 to
+        2053-10-08).
+    """
+    if isinstance(epoch_utc, datetime):
+        dt = epoch_utc
+    elif isinstance(epoch_utc, str):
+        text = epoch_utc.strip()
+        if text.endswith(("Z", "z")):
+            text = text[:-1] + "+00:00"
+        try:
+            dt = datetime.fromisoformat(text)
+        except ValueError:
+            raise InputError("not an ISO 8601 date-time", field="epoch_utc", value=epoch_utc,
+                             allowed="e.g. 2020-03-01T08:08:40Z") from None
+    else:
+        raise InputError("expected an ISO 8601 UTC text", field="epoch_utc", value=epoch_utc)
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=timezone.utc)
+    dt = dt.astimezone(timezone.utc)
+    if not (DE421_START_UTC <= dt <= DE421_END_UTC):
+        raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
+                         value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC")
+    return dt
+
+
+def _as_times(t_s) -> np.ndarray:
+    t = np.atleast_1d(np.asarray(t_s, dtype=float))
+    if t.ndim != 1:
+        raise ValueError(f"t_s must be a scalar or 1-D array, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError("t_s contains NaN or infinite values")
+    return t
+
+
+def skyfield_times(epoch_utc, t_s):
+    """skyfield ``Time`` array for ``epoch_utc + t_s`` (``t_s`` seconds, scalar or 1-D).
+
+    Always returns a vector ``Time`` of length N (a scalar ``t_s`` gives N = 1).
+
+    Raises
+    ------
+    InputError
+        Bad epoch, or an epoch + offset outside the DE421 range.
+    """
+    dt = parse_epoch(epoch_utc)
+    t = _as_times(t_s)
+    span = (t.min(), t.max()) if t.size else (0.0, 0.0)
+    lo = (DE421_START_UTC - dt).total_seconds()
+    hi = (DE421_END_UTC - dt).total_seconds()
+    if span[0] < lo or span[1] > hi:
+        raise InputError("times reach outside the DE421 ephemeris range", field="t_s",
+                         value=(float(span[0]), float(span[1])),
+                         allowed="1899-07-30 to 2053-10-08 UTC")
+    sec = dt.second + dt.microsecond * 1e-6
+    return timescale().utc(dt.year, dt.month, dt.day, dt.hour, dt.minute, sec + t)
+
+
+def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
+    eph = ephemeris()
+    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    earth, body = eph["earth"], eph[name]
+    if light_time:
+        pos = earth.at(t).observe(body).position.m
+    else:
+        pos = (body - earth).at(t).position.m
+    return np.ascontiguousarray(np.asarray(pos, dtype=float).reshape(3, -1).T)
+
+
+def _is_time(x) -> bool:
+    return type(x).__name__ == "Time" and hasattr(x, "tt")
+
+
+def sun_position_gcrs(epoch_utc, t_s=0.0, *, light_time: bool = True) -> np.ndarray:
+    """Geocentric position of the Sun, GCRS axes, metres, shape ``(N, 3)``.
+
+    Parameters
+    ----------
+    epoch_utc : str or datetime or skyfield Time
+        Scenario epoch (ISO 8601 UTC). A skyfield ``Time`` array may be passed instead, in
+        which case ``t_s`` is ignored.
+    t_s : float or array (N,)
+        Seconds since the epoch.
+    light_time : bool
+        True (default): astrometric position, where the Sun was when the light now arriving
+        at the Earth left it (~499 s light time); False: geometric (instantaneous) position.
+        They differ by only ~5 km (the Sun's barycentric motion during the light time).
+        Annual aberration (≈20", the apparent direction for an observer moving with the
+        Earth) is not applied; it is irrelevant for illumination and eclipse geometry.
+    """
+    return _body_gcrs("sun", epoch_utc, t_s, light_time)
+
+
+def moon_position_gcrs(epoch_utc, t_s=0.0, *, light_time: bool = True) -> np.ndarray:
+    """Geocentric position of the Moon, GCRS axes, metres, shape ``(N, 3)``.
+
+    Same arguments as :func:`sun_position_gcrs` (astrometric by default, ~1.3 s light time).
+    """
+    return _body_gcrs("moon", epoch_utc, t_s, light_time)
