@@ -26,8 +26,7 @@ from .scenario import Scenario
 __all__ = ["simulate", "EclipseWarning", "initial_attitude", "truth_attitude", "SimulationCounts"]
 
 
-class EclipseWarning(UserWarning):
-    """The object is (partly) in the Earth's shadow during the observation."""
+from ..geometry.visibility import UnlitPassWarning as EclipseWarning  # noqa: E402  one warning class
 
 
 @dataclass
