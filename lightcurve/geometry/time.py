@@ -17,6 +17,7 @@ Conventions
 
 from __future__ import annotations
 
+import atexit
 import functools
 import os
 import warnings
@@ -99,7 +100,9 @@ def ephemeris():
     if not os.path.isfile(path):
         raise FileNotFoundError(f"ephemeris file {path} is missing; reinstall 'skyfield-data' "
                                 "(lightcurve never downloads ephemerides)")
-    return loader()("de421.bsp")
+    eph = loader()("de421.bsp")
+    atexit.register(eph.close)  # close the memory-mapped file at exit (no ResourceWarning)
+    return eph
 
 
 def parse_epoch(epoch_utc) -> datetime:

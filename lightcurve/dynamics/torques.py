@@ -1,0 +1,409 @@
+"""Environmental torques in body axes (N m): gravity gradient, solar radiation pressure, drag.
+
+Conventions: ``q`` scalar first, inertial→body (``v_b = A(q) v_I``); ECI is GCRS; positions in
+m, velocities in m/s; facet geometry in body axes with centres of pressure measured from the
+centre of mass (m); facet normals are outward unit vectors. Facet inputs are plain arrays
+(``areas_m2 (F,)``, ``normals_body (F,3)``, ``centers_body_m (F,3)``) so a photometry shape can
+feed them directly.
+
+* Gravity gradient (Bernard 2021 eq. 4.20; Markley & Crassidis 2014 §3.3.6):
+  ``T = 3μ/|r|³ r̂_b × (J r̂_b)`` with ``r̂_b = A(q) r̂`` the unit geocentric position in body axes.
+* Solar radiation pressure (Bernard eq. 4.16–4.19; Markley & Crassidis §3.3.6):
+  for each facet with ``cos θ_i = n̂_i·ŝ > 0`` (``ŝ`` object→Sun, body axes)
+  ``F_i = −P A_i cos θ_i [(1 − C_s,i) ŝ + 2 (C_s,i cos θ_i + C_d,i/3) n̂_i]``,
+  ``T = Σ c_i × F_i``, with ``P = P_1au (1 au/|r_sun|)²`` and ``P_1au = 4.56e-6 N/m²``;
+  the absorbed fraction is ``C_a = 1 − C_s − C_d``. Multiplied by the lit fraction (0 in
+  umbra, 1 in full sunlight), so it vanishes in eclipse.
+* Aerodynamic drag (Bernard eq. 4.21–4.23; Markley & Crassidis §3.3.6): with the
+  atmosphere co-rotating with the Earth, ``v_rel = v − ω_E × r`` (inertial), ``v_b = A(q) v_rel``,
+  each facet with ``n̂_i·v_b > 0`` feels ``F_i = −½ ρ C_D |v_b| v_b A_i cos α_i
+  = −½ ρ C_D (n̂_i·v_b) A_i v_b`` (``cos α_i = n̂_i·v̂_b``),
+  ``T = Σ c_i × F_i``; ``ρ`` from :func:`lightcurve.dynamics.atmosphere.density_kg_m3` at the
+  altitude above a spherical Earth. Facet self-shadowing (for SRP) and shielding (for drag)
+  are not modelled.
+
+The ``*Torque`` classes bundle a torque with its geometry (functions of time) for the truth
+models and expose ``torque(t, q, omega)`` and the attitude partial ``dtheta(t, q, omega)``
+``= ∂T/∂δθ`` (see :mod:`lightcurve.dynamics.jacobians`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .. import rotations as rot
+from . import _checks as ck
+from .atmosphere import altitude_m, density_kg_m3
+from .rigid_body import check_inertia
+
+__all__ = [
+    "MU_EARTH",
+    "P_SUN_1AU",
+    "AU_M",
+    "OMEGA_EARTH",
+    "gravity_gradient_torque",
+    "gravity_gradient_torque_nb",
+    "srp_torque",
+    "srp_facet_forces",
+    "drag_torque",
+    "drag_relative_velocity",
+    "as_time_function",
+    "GravityGradientTorque",
+    "SRPTorque",
+    "DragTorque",
+    "ConstantTorque",
+    "TorqueSum",
+]
+
+MU_EARTH = 3.986004418e14
+"""Earth's gravitational parameter, m³/s² (WGS84/EGM96)."""
+P_SUN_1AU = 4.56e-6
+"""Solar radiation pressure at 1 au on a perfect absorber, N/m² (Markley & Crassidis 2014, environmental torques)."""
+AU_M = 1.495978707e11
+"""Astronomical unit, m (IAU 2012)."""
+OMEGA_EARTH = 7.292115e-5
+"""Earth's rotation rate, rad/s (about the GCRS z axis; precession/nutation neglected)."""
+
+
+# ----------------------------------------------------------------------------------------
+# gravity gradient
+# ----------------------------------------------------------------------------------------
+def gravity_gradient_torque(r_eci_m, q, J, mu: float = MU_EARTH):
+    """Gravity-gradient torque ``3μ/|r|³ r̂_b × (J r̂_b)`` (N m, body axes; Bernard eq. 4.20).
+
+    Parameters
+    ----------
+    r_eci_m : array (..., 3)
+        Geocentric position of the centre of mass, ECI (GCRS), m.
+    q : array (..., 4)
+        Attitude quaternion, scalar first, inertial→body.
+    J : array (3, 3)
+        Inertia tensor about the centre of mass, body axes, kg m².
+    mu : float
+        Gravitational parameter, m³/s².
+    """
+    r = ck.vec3(r_eci_m, "r_eci_m")
+    J = check_inertia(J)
+    mu = ck.finite_scalar(mu, "mu", positive=True)
+    rn = np.linalg.norm(r, axis=-1, keepdims=True)
+    if np.any(rn == 0):
+        raise ValueError("r_eci_m: zero position vector")
+    u = rot.quat_rotate(q, r / rn)
+    return 3.0 * mu / rn**3 * np.cross(u, u @ J.T)
+
+
+@njit(cache=True)
+def gravity_gradient_torque_nb(q, r_eci_m, J, mu):
+    """Numba kernel of :func:`gravity_gradient_torque` for one state (1-D float64 arrays).
+
+    ``q`` (4,) unit quaternion, ``r_eci_m`` (3,) m, ``J`` (3, 3) kg m², ``mu`` m³/s²; returns the
+    body torque (3,) in N m. No validation.
+    """
+    rn = np.sqrt(r_eci_m[0] ** 2 + r_eci_m[1] ** 2 + r_eci_m[2] ** 2)
+    u = rot.qrot_nb(q, r_eci_m / rn)
+    Ju = J @ u
+    k = 3.0 * mu / rn**3
+    out = np.empty(3)
+    out[0] = k * (u[1] * Ju[2] - u[2] * Ju[1])
+    out[1] = k * (u[2] * Ju[0] - u[0] * Ju[2])
+    out[2] = k * (u[0] * Ju[1] - u[1] * Ju[0])
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# solar radiation pressure
+# ----------------------------------------------------------------------------------------
+def _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, c_abs,
+                lit_fraction, sun_distance_m, p_sun_1au):
+    A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
+    F = A.shape[0]
+    cs = ck.per_facet(c_spec, F, "c_spec")
+    cd = ck.per_facet(c_diff, F, "c_diff")
+    if np.any(cs + cd > 1.0 + 1e-12):
+        raise ValueError("c_spec + c_diff: must not exceed 1 (the absorbed fraction is 1 - c_spec - c_diff)")
+    if c_abs is not None:
+        ca = ck.per_facet(c_abs, F, "c_abs")
+        if np.any(np.abs(cs + cd + ca - 1.0) > 1e-9):
+            raise ValueError("c_spec + c_diff + c_abs: must sum to 1 for every facet")
+    s = ck.unit_vec3(sun_dir_eci, "sun_dir_eci")
+    lit = np.asarray(lit_fraction, dtype=float)
+    if not np.all(np.isfinite(lit)) or np.any(lit < 0) or np.any(lit > 1):
+        raise ValueError("lit_fraction: must lie in [0, 1] (0 = umbra, 1 = full sunlight)")
+    d = np.asarray(sun_distance_m, dtype=float)
+    if not np.all(np.isfinite(d)) or np.any(d <= 0):
+        raise ValueError("sun_distance_m: must be finite and > 0 (m)")
+    p1 = ck.finite_scalar(p_sun_1au, "p_sun_1au", nonneg=True)
+    P = p1 * (AU_M / d) ** 2 * lit
+    s_b = rot.quat_rotate(q, s)
+    return A, n, c, cs, cd, s_b, P
+
+
+def srp_facet_forces(s_b, P, areas_m2, normals_body, c_spec, c_diff):
+    """Facet SRP forces (N, body axes), shape (..., F, 3), for body-frame Sun direction ``s_b``.
+
+    ``F_i = −P A_i max(cos θ_i, 0) [(1 − C_s) ŝ + 2 (C_s cos θ_i + C_d/3) n̂_i]`` with
+    ``cos θ_i = n̂_i·ŝ`` (Markley & Crassidis §3.3.6). No validation (internal helper).
+    """
+    cos = s_b[..., None, :] @ normals_body.T  # (..., 1, F)
+    cos = cos[..., 0, :]
+    lit = np.maximum(cos, 0.0)
+    P = np.asarray(P, dtype=float)[..., None]
+    a = (-P * areas_m2 * lit)[..., None]
+    term = (1.0 - c_spec)[:, None] * s_b[..., None, :] + 2.0 * (c_spec * cos + c_diff / 3.0)[..., None] * normals_body
+    return a * term
+
+
+def srp_torque(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, *,
+               c_abs=None, lit_fraction=1.0, sun_distance_m=AU_M, p_sun_1au: float = P_SUN_1AU):
+    """Solar-radiation-pressure torque from facets (N m, body axes; Bernard eq. 4.16–4.19).
+
+    Parameters
+    ----------
+    q : array (..., 4)
+        Attitude quaternion, scalar first, inertial→body.
+    sun_dir_eci : array (..., 3)
+        Unit vector from the object to the Sun, ECI.
+    areas_m2, normals_body, centers_body_m : arrays (F,), (F, 3), (F, 3)
+        Facet areas (m²), outward unit normals (body axes), centres of pressure relative to
+        the centre of mass (body axes, m).
+    c_spec, c_diff : float or array (F,)
+        Specular and diffuse reflection coefficients in [0, 1]; absorbed = 1 − c_spec − c_diff.
+    c_abs : float or array (F,), optional
+        Absorption coefficient; when given, checked to complete the sum to 1.
+    lit_fraction : float or array (...)
+        Fraction of the solar disk visible (0 in umbra; eclipse → zero torque).
+    sun_distance_m : float or array (...)
+        Object–Sun distance, m; the pressure scales as ``(1 au/d)²``.
+    p_sun_1au : float
+        Radiation pressure at 1 au, N/m² (default 4.56e-6).
+    """
+    A, n, c, cs, cd, s_b, P = _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
+                                          c_spec, c_diff, c_abs, lit_fraction, sun_distance_m, p_sun_1au)
+    Fi = srp_facet_forces(s_b, P, A, n, cs, cd)
+    return np.sum(np.cross(c, Fi), axis=-2)
+
+
+# ----------------------------------------------------------------------------------------
+# aerodynamic drag
+# ----------------------------------------------------------------------------------------
+def drag_relative_velocity(r_eci_m, v_eci_m_s, omega_earth: float = OMEGA_EARTH):
+    """Velocity relative to the co-rotating atmosphere ``v − ω_E ẑ × r`` (m/s, ECI)."""
+    r = ck.vec3(r_eci_m, "r_eci_m")
+    v = ck.vec3(v_eci_m_s, "v_eci_m_s")
+    we = np.array([0.0, 0.0, ck.finite_scalar(omega_earth, "omega_earth")])
+    return v - np.cross(we, r)
+
+
+def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *, Cd: float = 2.2,
+                density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH):
+    """Aerodynamic drag torque from facets (N m, body axes; Bernard eq. 4.21–4.23).
+
+    Parameters
+    ----------
+    q : array (..., 4)
+        Attitude quaternion, scalar first, inertial→body.
+    r_eci_m, v_eci_m_s : array (..., 3)
+        Position (m) and velocity (m/s) of the centre of mass, ECI.
+    areas_m2, normals_body, centers_body_m : arrays (F,), (F, 3), (F, 3)
+        Facet areas, outward unit normals (body), centres of pressure from the centre of mass (m).
+    Cd : float
+        Drag coefficient (default 2.2).
+    density_fn : callable ``h_m -> kg/m³``
+        Density at altitude above the spherical Earth (default: exponential atmosphere).
+    omega_earth : float
+        Rotation rate of the atmosphere about ECI z, rad/s (0 for a non-rotating atmosphere).
+    """
+    A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
+    Cd = ck.finite_scalar(Cd, "Cd", nonneg=True)
+    vrel = drag_relative_velocity(r_eci_m, v_eci_m_s, omega_earth)
+    rho = np.asarray(density_fn(altitude_m(r_eci_m)), dtype=float)
+    v_b = rot.quat_rotate(q, vrel)
+    nv = (v_b[..., None, :] @ n.T)[..., 0, :]  # n_i · v_b = |v| cos α_i, (..., F)
+    k = np.asarray(-0.5 * Cd * rho)[..., None] * A * np.maximum(nv, 0.0)  # (..., F), N/(m/s)
+    Fi = k[..., None] * v_b[..., None, :]
+    return np.sum(np.cross(c, Fi), axis=-2)
+
+
+# ----------------------------------------------------------------------------------------
+# time-dependent torque models for the truth simulators
+# ----------------------------------------------------------------------------------------
+def as_time_function(x, name: str):
+    """Turn ``x`` into a function of time ``t (s) -> array``.
+
+    ``x`` may be a callable (returned as is), a constant array, or a tuple ``(t_s, values)`` of
+    samples (interpolated with a cubic spline along the first axis of ``values``).
+    """
+    if callable(x):
+        return x
+    if isinstance(x, tuple) and len(x) == 2:
+        from scipy.interpolate import CubicSpline
+
+        t = np.asarray(x[0], dtype=float)
+        vals = np.asarray(x[1], dtype=float)
+        if t.ndim != 1 or vals.shape[0] != t.shape[0] or t.shape[0] < 2:
+            raise ValueError(f"{name}: samples (t_s, values) need matching first dimensions >= 2")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(vals))):
+            raise ValueError(f"{name}: samples contain NaN or infinite values")
+        if np.any(np.diff(t) <= 0):
+            raise ValueError(f"{name}: sample times must be strictly increasing")
+        return CubicSpline(t, vals, axis=0)
+    a = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return lambda t, _a=a: _a
+
+
+class GravityGradientTorque:
+    """Gravity-gradient torque along an orbit.
+
+    Parameters
+    ----------
+    J : array (3, 3)
+        Inertia, body axes, kg m².
+    position : callable ``t -> r_eci_m (3,)``, constant array or ``(t_s, r (N,3))`` samples.
+    mu : float
+        Gravitational parameter, m³/s².
+    """
+
+    def __init__(self, J, position, mu: float = MU_EARTH):
+        self.J = check_inertia(J)
+        self.position = as_time_function(position, "position")
+        self.mu = ck.finite_scalar(mu, "mu", positive=True)
+
+    def torque(self, t, q, omega=None):
+        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``."""
+        return gravity_gradient_torque(self.position(t), q, self.J, self.mu)
+
+    def dtheta(self, t, q, omega=None):
+        """``∂T/∂δθ`` (N m/rad, 3×3) for ``q_true = δq(δθ) ⊗ q``."""
+        from .jacobians import gravity_gradient_jacobian
+
+        return gravity_gradient_jacobian(self.position(t), q, self.J, self.mu)
+
+    __call__ = torque
+
+
+class SRPTorque:
+    """Solar-radiation-pressure torque of a faceted body along an orbit.
+
+    Parameters
+    ----------
+    areas_m2, normals_body, centers_body_m, c_spec, c_diff : see :func:`srp_torque`.
+    sun_dir : callable ``t -> (3,)`` unit object→Sun vector (ECI), constant, or samples.
+    lit_fraction : callable ``t -> float`` in [0, 1], constant, or samples (default 1).
+    sun_distance_m : callable ``t -> float``, constant, or samples (default 1 au).
+    p_sun_1au : float
+        Pressure at 1 au, N/m².
+    """
+
+    def __init__(self, areas_m2, normals_body, centers_body_m, c_spec, c_diff, sun_dir,
+                 lit_fraction=1.0, sun_distance_m=AU_M, p_sun_1au: float = P_SUN_1AU):
+        self.areas, self.normals, self.centers = ck.facets(areas_m2, normals_body, centers_body_m)
+        F = self.areas.shape[0]
+        self.c_spec = ck.per_facet(c_spec, F, "c_spec")
+        self.c_diff = ck.per_facet(c_diff, F, "c_diff")
+        if np.any(self.c_spec + self.c_diff > 1 + 1e-12):
+            raise ValueError("c_spec + c_diff: must not exceed 1")
+        self.sun_dir = as_time_function(sun_dir, "sun_dir")
+        self.lit_fraction = as_time_function(lit_fraction, "lit_fraction")
+        self.sun_distance_m = as_time_function(sun_distance_m, "sun_distance_m")
+        self.p_sun_1au = ck.finite_scalar(p_sun_1au, "p_sun_1au", nonneg=True)
+
+    def _args(self, t):
+        s = np.asarray(self.sun_dir(t), dtype=float)
+        s = s / np.linalg.norm(s)  # spline-interpolated directions drift slightly off unit
+        lit = float(np.clip(self.lit_fraction(t), 0.0, 1.0))
+        return s, lit, float(self.sun_distance_m(t))
+
+    def torque(self, t, q, omega=None):
+        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``."""
+        s, lit, d = self._args(t)
+        return srp_torque(q, s, self.areas, self.normals, self.centers, self.c_spec, self.c_diff,
+                          lit_fraction=lit, sun_distance_m=d, p_sun_1au=self.p_sun_1au)
+
+    def dtheta(self, t, q, omega=None):
+        """``∂T/∂δθ`` (N m/rad, 3×3)."""
+        from .jacobians import srp_torque_jacobian
+
+        s, lit, d = self._args(t)
+        return srp_torque_jacobian(q, s, self.areas, self.normals, self.centers, self.c_spec,
+                                   self.c_diff, lit_fraction=lit, sun_distance_m=d,
+                                   p_sun_1au=self.p_sun_1au)
+
+    __call__ = torque
+
+
+class DragTorque:
+    """Aerodynamic drag torque of a faceted body along an orbit.
+
+    Parameters
+    ----------
+    areas_m2, normals_body, centers_body_m : see :func:`drag_torque`.
+    position, velocity : callables ``t -> (3,)`` (ECI, m and m/s), constants or samples.
+    Cd, density_fn, omega_earth : see :func:`drag_torque`.
+    """
+
+    def __init__(self, areas_m2, normals_body, centers_body_m, position, velocity, Cd: float = 2.2,
+                 density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH):
+        self.areas, self.normals, self.centers = ck.facets(areas_m2, normals_body, centers_body_m)
+        self.position = as_time_function(position, "position")
+        self.velocity = as_time_function(velocity, "velocity")
+        self.Cd = ck.finite_scalar(Cd, "Cd", nonneg=True)
+        self.density_fn = density_fn
+        self.omega_earth = ck.finite_scalar(omega_earth, "omega_earth")
+
+    def torque(self, t, q, omega=None):
+        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``."""
+        return drag_torque(q, self.position(t), self.velocity(t), self.areas, self.normals,
+                           self.centers, Cd=self.Cd, density_fn=self.density_fn,
+                           omega_earth=self.omega_earth)
+
+    def dtheta(self, t, q, omega=None):
+        """``∂T/∂δθ`` (N m/rad, 3×3)."""
+        from .jacobians import drag_torque_jacobian
+
+        return drag_torque_jacobian(q, self.position(t), self.velocity(t), self.areas, self.normals,
+                                    self.centers, Cd=self.Cd, density_fn=self.density_fn,
+                                    omega_earth=self.omega_earth)
+
+    __call__ = torque
+
+
+class ConstantTorque:
+    """A constant torque in body axes (N m); attitude-independent, so ``∂T/∂δθ = 0``."""
+
+    def __init__(self, torque_body_nm):
+        self.value = ck.vec3(torque_body_nm, "torque_body_nm").reshape(3)
+
+    def torque(self, t, q, omega=None):
+        return self.value.copy()
+
+    def dtheta(self, t, q, omega=None):
+        return np.zeros((3, 3))
+
+    __call__ = torque
+
+
+class TorqueSum:
+    """Sum of torque models (each with ``torque(t, q, omega)`` and ``dtheta(t, q, omega)``)."""
+
+    def __init__(self, models):
+        self.models = list(models)
+        for m in self.models:
+            if not (hasattr(m, "torque") and hasattr(m, "dtheta")):
+                raise ValueError(f"torque model {m!r} lacks torque()/dtheta() methods")
+
+    def torque(self, t, q, omega=None):
+        out = np.zeros(3)
+        for m in self.models:
+            out = out + np.asarray(m.torque(t, q, omega), dtype=float)
+        return out
+
+    def dtheta(self, t, q, omega=None):
+        out = np.zeros((3, 3))
+        for m in self.models:
+            out = out + np.asarray(m.dtheta(t, q, omega), dtype=float)
+        return out
+
+    __call__ = torque
