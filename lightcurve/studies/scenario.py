@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.tomlio import Section, load_toml, loads_toml
+from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
 __all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario"]
 
@@ -51,6 +51,8 @@ class AttitudeSpec:
     eta_sigma_deg_s2: float = 0.0
     torques: tuple = ()
     inertia_kg_m2: np.ndarray | None = None
+    #: ``dynamics = "law"``: the attitude law's name (lightcurve.dynamics.laws.LAWS)
+    law: str = ""
 
 
 @dataclass
@@ -86,6 +88,8 @@ class Scenario:
     sites: list
     measurement: MeasurementSpec
     effects: dict = field(default_factory=dict)
+    #: ``[recording]`` column mapping (lightcurve.io.recording.RecordingSpec) or None
+    recording: object = None
     name: str = ""
     source: str = ""
     text: str = ""
@@ -97,7 +101,7 @@ class Scenario:
         return replace(self, seed=int(seed))
 
 
-_DYNAMICS = ("controlled", "uncontrolled")
+_DYNAMICS = ("controlled", "uncontrolled", "law")
 _TORQUES = ("gravity_gradient", "srp", "drag")
 
 
@@ -124,13 +128,17 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     sc = root.section("scenario")
     epoch = sc.str("epoch_utc")
     parse_epoch(epoch)  # validates ISO 8601 (InputError names the field)
-    duration = sc.float("duration_s", min=0.0, min_open=True, max=30 * 86400.0)
+    # a scenario that models a recording ([recording]) may span more than 30 days and need
+    # no duration or [orbit]: the recording gives the epochs and (topocentric) positions
+    has_rec = isinstance(doc.get("recording"), dict)
+    duration = sc.float("duration_s", None if has_rec else REQUIRED, min=0.0, min_open=True,
+                        max=None if has_rec else 30 * 86400.0)
     cadence = sc.float("cadence_s", 5.0, min=1e-3, max=duration)
     seed = sc.int("seed", 0, min=0)
     name = sc.str("name", Path(str(file)).stem)
     sc.check_unknown(extra_allowed=("description",))
 
-    orbit = orbit_from_section(root.section("orbit"))
+    orbit = orbit_from_section(root.section("orbit")) if (root.has("orbit") or not has_rec) else None
 
     sh = root.section("shape")
     base = Path(str(file)).parent if file and not str(file).startswith("<") else Path.cwd()
@@ -140,6 +148,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         spec = (mesh, materials)
     else:
         spec = sh.str("name")
+    areas = sh.vector("areas_m2", None, min=0.0, min_open=True)
     sh.check_unknown()
     try:
         shape = load_shape(spec, library_dirs=library_dirs)
@@ -147,13 +156,20 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         raise
     except (FileNotFoundError, KeyError) as exc:
         raise InputError(f"cannot load shape: {exc}", file=file, field="shape") from None
+    if areas is not None:  # facet areas overriding the library's (e.g. a published unit-area fit)
+        if areas.size != shape.n_facets:
+            raise InputError(f"expected {shape.n_facets} facet areas", file=file,
+                             field="shape.areas_m2", value=areas.tolist())
+        shape = shape.copy_with(areas_m2=areas)
 
     at = root.section("attitude")
     dyn = at.str("dynamics", "controlled", choices=_DYNAMICS)
     att = AttitudeSpec(
         dynamics=dyn,
-        euler321_deg=at.vector("euler321_deg", n=3, min=-360.0, max=360.0),
-        omega_deg_s=at.vector("omega_deg_s", n=3, min=-3600.0, max=3600.0),
+        euler321_deg=at.vector("euler321_deg", [0.0] * 3 if dyn == "law" else REQUIRED, n=3,
+                               min=-360.0, max=360.0),
+        omega_deg_s=at.vector("omega_deg_s", [0.0] * 3 if dyn == "law" else REQUIRED, n=3,
+                              min=-3600.0, max=3600.0),
         acs_sigma_deg=at.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
         frame=at.str("frame", "inertial", choices=("inertial", "nadir")),
         eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
@@ -169,6 +185,10 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         if not np.allclose(J, J.T) or np.any(np.linalg.eigvalsh(0.5 * (J + J.T)) <= 0):
             raise InputError("inertia must be symmetric positive definite", file=file,
                              field="attitude.inertia_kg_m2", value=J.tolist())
+    if dyn == "law":
+        from ..dynamics.laws import LAWS
+
+        att.law = at.str("law", choices=LAWS)
     at.check_unknown()
 
     sites = []
@@ -178,7 +198,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         else:
             inline = {k: s.raw(k) for k in ("name", "id", "lat_deg", "lon_deg", "height_m") if s.has(k)}
             site = get_site(inline, dirs=site_dirs)
-        windows = s.raw("windows_s", [[0.0, duration]])
+        windows = s.raw("windows_s", [[0.0, duration if duration is not None else 0.0]])
         ok = isinstance(windows, list) and all(
             isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
             and 0 <= w[0] <= w[1] for w in windows)
@@ -201,13 +221,25 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     )
     me.check_unknown()
 
+    rec = root.section("recording", None)
+    if rec is not None:
+        from ..io.recording import recording_spec_from_section
+
+        rec = recording_spec_from_section(rec)
+
     effects = root.raw("effects", {})
     if not isinstance(effects, dict):
         raise InputError("expected a table", file=file, field="effects", value=effects)
     if effects:
-        raise InputError("no physics effects are available yet (model-mismatch issue); leave "
-                         "[effects] empty", file=file, field="effects", value=sorted(effects))
+        # validated here (InputError names effects.<name>.<param>); lightcurve.physics
+        # re-parses the same table when simulating (studies.simulate)
+        from ..physics.registry import parse_effects
+
+        parse_effects(effects, file=file, site_names=[s.site.id for s in sites])
+        if meas.ignore_eclipse and "penumbra" in effects and effects["penumbra"].get("enabled", True):
+            raise InputError("the penumbra effect contradicts measurement.ignore_eclipse = true",
+                             file=file, field="effects.penumbra")
     root.check_unknown()
     return Scenario(epoch_utc=epoch, duration_s=duration, cadence_s=cadence, seed=seed, orbit=orbit,
                     shape=shape, attitude=att, sites=sites, measurement=meas, effects=effects,
-                    name=name, source=str(file), text=text or "")
+                    recording=rec, name=name, source=str(file), text=text or "")

@@ -74,6 +74,14 @@ def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v
     """Truth quaternions (N,4) and body rates (N,3, rad/s) at sorted unique times ``t_s``."""
     from ..dynamics import ControlledTruth, UncontrolledTruth
     at = scenario.attitude
+    if at.dynamics == "law":  # attitude prescribed by geometry (lightcurve.dynamics.laws)
+        from ..dynamics.laws import attitude_law, law_body_rates
+        from ..geometry.time import sun_position_gcrs
+
+        r = scenario.orbit.positions(scenario.epoch_utc, t_s)[0] if r_obj_eci_m is None else r_obj_eci_m
+        r_sun = sun_position_gcrs(scenario.epoch_utc, t_s) if r_sun_eci_m is None else r_sun_eci_m
+        q = attitude_law(at.law, r, r_sun, scenario.epoch_utc, t_s)
+        return q, law_body_rates(q, t_s)
     q0, w0 = initial_attitude(scenario)
     if at.dynamics == "controlled":
         model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng)
@@ -107,6 +115,9 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     from ..photometry import apparent_magnitude
     from ..photometry.noise import magnitude_sigma
 
+    if scenario.orbit is None:
+        raise InputError("this scenario has no [orbit] (it models a recording); add an [orbit] to "
+                         "simulate", file=scenario.source, field="orbit")
     seed = scenario.seed if seed is None else int(seed)
     rng_att, rng_noise = _rngs(seed)
     meas = scenario.measurement
@@ -157,11 +168,18 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     q_u, w_u = truth_attitude(scenario, tu, rng_att, r_u, v_u)
     q, w = q_u[inv], w_u[inv]
 
-    lit_frac = np.ones(len(t)) if meas.ignore_eclipse else geo.lit_fraction
+    # baseline illumination is lit-or-dark; the partial solar disc is the penumbra effect
+    lit_frac = np.ones(len(t)) if meas.ignore_eclipse else (geo.lit_fraction > 0).astype(float)
     with np.errstate(divide="ignore"):
         m_true = apparent_magnitude(scenario.shape, q, geo.obj_to_sun_unit, geo.obj_to_obs_unit,
                                     geo.range_obs_m, geo.range_sun_m, sun_mag=meas.sun_mag)
         m_true = m_true - 2.5 * np.log10(np.where(lit_frac > 0, lit_frac, np.nan))
+    effects_json = None
+    if scenario.effects:  # physics effects on the noise-free magnitudes (lightcurve.physics)
+        from ..physics.simulation import apply_scenario_effects
+
+        m_true, effects_json = apply_scenario_effects(scenario, geo, q, w, m_true,
+                                                      keep & np.isfinite(m_true))
     # no reflected light towards the observer (all lit facets face away): not measurable
     dark_obj = ~np.isfinite(m_true)
     keep &= ~dark_obj
@@ -186,4 +204,6 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
                "dropped_below_horizon": counts.below_horizon, "dropped_site_daylight": counts.site_daylight,
                "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": int(np.sum(dark_obj))},
     )
+    if effects_json is not None:
+        lc.attrs["effects"] = effects_json
     return (lc, counts) if return_counts else lc
