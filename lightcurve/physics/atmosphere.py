@@ -11,8 +11,6 @@ sites up to 0.5). Rows below the horizon (X = NaN) get NaN.
 
 from __future__ import annotations
 
-import numpy as np
-
 from .registry import Effect, ParamSpec, Prior, register_effect
 
 __all__ = ["Extinction"]

@@ -13,11 +13,8 @@ direct Sun, ``y_κ = C C_κ ν f_κ(ŝ)``, with the model's normals and gains. E
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from ..errors import InputError
 from .registry import Effect, ParamSpec, Prior, register_effect
 
 __all__ = ["CSSAlbedo", "CSSMisalignment", "CSSScaleFactor", "CSSFault"]

@@ -44,7 +44,6 @@ def apply_scenario_effects(scenario, geo, q, omega, m_true, rows):
             c.params = c.effect.check_params(c.params, ctx)
         m_new[idx] = apply_effects(ctx, configured)
     else:
-        ctx = None
         for c in configured:
             c.params = c.effect.check_params(c.params, _Sizes(len(site_names)))
     return m_new, effects_to_json(configured, site_names)
