@@ -8,7 +8,9 @@ failure, 2 bad usage or bad input (one clear line; the traceback only with ``--d
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +18,34 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["main", "build_parser"]
+
+
+# ----------------------------------------------------------------------------------------
+# argument types: a bad number is a usage error (exit 2), never a crash later on
+# ----------------------------------------------------------------------------------------
+def _num(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
+    """argparse ``type=`` for a finite number in [lo, hi] (open ends with ``*_open``)."""
+
+    def conv(text):
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if integer else 'a number'}, got {text!r}") from None
+        if not np.isfinite(v):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        if (lo is not None and (v < lo or (lo_open and v == lo))) or \
+                (hi is not None and (v > hi or (hi_open and v == hi))):
+            rng = (f"{'(' if lo_open else '['}{'-inf' if lo is None else lo}, "
+                   f"{'inf' if hi is None else hi}{')' if hi_open else ']'}")
+            raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: {rng}")
+        return v
+
+    conv.__name__ = "integer" if integer else "number"
+    return conv
+
+
+_SEED = _num(0, 2**63 - 1, integer=True)
 
 
 # ----------------------------------------------------------------------------------------
@@ -206,8 +236,11 @@ def _cmd_demo(args) -> int:
         lc = simulate(scen)
     for w in caught:
         print(f"WARNING: {w.message}", file=sys.stderr)
-    h5 = lc.write(out / f"{scen.name}.h5")
-    png = out / f"{scen.name}.png"
+    from .io.paths import safe_output_path
+
+    # the scenario name comes from a data file: it must not steer the output out of OUT
+    h5 = lc.write(safe_output_path(out, scen.name, ".h5", field="scenario.name"))
+    png = safe_output_path(out, scen.name, ".png", field="scenario.name")
     plot_lightcurve(lc, png, title=scen.name)
     print(f"simulated {len(lc)} magnitudes: {np.nanmin(lc.mag):.2f} to {np.nanmax(lc.mag):.2f} mag")
     print(f"wrote {h5}\nwrote {png}")
@@ -223,7 +256,7 @@ def _register_simulation(sub) -> None:
         "(docs/formats.md) atomically.")
     p.add_argument("scenario", help="scenario TOML file (see docs/formats.md and pipelines/)")
     p.add_argument("-o", "--output", required=True, help="output HDF5 file")
-    p.add_argument("--seed", type=int, default=None, help="override [scenario].seed")
+    p.add_argument("--seed", type=_SEED, default=None, help="override [scenario].seed")
     p.add_argument("--plot", action="store_true", help="also write OUTPUT.png")
     p.add_argument("--library", action="append", default=None, metavar="DIR",
                    help="extra shape library folder (repeatable)")
@@ -250,8 +283,175 @@ def _register_simulation(sub) -> None:
 # ----------------------------------------------------------------------------------------
 # coarse sun sensors
 # ----------------------------------------------------------------------------------------
+def _css_sensors(name, fov_deg):
+    from .css.configurations import configuration_by_name
+
+    if name in ("dual_pyramid", "cube"):
+        return configuration_by_name(name, fov_half_angle_deg=fov_deg)
+    return configuration_by_name(name)
+
+
+def _css_albedo(spec):
+    from .css.albedo import load_albedo_map
+
+    if spec == "builtin":
+        return None
+    if spec == "none":
+        return False
+    return load_albedo_map(spec)
+
+
+def _cmd_css_simulate(args) -> int:
+    import numpy as np
+
+    from .css.recording import write_recording
+    from .css.study import gyroless_params, settled_mask
+    from .css.sunline_ekf import FilterParams
+    from .css.truth import Scenario, simulate
+
+    css = _css_sensors(args.config, args.fov_deg)
+    gyro = None if args.gyro == "none" else args.gyro
+    fp = FilterParams() if gyro else gyroless_params()
+    sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
+                  duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
+                  albedo=_css_albedo(args.albedo), filter_params=fp)
+    r = simulate(sc, args.seed)
+    m = settled_mask(r.t, r.lit, args.settle_s)
+    e = r.error_deg[m]
+    print(f"{css.name}: {r.t.size} samples, sunlit {np.mean(r.lit > 0.999) * 100:.0f} %, "
+          f"estimator {args.estimator}, gyro {args.gyro}, "
+          f"{'controlled' if args.controlled else 'tumbling'}")
+    if e.size:
+        print(f"angular error after {args.settle_s:g} s in sunlight: median {np.median(e):.2f} deg, "
+              f"99th percentile {np.percentile(e, 99):.2f} deg")
+    if args.controlled:
+        pe = np.degrees(np.arccos(np.clip(r.s_true @ r.info["pointing_axis"], -1, 1)))
+        print(f"final pointing error {pe[-1]:.2f} deg")
+    if args.out:
+        write_recording(args.out, r, css, args.epoch, gyro is not None)
+        print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_css_estimate(args) -> int:
+    import numpy as np
+
+    from .css.recording import read_recording
+    from .css.single_point import angle_deg, estimate
+    from .css.study import gyroless_params
+    from .css.sunline_ekf import FilterParams, run_filter
+
+    rec = read_recording(args.recording)
+    gyro = None if args.no_gyro else rec["gyro"]
+    if args.estimator in ("ekf", "eckf"):
+        fp = FilterParams() if gyro is not None else gyroless_params()
+        fp = fp.__class__(**{**fp.__dict__, "fov_half_angle_deg": float(np.degrees(np.max(rec["fov_half_angle_rad"])))})
+        s_hat = run_filter(args.estimator, rec["t"], rec["y"], rec["normals"], gyro=gyro,
+                           params=fp)["s_hat"]
+    else:
+        s_hat = estimate(args.estimator, rec["y"], rec["normals"], args.threshold)
+    print(f"{args.recording}: {rec['t'].size} samples, estimator {args.estimator}, "
+          f"gyro {'yes' if gyro is not None else 'no'}")
+    if rec["truth"] is not None and "s_body" in rec["truth"]:
+        err = angle_deg(s_hat, rec["truth"]["s_body"])
+        lit = rec["truth"].get("lit", np.ones(err.size)) > 0.999
+        sel = lit & (rec["t"] >= rec["t"][0] + args.settle_s)
+        if sel.any():
+            print(f"angular error (sunlit, after {args.settle_s:g} s): median "
+                  f"{np.median(err[sel]):.2f} deg, 99th percentile {np.percentile(err[sel], 99):.2f} deg")
+    if args.out:
+        from .io.atomic import atomic_path
+
+        with atomic_path(args.out, suffix=".csv") as tmp:
+            np.savetxt(tmp, np.column_stack([rec["t"], s_hat]), delimiter=",",
+                       header="t_s,s_hat_x,s_hat_y,s_hat_z (body axes)", comments="")
+        print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_css_study(args) -> int:
+    from dataclasses import replace
+
+    from .css.study import load_study, run_study, write_report
+
+    spec = load_study(args.pipeline)
+    if args.runs is not None:
+        spec = replace(spec, n_runs=args.runs)
+    cases = run_study(spec)
+    if args.out:
+        out_dir = args.out
+    else:  # derived from the study's name (data): keep it inside the current folder
+        from .io.paths import safe_output_path
+
+        out_dir = safe_output_path(".", f"{spec.name}-report", field="study.name")
+    out = write_report(spec, cases, out_dir)
+    print((out / "summary.txt").read_text(), end="")
+    print(f"report in {out}/ (summary.json, summary.txt, envelopes.png, error_maps.png)")
+    return 0
+
+
 def _register_css(sub) -> None:
-    pass
+    p = sub.add_parser(
+        "css", help="coarse sun sensors: simulate, estimate the Sun direction, Monte Carlo studies",
+        description="Coarse-sun-sensor (CSS) tools after O'Keefe (2015): cosine sensors with "
+        "Earth albedo, rate gyros, single-point (WAVG/LSMN/WLSMN) and sequential (EKF/ECKF) "
+        "sun-direction estimators and MRP sun-pointing control.")
+    css_sub = p.add_subparsers(title="css commands", metavar="CSS_COMMAND")
+
+    def common(q):
+        q.add_argument("--config", default="dual_pyramid",
+                       help="sensor set: dual_pyramid, cube or a sensor TOML file (default dual_pyramid)")
+        q.add_argument("--fov-deg", type=_num(0.0, 90.0, lo_open=True), default=70.0,
+                       help="FOV half angle of the bundled sets, deg (default 70)")
+
+    s = css_sub.add_parser(
+        "simulate", help="simulate one dispersed run (truth, CSS, gyro, estimator, control)",
+        description="Simulate one §2.4 run: 400 km polar orbit, dispersed attitude, rates and "
+        "sensor errors, CSS outputs with albedo, gyro, the chosen estimator and optionally the "
+        "MRP sun-pointing controller. Prints the angular error and optionally writes an HDF5 "
+        "recording for 'css estimate'.")
+    common(s)
+    s.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
+                   help="estimator in the loop (default ekf)")
+    s.add_argument("--gyro", default="tactical", choices=("rate", "tactical", "navigation", "none"),
+                   help="gyro grade, or none for gyro-less operation (default tactical)")
+    s.add_argument("--controlled", action="store_true", help="run the sun-pointing controller")
+    s.add_argument("--duration-s", type=_num(0.0, 366 * 86400.0, lo_open=True), default=1800.0, help="duration, s (default 1800)")
+    s.add_argument("--dt-s", type=_num(1e-3, 60.0), default=0.5, help="sample and control step, s (default 0.5)")
+    s.add_argument("--epoch", default="2015-03-01T00:00:00Z", help="epoch, ISO 8601 UTC")
+    s.add_argument("--albedo", default="builtin",
+                   help="builtin (zonal CERES fit), none, or a CERES CSV / TOMS .dat file")
+    s.add_argument("--seed", type=_SEED, default=1, help="random seed (default 1)")
+    s.add_argument("--settle-s", type=_num(0.0), default=300.0,
+                   help="ignore errors this long after entering sunlight, s (default 300)")
+    s.add_argument("--out", help="write the run to this HDF5 file")
+    s.set_defaults(func=_cmd_css_simulate)
+
+    e = css_sub.add_parser(
+        "estimate", help="run an estimator on a CSS recording",
+        description="Run WAVG, LSMN, WLSMN, the sun-line EKF or the ECKF on a CSS recording "
+        "(HDF5 written by 'css simulate'); prints the error against the truth when present.")
+    e.add_argument("recording", help="HDF5 CSS recording")
+    e.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"))
+    e.add_argument("--no-gyro", action="store_true",
+                   help="ignore the gyro: rates from successive estimates (eq. 3.67)")
+    e.add_argument("--threshold", type=_num(), default=0.5,
+                   help="activity threshold of the single-point methods (default 0.5)")
+    e.add_argument("--settle-s", type=_num(0.0), default=300.0, help="skip this long before scoring, s")
+    e.add_argument("--out", help="write the estimates to this CSV file")
+    e.set_defaults(func=_cmd_css_estimate)
+
+    st = css_sub.add_parser(
+        "study", help="Monte Carlo study from a pipeline TOML (percentile envelopes, time above 15/30 deg)",
+        description="Run a CSS Monte Carlo study (e.g. pipelines/css/*.toml) and write "
+        "summary.json, summary.txt, envelopes.png and error_maps.png: 99th-percentile errors "
+        "after the first minutes in sunlight next to the thesis values, time above 15/30 deg "
+        "per orbit, with control the time to sun pointing, and the noise-free single-point "
+        "error maps (figs. 3.1-3.2).")
+    st.add_argument("pipeline", help="study TOML file")
+    st.add_argument("--runs", type=_num(1, 100000, integer=True), help="override the number of runs")
+    st.add_argument("--out", help="report folder (default <study name>-report)")
+    st.set_defaults(func=_cmd_css_study)
 
 
 # ----------------------------------------------------------------------------------------
@@ -341,8 +541,55 @@ def _register_filters(sub) -> None:
     p.set_defaults(func=_cmd_invert)
 
 
+def _cmd_diagnose(args) -> int:
+    from .diagnosis.diagnose import diagnose_recording
+    from .diagnosis.report import write_report
+
+    say = (lambda m: None) if args.quiet else (lambda m: print(m, flush=True))
+    d = diagnose_recording(args.recording, args.scenario, free=args.free,
+                           exclude=[e.strip() for e in (args.exclude or "").split(",") if e.strip()],
+                           cross_validation=False if args.no_cv else None, progress=say,
+                           max_effects=args.max_effects, seed=args.seed)
+    jpath, hpath = write_report(d, args.output)
+    js = d.summary()
+    print(f"verdict: {js['verdict']}; baseline chi2/dof {js['baseline']['chi2_dof']:.3g}; chosen: "
+          f"{', '.join(js['chosen']) or 'none'}; final chi2/dof {js['final']['chi2_dof']:.3g}")
+    cv = js.get("cross_validation")
+    if cv:
+        print(f"leave-one-night-out ({cv['n_folds']} nights): RMS {cv['rms_mag_before']:.3f} -> "
+              f"{cv['rms_mag_after']:.3f} mag, R {cv['r_before']:.3f} -> {cv['r_after']:.3f}")
+    print(f"wrote {jpath} and {hpath}")
+    return 0
+
+
+def _register_diagnosis(sub) -> None:
+    p = sub.add_parser(
+        "diagnose", help="find where a model and a recording differ and name the missing physics",
+        description="Fit the model's baseline to a recording, test the residuals (chi-square band, "
+        "Ljung-Box, runs, systematic segments), score every registered physics effect (signature "
+        "correlation, fit, delta-BIC), fit the best one or two, and write DIR/diagnosis.json and "
+        "DIR/report.html. Recordings spanning several nights get leave-one-night-out "
+        "cross-validation.")
+    p.add_argument("recording", help="lightcurve HDF5 file, or a CSV recording (needs --scenario)")
+    p.add_argument("--scenario", default=None, metavar="MODEL.toml",
+                   help="the model (scenario TOML; its [effects] are switched off; an optional "
+                   "[diagnosis] table sets free/exclude/max_effects/min_delta_bic). Default for HDF5: "
+                   "the file's own scenario")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--free", default=None,
+                   help="free baseline parameters: none | zero_point | reflection | BRDF parameter "
+                   "names, comma separated (default: none for HDF5 with truth, reflection for CSV)")
+    p.add_argument("--exclude", default=None, help="effects not to propose, comma separated")
+    p.add_argument("--max-effects", type=_num(1, 2, integer=True), default=None,
+                   help="at most this many effects in the final model (1 or 2; default 2)")
+    p.add_argument("--no-cv", action="store_true", help="skip the leave-one-night-out cross-validation")
+    p.add_argument("--seed", type=_SEED, default=0, help="seed of the random fit starts (default 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(func=_cmd_diagnose)
+
+
 _REGISTRARS = (_register_core, _register_geometry, _register_photometry, _register_simulation,
-               _register_css, _register_filters)
+               _register_css, _register_filters, _register_diagnosis)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -368,20 +615,32 @@ def main(argv=None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except InputError as exc:
+    except InputError as exc:  # bad input: exit 2
         if args.debug:
-            raise
-        print(f"lightcurve: error: {exc}", file=sys.stderr)
+            traceback.print_exc()
+        print(f"lightcurve: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("lightcurve: interrupted", file=sys.stderr)
         return 130
-    except Exception as exc:  # run-time failure: one line unless --debug
+    except BrokenPipeError:  # `lightcurve ... | head`: the reader went away, not our failure
+        try:
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115  silence the flush at exit
+        except OSError:
+            pass
+        return 0
+    except Exception as exc:  # run-time failure: exit 1, one line unless --debug
         if args.debug:
-            raise
-        print(f"lightcurve: failed: {type(exc).__name__}: {exc} (run with --debug for details)",
-              file=sys.stderr)
+            traceback.print_exc()
+        hint = "" if args.debug else " (run with --debug for details)"
+        print(f"lightcurve: failed: {type(exc).__name__}: {_one_line(exc)}{hint}", file=sys.stderr)
         return 1
+
+
+def _one_line(exc: BaseException, limit: int = 2000) -> str:
+    """The exception's text on one line (newlines folded), at most ``limit`` characters."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 if __name__ == "__main__":  # pragma: no cover

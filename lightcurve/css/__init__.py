@@ -1,1 +1,24 @@
-"""css subpackage (see DESIGN.md)."""
+"""Coarse sun sensors (O'Keefe 2015, ch. 2-3): sensor, albedo and gyro models, single-point
+and sequential sun-direction estimators, MRP sun-pointing control, truth simulation and
+Monte Carlo studies.
+
+Modules: :mod:`.sensors` (eq. 2.19, 2.21), :mod:`.configurations` (tables 2.1, 2.2, TOML),
+:mod:`.albedo` (eq. 2.15-2.18, CERES/TOMS maps, built-in zonal model), :mod:`.gyro`
+(eq. 2.23-2.50, table 2.3), :mod:`.allan` (eq. 2.52), :mod:`.single_point` (eq. 3.3,
+3.9-3.12, figs. 3.1-3.2), :mod:`.sunline_ekf` (eq. 3.27-3.31, §3.2.2, eq. 3.67),
+:mod:`.control` (eq. 3.64), :mod:`.truth` (§2.4), :mod:`.study`, :mod:`.recording`.
+"""
+
+from .albedo import AlbedoMap, builtin_albedo_map, load_albedo_map, zonal_albedo
+from .configurations import cube, dual_pyramid, load_configuration
+from .control import ControlParams
+from .gyro import GYRO_GRADES, GyroSpec, simulate_gyro
+from .sensors import CSSArray
+from .single_point import error_map, estimate
+from .sunline_ekf import FilterParams, run_filter
+from .truth import Dispersions, Scenario, Spacecraft, simulate
+
+__all__ = ["AlbedoMap", "builtin_albedo_map", "load_albedo_map", "zonal_albedo", "cube",
+           "dual_pyramid", "load_configuration", "ControlParams", "GYRO_GRADES", "GyroSpec",
+           "simulate_gyro", "CSSArray", "error_map", "estimate", "FilterParams", "run_filter",
+           "Dispersions", "Scenario", "Spacecraft", "simulate"]
