@@ -453,6 +453,83 @@ def _register_css(sub) -> None:
     st.add_argument("--out", help="report folder (default <study name>-report)")
     st.set_defaults(func=_cmd_css_study)
 
+    # --- issue 9: calibration, fault detection, VMM/SMM, Sun models (handlers in
+    # lightcurve/css/cli_tools.py) ---
+    def _lazy(name):
+        def run(args):
+            from .css import cli_tools
+
+            return getattr(cli_tools, name)(args)
+        return run
+
+    ca = css_sub.add_parser(
+        "calibrate", help="on-orbit CSS calibration filters (full and reduced) on a simulated orbit",
+        description="Simulate O'Keefe's §4.4 case (one orbit, tumbling, dual pyramid, scale "
+        "factors dispersed 30 %%, misalignments, albedo, gyro, star tracker) and run the full "
+        "calibration ECKF (MRP, gyro bias, scale factors, misalignments, albedo model) and the "
+        "reduced filter (albedo as a considered bias). Prints per-sensor errors and 3-sigma bounds.")
+    ca.add_argument("--filter", choices=("full", "reduced", "both"), default="both")
+    ca.add_argument("--seed", type=_SEED, default=0, help="random seed (default 0)")
+    ca.add_argument("--duration-s", type=_num(10.0, 86400.0), default=None,
+                    help="duration, s (default one 400 km orbit, 5553 s)")
+    ca.add_argument("--dt-s", type=_num(0.05, 10.0), default=1.0, help="step, s (default 1)")
+    ca.add_argument("--scale-sigma", type=_num(0.0, 1.0), default=0.3,
+                    help="1-sigma dispersion of the scale factors (default 0.3)")
+    ca.add_argument("--misalignment-sigma-deg", type=_num(0.0, 20.0), default=2.0,
+                    help="1-sigma misalignment per angle, deg (default 2)")
+    ca.add_argument("--star-period-s", type=_num(0.0, 3600.0), default=10.0,
+                    help="star-tracker period, s; 0 for none (default 10)")
+    ca.add_argument("--albedo-truth", default="builtin",
+                    help="albedo of the truth: builtin, none, or a CERES CSV / TOMS .dat file")
+    ca.add_argument("--albedo-filter", default=None,
+                    help="albedo map of the full filter (default: the truth's map)")
+    ca.add_argument("--out", help="write the summary to this JSON file")
+    ca.set_defaults(func=_lazy("cmd_calibrate"))
+
+    fa = css_sub.add_parser(
+        "faults", help="fault detection by averaged per-sensor NIS (off / stuck / random failures)",
+        description="Monte Carlo of O'Keefe §5.1: one sensor fails (off, stuck or random) at "
+        "--fail-s; the averaged per-sensor NIS of the calibration filter is tested against "
+        "the chi-square bound. Reports detection and false-alarm rates and times to detection.")
+    fa.add_argument("--runs", type=_num(1, 100000, integer=True), default=300,
+                    help="runs per failure mode (default 300)")
+    fa.add_argument("--workers", type=_num(1, 256, integer=True), default=1)
+    fa.add_argument("--seed", type=_SEED, default=0)
+    fa.add_argument("--window", type=_num(1, 100000, integer=True), default=50,
+                    help="averaging window, valid samples (default 50)")
+    fa.add_argument("--prob", type=_num(0.0, 1.0, lo_open=True, hi_open=True), default=0.999999,
+                    help="probability of the chi-square interval (default 1-1e-6)")
+    fa.add_argument("--start-s", type=_num(0.0), default=600.0,
+                    help="no decision before this time, s (default 600)")
+    fa.add_argument("--fail-s", type=_num(0.0), default=1950.0, help="failure time, s (default 1950)")
+    fa.add_argument("--out", help="write the summary to this JSON file")
+    fa.set_defaults(func=_lazy("cmd_faults"))
+
+    vm = css_sub.add_parser(
+        "vmm", help="voltage vs sun-vector measurement model in a full-attitude MEKF",
+        description="DiGregorio's comparison: MEKF with magnetometer, gyro and photodiodes, "
+        "photodiodes used as a least-squares Sun vector (SMM) or as individual voltages (VMM); "
+        "attitude errors grouped by the number of lit photodiodes, with a plot.")
+    vm.add_argument("--runs", type=_num(1, 100000, integer=True), default=20)
+    vm.add_argument("--seed", type=_SEED, default=0)
+    vm.add_argument("--duration-s", type=_num(10.0, 86400.0), default=3000.0)
+    vm.add_argument("--fov-deg", type=_num(0.0, 90.0, lo_open=True), default=70.0,
+                    help="photodiode FOV half angle, deg (cube; default 70)")
+    vm.add_argument("--albedo", action="store_true", help="Earth albedo in the truth (unmodelled)")
+    vm.add_argument("--plot", help="write the figure to this PNG file")
+    vm.add_argument("--out", help="write the summary to this JSON file")
+    vm.set_defaults(func=_lazy("cmd_vmm"))
+
+    sm = css_sub.add_parser(
+        "sun-models", help="almanac (Vallado) vs DE421 Sun direction (table 4.5)",
+        description="Angular difference between the low-precision almanac Sun formula "
+        "(O'Keefe eq. 4.39) and skyfield/DE421 at the given dates.")
+    sm.add_argument("dates", nargs="*", default=["2005-01-01T00:00:00Z", "2010-01-01T00:00:00Z",
+                                                 "2015-03-01T00:00:00Z", "2020-01-01T00:00:00Z",
+                                                 "2025-01-01T00:00:00Z"],
+                    help="ISO 8601 UTC dates")
+    sm.set_defaults(func=_lazy("cmd_sun_models"))
+
 
 # ----------------------------------------------------------------------------------------
 # attitude filters (invert)
@@ -468,15 +545,23 @@ def _cmd_invert(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     summary = {}
     failed = 0
+    bad_inputs = 0
     for f in args.files:
-        curve = read_lightcurve(f)
-        est = invert(curve, args.method, seed=args.seed, sigma_theta_deg=args.sigma_theta_deg,
-                     sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
-                     roughening=args.roughening, resampling=args.resampling,
-                     ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
-                     pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
-                     kappa=args.kappa)
         stem = Path(f).stem
+        try:
+            curve = read_lightcurve(f)
+            est = invert(curve, args.method, seed=args.seed,
+                         sigma_theta_deg=args.sigma_theta_deg,
+                         sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
+                         roughening=args.roughening, resampling=args.resampling,
+                         ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
+                         pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
+                         kappa=args.kappa)
+        except InputError as exc:  # report, go on with the other files, exit 2 at the end
+            print(f"lightcurve: error: {exc}", file=sys.stderr)
+            summary[stem] = {"file": str(f), "method": args.method, "error": str(exc)}
+            bad_inputs += 1
+            continue
         res = out / f"{stem}.{args.method}.h5"
         est.write(res)
         s = est.summary()
@@ -502,8 +587,9 @@ def _cmd_invert(args) -> int:
             plot_estimate(est, png, title=f"{stem} ({args.method})")
             print(f"wrote {png}")
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    print(f"wrote {out / 'summary.json'} ({len(summary)} file(s), {failed} diverged)")
-    return 0
+    print(f"wrote {out / 'summary.json'} ({len(summary)} file(s), {failed} diverged, "
+          f"{bad_inputs} rejected)")
+    return 2 if bad_inputs else 0
 
 
 def _register_filters(sub) -> None:
@@ -519,24 +605,24 @@ def _register_filters(sub) -> None:
     p.add_argument("--method", choices=("mekf", "ukf", "bpf"), default="ukf",
                    help="filter (default: ukf)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--sigma-theta-deg", type=float, default=3.0,
+    p.add_argument("--seed", type=_SEED, default=0, help="random seed (default 0)")
+    p.add_argument("--sigma-theta-deg", type=_num(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3)")
-    p.add_argument("--sigma-omega-deg-s", type=float, default=0.02,
+    p.add_argument("--sigma-omega-deg-s", type=_num(0.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
-    p.add_argument("--particles", type=int, default=10_000, help="BPF particles (default 10000)")
-    p.add_argument("--roughening", type=float, default=0.2,
+    p.add_argument("--particles", type=_num(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
+    p.add_argument("--roughening", type=_num(0.0), default=0.2,
                    help="BPF roughening constant G (Bernard table 7.9; default 0.2)")
     p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic")
-    p.add_argument("--ess-threshold", type=float, default=0.5,
+    p.add_argument("--ess-threshold", type=_num(0.0, 1.0), default=0.5,
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
     p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",
                    help="controlled model: ACS noise as attitude random walk or jitter")
-    p.add_argument("--pseudo-noise", type=float, default=0.0,
+    p.add_argument("--pseudo-noise", type=_num(0.0), default=0.0,
                    help="rate pseudo-noise PSD, (rad/s)^2/s (default 0)")
-    p.add_argument("--alpha", type=float, default=1.0, help="UKF alpha (default 1)")
-    p.add_argument("--beta", type=float, default=2.0, help="UKF beta (default 2)")
-    p.add_argument("--kappa", type=float, default=0.0, help="UKF kappa (default 0)")
+    p.add_argument("--alpha", type=_num(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
+    p.add_argument("--beta", type=_num(), default=2.0, help="UKF beta (default 2)")
+    p.add_argument("--kappa", type=_num(), default=0.0, help="UKF kappa (default 0)")
     p.add_argument("--plot", action="store_true", help="also write a PNG per file")
     p.set_defaults(func=_cmd_invert)
 
@@ -588,8 +674,54 @@ def _register_diagnosis(sub) -> None:
     p.set_defaults(func=_cmd_diagnose)
 
 
+# ----------------------------------------------------------------------------------------
+# studies (issue 7): Monte Carlo filter comparisons
+# ----------------------------------------------------------------------------------------
+def _cmd_compare(args) -> int:
+    from .studies.runner import run_study
+    from .studies.study import load_study
+
+    study = load_study(args.study)
+    summary = run_study(study, args.output, runs=args.runs, workers=args.workers,
+                        scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
+                        progress=not args.quiet)
+    cells = summary["cells"]
+    cnt = {c: sum(1 for x in cells if x["color"] == c) for c in ("green", "yellow", "red")}
+    fails = sum(x["failures"] for x in cells)
+    print(f"{len(cells)} cells x {summary['runs_per_cell']} runs: {cnt['green']} green, "
+          f"{cnt['yellow']} yellow, {cnt['red']} red; {fails} failed runs")
+    print(f"wrote {Path(args.output) / 'summary.json'} and {Path(args.output) / 'report.html'}")
+    return 0
+
+
+def _register_studies(sub) -> None:
+    p = sub.add_parser(
+        "compare",
+        help="run a Monte Carlo filter-comparison study (resumable; process pool or Dask)",
+        description="Run every cell of a study TOML (grid of filters, dynamics, sites, initial "
+        "errors, noise levels) RUNS times: simulate, invert, score. Each finished run is stored "
+        "under DIR/runs/ as it completes; rerunning the same command resumes. Writes "
+        "DIR/summary.json and a self-contained DIR/report.html (Bernard 2021 fig. 9.4 table). "
+        "Results do not depend on the executor or the worker count.")
+    p.add_argument("study", metavar="STUDY.toml", help="study file (docs/formats.md, Studies)")
+    p.add_argument("--runs", type=_num(1, 1_000_000, integer=True), default=None,
+                   help="runs per cell (default: the study's [study] runs)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    ex = p.add_mutually_exclusive_group()
+    ex.add_argument("--workers", type=_num(1, 4096, integer=True), default=None,
+                    help="local process-pool size (default: all CPUs; 1 runs in this process)")
+    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    ex.add_argument("--dask-local", type=_num(1, 4096, integer=True), default=None, metavar="W",
+                    help="start a Dask LocalCluster with W worker processes")
+    p.add_argument("--force", action="store_true",
+                   help="discard stored runs of a different (changed) study instead of refusing")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_compare)
+
+
 _REGISTRARS = (_register_core, _register_geometry, _register_photometry, _register_simulation,
-               _register_css, _register_filters, _register_diagnosis)
+               _register_css, _register_filters, _register_diagnosis, _register_studies)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -182,6 +182,7 @@ def builtin_albedo_map(resolution_deg: float = 10.0) -> AlbedoMap:
 
 
 _CERES_SHAPES = ((18, 36), (36, 72), (180, 360))
+_MAX_MAP_BYTES = 16 * 1024 * 1024
 
 
 def load_albedo_map(path) -> AlbedoMap:
@@ -194,6 +195,10 @@ def load_albedo_map(path) -> AlbedoMap:
     path = Path(path)
     if not path.is_file():
         raise InputError("albedo map file not found", file=path)
+    size = path.stat().st_size
+    if size > _MAX_MAP_BYTES:  # refused before reading (bounded time and memory)
+        raise InputError(f"file too large ({size} bytes) for an albedo map", file=path,
+                         allowed=f"<= {_MAX_MAP_BYTES} bytes (a 1-degree CERES map is ~0.5 MB)")
     toms = path.suffix.lower() == ".dat"
     try:
         if toms:

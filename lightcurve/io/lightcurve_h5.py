@@ -137,6 +137,10 @@ class Lightcurve:
             v = getattr(self, name)
             if v is None:
                 continue
+            if name == "site":  # integer indices: refuse NaN/fractions before the cast
+                f = np.asarray(v, dtype=float)
+                if not np.all(np.isfinite(f) & (f == np.round(f)) & (np.abs(f) < 2**31)):
+                    raise err(name, "site indices must be integers", allowed="0..K-1")
             v = np.asarray(v, dtype=np.int64 if name == "site" else float)
             if v.shape != shape:
                 raise err(name, f"expected shape {shape}, got {v.shape}")
@@ -144,17 +148,72 @@ class Lightcurve:
                     and not np.all(np.isfinite(v)):
                 raise err(name, "contains NaN or infinite values")
             setattr(self, name, v)
-        if np.any((self.mag_sigma <= 0) & np.isfinite(self.mag)):
-            raise err("mag_sigma", "measurement sigmas must be positive", allowed="> 0")
+        # NaN marks "not measured" (skipped by the filters, counted by count_unusable); an
+        # infinite magnitude is never a measurement
+        if np.any(np.isinf(self.mag)):
+            k = int(np.argmax(np.isinf(self.mag)))
+            raise err("mag", f"infinite magnitude at row {k}", value=float(self.mag[k]),
+                      allowed="finite, or NaN for not measured")
+        bad_sig = ~((self.mag_sigma > 0) & np.isfinite(self.mag_sigma)) & np.isfinite(self.mag)
+        if np.any(bad_sig):
+            k = int(np.argmax(bad_sig))
+            raise err("mag_sigma", f"measurement sigmas must be positive and finite (row {k})",
+                      value=float(self.mag_sigma[k]), allowed="> 0")
+        for name, lo, hi in (("lit_fraction", 0.0, 1.0), ("elevation_rad", -np.pi / 2, np.pi / 2)):
+            v = getattr(self, name)
+            if v is not None and not np.all((v >= lo) & (v <= hi)):
+                raise err(name, "values must be finite and in range", allowed=f"[{lo:g}, {hi:g}]")
         k = len(self.site_names)
         self.site_names = [str(s) for s in self.site_names]
         if n and (self.site.min() < 0 or self.site.max() >= k):
             raise err("site", "site index out of range", allowed=f"0..{k - 1}")
-        self.site_lla_deg_m = np.asarray(self.site_lla_deg_m, dtype=float).reshape(k, 3)
+        if n > 1:  # the same site measuring twice at one instant: a duplicated row
+            same = (np.diff(self.t) == 0)
+            if np.any(same):
+                order = np.lexsort((self.site, self.t))
+                dup = (np.diff(self.t[order]) == 0) & (np.diff(self.site[order]) == 0)
+                if np.any(dup):
+                    j = int(order[int(np.argmax(dup)) + 1])
+                    raise err("t", f"duplicated measurement: row {j} repeats the time and site of "
+                              "another row", value=float(self.t[j]),
+                              allowed="one measurement per (time, site)")
+        try:
+            self.site_lla_deg_m = np.asarray(self.site_lla_deg_m, dtype=float).reshape(k, 3)
+        except ValueError:
+            raise err("sites/lla_deg_m", f"expected shape ({k}, 3) for {k} site name(s)",
+                      value=np.shape(self.site_lla_deg_m)) from None
+        lla = self.site_lla_deg_m
+        if not (np.all(np.isfinite(lla)) and np.all(np.abs(lla[:, 0]) <= 90)
+                and np.all((lla[:, 1] >= -180) & (lla[:, 1] <= 360))):
+            raise err("sites/lla_deg_m", "site latitude/longitude not finite or out of range",
+                      allowed="lat in [-90, 90] deg, lon in [-180, 360] deg")
+        self._check_time_span(err)
         if self.truth_q is not None:
             nq = np.linalg.norm(self.truth_q, axis=1)
             if np.any(np.abs(nq - 1) > 1e-6):
                 raise err("truth_q", "quaternions must have unit norm")
+
+    def _check_time_span(self, err) -> None:
+        """The epoch parses and every time lies inside the DE421 ephemeris (1899-07-30 to
+        2053-10-08 UTC, the package's conservative bounds of JPL's 1899-07-29 .. 2053-10-09)."""
+        from ..geometry.time import DE421_END_UTC, DE421_START_UTC, parse_epoch
+
+        try:
+            ep = parse_epoch(self.epoch_utc)
+        except InputError as exc:
+            raise err("epoch_utc", exc.bare_message, value=self.epoch_utc, allowed=exc.allowed) from None
+        if len(self):
+            lo = (DE421_START_UTC - ep).total_seconds()
+            hi = (DE421_END_UTC - ep).total_seconds()
+            if self.t[0] < lo or self.t[-1] > hi:
+                k = 0 if self.t[0] < lo else len(self) - 1
+                raise err("t", f"time at row {k} is outside the DE421 ephemeris",
+                          value=float(self.t[k]), allowed=f"[{lo:.0f}, {hi:.0f}] s from epoch_utc "
+                          "(1899-07-30 to 2053-10-08 UTC)")
+
+    def count_unusable(self) -> dict:
+        """Counts of rows a filter must skip: ``{"nan_mag": ...}`` (NaN = not measured)."""
+        return {"nan_mag": int(np.sum(np.isnan(self.mag)))}
 
     # ------------------------------------------------------------------------------------
     def write(self, path) -> Path:
@@ -259,7 +318,7 @@ def read_lightcurve(path) -> Lightcurve:
             )
     except InputError:
         raise
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py: damaged file
         raise InputError(f"corrupted or unexpected HDF5 content: {exc}", file=path) from None
     if (kw["truth_q"] is None) != (kw["truth_omega_rad_s"] is None):
         raise InputError("truth/q and truth/omega_rad_s must both be present or both absent",

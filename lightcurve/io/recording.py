@@ -18,6 +18,12 @@ Row handling (documented, counted in ``Lightcurve.attrs``):
 * an empty or ``nan`` magnitude skips the row (``attrs["skipped_nan_mag"]``);
 * rows not in time order are sorted (stable); ``attrs["sorted_by_time"] = 1`` and
   ``attrs["n_out_of_order"]`` say so;
+* an exact copy of a row (same time, site and values) is skipped
+  (``attrs["skipped_duplicate"]``); two different values at the same time and site are an
+  error naming both lines;
+* rows with the object below the site's geometric horizon are skipped
+  (``attrs["skipped_below_horizon"]``); rows with it in the Earth's full shadow are kept,
+  counted (``attrs["n_unlit"]``) and announced with an ``UnlitPassWarning``;
 * every other bad value (wrong number of fields, unparsable time or number, altitude out of
   [-90, 90] / below 0 with a height, azimuth not finite, negative sigma/range, a height below
   the site, an unknown site) raises :class:`~lightcurve.errors.InputError` naming the file, the
@@ -348,6 +354,7 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
     nexp = len(header[1]) if header else None
     times, mags, sigmas, site_ids, alts, azs, dists, lines = [], [], [], [], [], [], [], []
     skipped_nan = 0
+    skipped_below = 0
     dscale = _UNITS[spec.range_unit] if ci["range"] is not None else _UNITS[spec.height_unit]
 
     for no, f in rows:
@@ -410,6 +417,11 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
             if key == "height" and a < 0:
                 raise bad("alt", "altitude below the horizon: no line of sight reaches a height",
                           "[0, 90] deg with a height column")
+            if a < 0:  # below the geometric horizon: not observable; skipped and counted
+                skipped_below += 1
+                if ci["site"] is not None:
+                    site_ids.pop()
+                continue
             alts.append(a)
             azs.append(z)
             dists.append(d)
@@ -420,7 +432,8 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
 
     n = len(times)
     if n == 0:
-        raise InputError(f"no measurement rows ({skipped_nan} skipped for a missing magnitude)", file=path)
+        raise InputError(f"no measurement rows ({skipped_nan} skipped for a missing magnitude, "
+                         f"{skipped_below} below the horizon)", file=path)
 
     # sites
     if fixed_site is not None:
@@ -446,6 +459,29 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
     # rows earlier than some row above them in the file
     n_out = int(np.sum(ts[1:] < np.maximum.accumulate(ts)[:-1])) if n > 1 else 0
     was_sorted = bool(np.all(order == np.arange(n)))
+    # the same site twice at one instant: an identical copy is dropped (counted in
+    # attrs["skipped_duplicate"]); two different values are an error naming both lines
+    skipped_dup = 0
+    if n > 1:
+        by = np.lexsort((sidx, ts))
+        rep = (np.diff(ts[by]) == 0) & (np.diff(sidx[by]) == 0)
+        if np.any(rep):
+            vals = np.column_stack([mags, sigmas] + ([alts, azs, dists] if topo else []))
+            drop = np.zeros(n, bool)
+            for j in np.flatnonzero(rep):  # consecutive pairs: a run of copies chains up
+                a_, b_ = int(by[j]), int(by[j + 1])
+                if np.array_equal(vals[a_], vals[b_]):
+                    drop[b_] = True
+                else:
+                    raise InputError(f"lines {lines[a_]} and {lines[b_]}: two different measurements "
+                                     "at the same time from the same site", file=path,
+                                     field=f"line {lines[b_]}, column {colname['time']}",
+                                     value=str(times[b_]),
+                                     allowed="one measurement per (time, site); identical copies "
+                                     "are skipped")
+            skipped_dup = int(drop.sum())
+            order = order[~drop[order]]
+            n = order.size
     times = [times[k] for k in order]
     mag = np.asarray(mags, float)[order]
     sig = np.asarray(sigmas, float)[order]
@@ -499,6 +535,17 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
             except InputError as exc:
                 raise InputError(exc.bare_message, file=path, field=exc.field, value=exc.value,
                                  allowed=exc.allowed) from None
+        from ..geometry.eclipse import R_EARTH_SHADOW_M
+
+        inside = np.linalg.norm(r_obj, axis=1) <= R_EARTH_SHADOW_M
+        if np.any(inside):
+            j = int(np.argmax(inside))
+            key = "range" if ci["range"] is not None else "height"
+            raise InputError(f"line {lines_s[j]}: the line of sight ends inside the Earth (range "
+                             "too short for this altitude?)", file=path,
+                             field=f"line {lines_s[j]}, column {colname[key]}", value=float(dist[j]),
+                             allowed=f"a position above the Earth's equatorial radius "
+                             f"({R_EARTH_SHADOW_M:.0f} m from its centre)")
         geometry_source = "topocentric"
     else:
         orbit = getattr(scenario, "orbit", None) if scenario is not None else None
@@ -513,14 +560,40 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
 
     geo = compute_geometry(epoch, t, sidx, sites, r_obj)
     lla = np.array([[s.lat_deg, s.lon_deg, s.height_m] for s in sites])
-    return Lightcurve(
-        epoch_utc=str(epoch), t=t, mag=mag, mag_sigma=sig, site=sidx,
-        site_names=[s.id for s in sites], site_lla_deg_m=lla,
-        r_obj_eci_m=geo.r_obj_eci_m, r_site_eci_m=geo.r_site_eci_m, r_sun_eci_m=geo.r_sun_eci_m,
-        lit_fraction=geo.lit_fraction, elevation_rad=geo.elevation_rad,
-        scenario_toml=getattr(scenario, "text", "") if scenario is not None else "",
-        attrs={"source": "recording", "file": str(path), "n_rows": len(rows),
-               "skipped_nan_mag": int(skipped_nan), "sorted_by_time": int(not was_sorted),
-               "n_out_of_order": n_out, "geometry_source": geometry_source,
-               "time_format": spec.time_format},
-    )
+    try:
+        lc = Lightcurve(
+            epoch_utc=str(epoch), t=t, mag=mag, mag_sigma=sig, site=sidx,
+            site_names=[s.id for s in sites], site_lla_deg_m=lla,
+            r_obj_eci_m=geo.r_obj_eci_m, r_site_eci_m=geo.r_site_eci_m, r_sun_eci_m=geo.r_sun_eci_m,
+            lit_fraction=geo.lit_fraction, elevation_rad=geo.elevation_rad,
+            scenario_toml=getattr(scenario, "text", "") if scenario is not None else "",
+            attrs={"source": "recording", "file": str(path), "n_rows": len(rows),
+                   "skipped_nan_mag": int(skipped_nan), "sorted_by_time": int(not was_sorted),
+                   "n_out_of_order": n_out, "geometry_source": geometry_source,
+                   "time_format": spec.time_format, "skipped_duplicate": skipped_dup},
+        )
+    except InputError as exc:  # name the CSV file
+        raise InputError(exc.bare_message, file=path, field=exc.field, value=exc.value,
+                         allowed=exc.allowed) from None
+    # rows the model cannot have produced. Below the site's geometric horizon there is no line
+    # of sight: skipped and counted. In the Earth's full shadow the object reflects no sunlight:
+    # kept (Bernard's published cases model umbral passes as if sunlit), counted in
+    # attrs["n_unlit"] and announced with a warning -- never silently used.
+    below = ~(lc.elevation_rad >= 0.0)
+    unlit = ~(lc.lit_fraction > 0.0) & ~below
+    lc.attrs["skipped_below_horizon"] = int(below.sum()) + skipped_below
+    lc.attrs["n_unlit"] = int(unlit.sum())
+    if np.any(below):
+        if np.all(below):
+            raise InputError(f"no usable row: the object is below the horizon in all {below.size}",
+                             file=path, field="alt_deg / time", allowed="altitude >= 0 deg")
+        lc = lc.subset(~below)
+    if np.any(unlit):
+        import warnings
+
+        from ..geometry.visibility import UnlitPassWarning
+
+        warnings.warn(f"{path}: the object is in the Earth's shadow at {int(unlit.sum())} of "
+                      f"{unlit.size} measurement epochs (kept; counted in attrs['n_unlit'])",
+                      UnlitPassWarning, stacklevel=2)
+    return lc

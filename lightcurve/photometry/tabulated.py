@@ -42,6 +42,7 @@ from .brdf import BRDF
 __all__ = ["TabulatedBRDF", "load_brdf_table"]
 
 _FLOOR = 1e-12  # sr⁻¹, floor before taking logs
+_MAX_TABLE_BYTES = 64 * 1024 * 1024
 
 
 def load_brdf_table(path):
@@ -53,6 +54,10 @@ def load_brdf_table(path):
     path = Path(path)
     if not path.is_file():
         raise InputError("BRDF table not found", file=path)
+    size = path.stat().st_size
+    if size > _MAX_TABLE_BYTES:  # refused before reading (bounded time and memory)
+        raise InputError(f"file too large ({size} bytes) for a BRDF table", file=path,
+                         allowed=f"<= {_MAX_TABLE_BYTES} bytes")
     rows = []
     for lineno, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
         text = line.split("#", 1)[0].strip()
@@ -132,7 +137,10 @@ class TabulatedBRDF(BRDF):
     def from_csv(cls, path, name: str | None = None) -> "TabulatedBRDF":
         """Build from a table file (format in the module docstring)."""
         ti, po, f = load_brdf_table(path)
-        return cls(ti, po, f, name=name or f"tabulated:{Path(path).name}")
+        try:
+            return cls(ti, po, f, name=name or f"tabulated:{Path(path).name}")
+        except ValueError as exc:  # e.g. an incidence angle with a single sample
+            raise InputError(str(exc), file=path, allowed=">= 2 samples per incidence angle") from None
 
     # -- in-plane lookup -------------------------------------------------------------------
     def in_plane(self, theta_i_deg, d_deg) -> np.ndarray:

@@ -102,6 +102,8 @@ class Scenario:
 
 
 _DYNAMICS = ("controlled", "uncontrolled", "law")
+#: most epochs a scenario may schedule (same cap as geometry.schedules.cadence_grid)
+_MAX_EPOCHS = 50_000_000
 _TORQUES = ("gravity_gradient", "srp", "drag")
 
 
@@ -127,13 +129,30 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     root = Section(doc, file=file)
     sc = root.section("scenario")
     epoch = sc.str("epoch_utc")
-    parse_epoch(epoch)  # validates ISO 8601 (InputError names the field)
+    try:
+        epoch_dt = parse_epoch(epoch)  # validates ISO 8601 and the DE421 range
+    except InputError as exc:
+        raise InputError(exc.bare_message, file=file, field="scenario.epoch_utc", value=epoch,
+                         allowed=exc.allowed) from None
     # a scenario that models a recording ([recording]) may span more than 30 days and need
     # no duration or [orbit]: the recording gives the epochs and (topocentric) positions
     has_rec = isinstance(doc.get("recording"), dict)
     duration = sc.float("duration_s", None if has_rec else REQUIRED, min=0.0, min_open=True,
                         max=None if has_rec else 30 * 86400.0)
     cadence = sc.float("cadence_s", 5.0, min=1e-3, max=duration)
+    if duration is not None:
+        from ..geometry.time import DE421_END_UTC
+
+        # refuse huge schedules here (bounded memory), naming the file, before allocating them
+        if duration / cadence > _MAX_EPOCHS:
+            raise InputError("too many epochs (duration_s / cadence_s)", file=file,
+                             field="scenario.cadence_s", value=cadence,
+                             allowed=f"duration_s / cadence_s <= {_MAX_EPOCHS:.0e}")
+        if (DE421_END_UTC - epoch_dt).total_seconds() < duration:
+            raise InputError("epoch_utc + duration_s runs past the end of the DE421 ephemeris",
+                             file=file, field="scenario.duration_s", value=duration,
+                             allowed=f"<= {(DE421_END_UTC - epoch_dt).total_seconds():.0f} s "
+                             "(DE421 ends 2053-10-08 UTC)")
     seed = sc.int("seed", 0, min=0)
     name = sc.str("name", Path(str(file)).stem)
     sc.check_unknown(extra_allowed=("description",))
@@ -194,10 +213,15 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     sites = []
     for s in root.sections("sites"):
         if s.has("name") and isinstance(s.data.get("name"), str) and not s.has("lat_deg"):
-            site = get_site(s.str("name"), dirs=site_dirs)
+            sid = s.str("name")
+            try:
+                site = get_site(sid, dirs=site_dirs)
+            except InputError as exc:  # name the scenario file and the [[sites]] entry
+                raise InputError(exc.bare_message, file=file, field=f"{s.name}.name", value=sid,
+                                 allowed=exc.allowed) from None
         else:
             inline = {k: s.raw(k) for k in ("name", "id", "lat_deg", "lon_deg", "height_m") if s.has(k)}
-            site = get_site(inline, dirs=site_dirs)
+            site = get_site(Section(inline, file=file, name=s.name), dirs=site_dirs)
         windows = s.raw("windows_s", [[0.0, duration if duration is not None else 0.0]])
         ok = isinstance(windows, list) and all(
             isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
@@ -212,7 +236,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
 
     me = root.section("measurement", {})
     meas = MeasurementSpec(
-        r_percent=me.float("r_percent", 1.0, min=0.0, max=100.0),
+        r_percent=me.float("r_percent", 1.0, min=0.0, min_open=True, max=100.0),
         ignore_eclipse=me.bool("ignore_eclipse", False),
         min_elevation_deg=me.float("min_elevation_deg", 0.0, min=-5.0, max=90.0),
         require_dark_site=me.bool("require_dark_site", True),

@@ -182,6 +182,7 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
                                                       keep & np.isfinite(m_true))
     # no reflected light towards the observer (all lit facets face away): not measurable
     dark_obj = ~np.isfinite(m_true)
+    n_no_reflection = int(np.sum(keep & dark_obj))  # only epochs not already dropped above
     keep &= ~dark_obj
     if not np.any(keep):
         raise InputError("no visible measurement: no lit facet faces the observer at any epoch",
@@ -202,7 +203,7 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
         attrs={"shape": getattr(scenario.shape, "name", ""), "r_percent": meas.r_percent,
                "seed": seed, "ignore_eclipse": int(meas.ignore_eclipse), "sun_mag": meas.sun_mag,
                "dropped_below_horizon": counts.below_horizon, "dropped_site_daylight": counts.site_daylight,
-               "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": int(np.sum(dark_obj))},
+               "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": n_no_reflection},
     )
     if effects_json is not None:
         lc.attrs["effects"] = effects_json

@@ -1,0 +1,36 @@
+"""docs/robustness.md stays in sync with the hardening tests (issue 11 acceptance: "a table of
+every bad-input case handled and how, kept in sync with the tests")."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+DOC = HERE.parents[1] / "docs" / "robustness.md"
+REF = re.compile(r"`(test_hardening_[a-z0-9_]+\.py)::(test_[a-z0-9_]+)`")
+
+
+def _listed():
+    rows = [ln for ln in DOC.read_text(encoding="utf-8").splitlines() if ln.startswith("|")]
+    refs = [m.groups() for ln in rows for m in REF.finditer(ln)]
+    assert len(refs) >= 40, "the robustness table lists suspiciously few tests"
+    return refs
+
+
+def _defined():
+    out = set()
+    for f in HERE.glob("test_hardening_*.py"):
+        for name in re.findall(r"^def (test_[a-z0-9_]+)\(", f.read_text(encoding="utf-8"), re.M):
+            out.add((f.name, name))
+    return out
+
+
+def test_every_listed_test_exists():
+    missing = sorted(set(_listed()) - _defined())
+    assert not missing, f"docs/robustness.md names tests that do not exist: {missing}"
+
+
+def test_every_hardening_test_is_listed():
+    unlisted = sorted(_defined() - set(_listed()))
+    assert not unlisted, f"hardening tests missing from docs/robustness.md: {unlisted}"
