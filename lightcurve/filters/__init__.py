@@ -1,1 +1,31 @@
-"""filters subpackage (see DESIGN.md)."""
+"""Attitude filters on lightcurves: MEKF, USQUE/GRP UKF and a numba bootstrap particle filter.
+
+Public API::
+
+    invert(curve, method="mekf"|"ukf"|"bpf", seed=…, sigma_theta_deg=…, sigma_omega_deg_s=…,
+           particles=…, roughening=…, …) -> Estimate
+    build_problem(curve, …) -> FilterProblem          # model + dynamics + initial estimate
+    run_mekf(problem, …), run_ukf(problem, …), run_bpf(problem, …), run_bpf_numpy(problem, …)
+    Estimate (per-epoch q̂, ω̂, 1σ bounds, innovations, NEES, N_eff, flags; .write(), .summary())
+    read_estimate(path) -> Estimate
+    MagnitudeModel, ControlledDynamics, UncontrolledDynamics
+
+Conventions (DESIGN.md): quaternions scalar first, inertial(ECI)→body passive; ω body rate in
+body axes (rad/s); error state [δθ, δω] with q_true = δq(δθ) ⊗ q̂; degrees only in names *_deg.
+"""
+
+from ._common import FilterProblem
+from .bpf import run_bpf, run_bpf_numpy
+from .invert import METHODS, build_problem, invert
+from .mekf import run_mekf
+from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
+from .result import (FLAG_COLLAPSE, FLAG_INVISIBLE, FLAG_NAN, FLAG_NIS, FLAG_REFUSED,
+                     FLAG_RESAMPLED, Estimate, read_estimate)
+from .ukf import run_ukf
+
+__all__ = [
+    "invert", "build_problem", "METHODS", "FilterProblem", "run_mekf", "run_ukf", "run_bpf",
+    "run_bpf_numpy", "Estimate", "read_estimate", "MagnitudeModel", "ControlledDynamics",
+    "UncontrolledDynamics", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
+    "FLAG_RESAMPLED", "FLAG_NIS",
+]

@@ -1,0 +1,200 @@
+"""Pieces shared by the three attitude filters: the problem definition and the run record."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..estimation.consistency import NISDivergenceDetector
+from . import _kernels as K
+from .result import FLAG_COLLAPSE, FLAG_NIS, FLAG_REFUSED, Estimate
+
+GRP_A = 1.0
+GRP_F = 4.0
+
+
+@dataclass
+class FilterProblem:
+    """Everything a filter needs: measurement model, dynamics and initial estimate.
+
+    Attributes
+    ----------
+    model : MagnitudeModel
+    dynamics : ControlledDynamics or UncontrolledDynamics
+    q0 : (4,) initial attitude estimate (inertial→body) at ``model.t[0]``
+    omega0 : (3,) initial rate estimate, rad/s, body axes
+    P0 : (6,6) initial error covariance of [δθ (rad), δω (rad/s)]
+    truth_q, truth_omega : (N,4), (N,3) or None
+    meta : dict of settings recorded in the Estimate
+    """
+
+    model: object
+    dynamics: object
+    q0: np.ndarray
+    omega0: np.ndarray
+    P0: np.ndarray
+    truth_q: np.ndarray | None = None
+    truth_omega: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.q0 = np.asarray(self.q0, float).reshape(4)
+        self.q0 = self.q0 / np.linalg.norm(self.q0)
+        self.omega0 = np.asarray(self.omega0, float).reshape(3)
+        self.P0 = np.asarray(self.P0, float).reshape(6, 6)
+        if not (np.all(np.isfinite(self.q0)) and np.all(np.isfinite(self.omega0))
+                and np.all(np.isfinite(self.P0))):
+            raise ValueError("initial estimate contains NaN or inf")
+        try:
+            np.linalg.cholesky(self.P0)
+        except np.linalg.LinAlgError:
+            raise ValueError("initial covariance P0 is not positive definite") from None
+
+    @property
+    def n(self) -> int:
+        """Number of epochs."""
+        return len(self.model)
+
+    def random_walk_zeta(self) -> bool:
+        """True when the ACS noise ζ is a random walk of the attitude (process noise)."""
+        d = self.dynamics
+        return d.acs_sigma > 0.0 and d.acs_mode == "random_walk"
+
+    def jitter_zeta(self) -> bool:
+        """True when ζ is measurement-time jitter about the nominal profile (eq. 7.27)."""
+        d = self.dynamics
+        return d.acs_sigma > 0.0 and d.acs_mode == "jitter"
+
+
+class Recorder:
+    """Collects per-epoch results and builds the :class:`Estimate`."""
+
+    def __init__(self, problem: FilterProblem, method: str, nis_window=10, nis_prob=0.999):
+        N = problem.n
+        self.p = problem
+        self.method = method
+        self.q = np.full((N, 4), np.nan)
+        self.w = np.full((N, 3), np.nan)
+        self.P = np.full((N, 6, 6), np.nan)
+        self.nu = np.full(N, np.nan)
+        self.S = np.full(N, np.nan)
+        self.neff = np.full(N, np.nan)
+        self.flags = np.zeros(N, dtype=np.int64)
+        self.nis = np.full(N, np.nan)
+        self.skipped_nan = 0
+        self.det = NISDivergenceDetector(1, nis_window, nis_prob)
+        self.reason = ""
+
+    def innovation(self, k, nu, S):
+        """Record the innovation ν (mag) and its variance S (mag²) at epoch k."""
+        self.nu[k] = nu
+        self.S[k] = S
+        if np.isfinite(nu) and S > 0:
+            self.nis[k] = nu * nu / S
+            if self.det.update(self.nis[k]):
+                self.flags[k] |= FLAG_NIS
+
+    def store(self, k, q, w, P):
+        """Record the posterior of epoch k."""
+        q = np.asarray(q, float)
+        self.q[k] = q / np.linalg.norm(q)
+        self.w[k] = w
+        self.P[k] = 0.5 * (P + P.T)
+
+    def finish(self, runtime_s) -> Estimate:
+        """Build the Estimate (with truth comparison when the problem has truth)."""
+        p = self.p
+        d = np.clip(np.diagonal(self.P, axis1=1, axis2=2), 0.0, None)
+        att_var = d[:, :3].copy()
+        if p.jitter_zeta():
+            att_var += p.dynamics.acs_sigma ** 2
+        diverged = False
+        reasons = []
+        last_upd = np.flatnonzero(np.isfinite(self.nis))
+        if last_upd.size and (self.flags[last_upd[-1]] & FLAG_NIS):
+            diverged = True
+            reasons.append("sliding-window NIS above its 99.9% bound at the last update")
+        if np.any(self.flags & FLAG_COLLAPSE):
+            diverged = True
+            reasons.append(f"particle weights collapsed at {int(np.sum(self.flags & FLAG_COLLAPSE > 0))} "
+                           "epoch(s)")
+        if last_upd.size == 0:
+            diverged = True
+            reasons.append("no measurement update at all (every prediction invisible or refused)")
+        nref = int(np.sum((self.flags & FLAG_REFUSED) > 0))
+        nupd = int(np.sum(np.isfinite(p.model.y)))
+        if nref and nref >= max(1, nupd // 2):
+            diverged = True
+            reasons.append(f"{nref} of {nupd} updates refused (numerical failure)")
+        if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.w))
+                and np.all(np.isfinite(self.P))):
+            # never expected (every step guards), but never return silent NaN either
+            diverged = True
+            reasons.append("non-finite estimate")
+        est = Estimate(
+            method=self.method, t=p.model.t.copy(), q=self.q, omega_rad_s=self.w, cov=self.P,
+            att_sigma_deg=np.degrees(np.sqrt(att_var)), omega_sigma_rad_s=np.sqrt(d[:, 3:]),
+            innovations=self.nu, innovation_var=self.S, n_eff=self.neff, flags=self.flags,
+            skipped_nan=int(self.skipped_nan), diverged=diverged,
+            divergence_reason="; ".join(reasons), runtime_s=float(runtime_s), meta=dict(p.meta))
+        if p.truth_q is not None and p.truth_omega is not None:
+            extra = p.dynamics.acs_sigma ** 2 if p.jitter_zeta() else 0.0
+            est.attach_truth(p.truth_q, p.truth_omega, extra_att_var=extra)
+        return est
+
+
+def grp_to_dq(p):
+    """Quaternions (S,4) of GRP error vectors p (S,3) (a = 1, f = 4)."""
+    P = np.ascontiguousarray(np.asarray(p, float).reshape(-1, 3))
+    ident = np.array([1.0, 0.0, 0.0, 0.0])
+    return K.from_grp_rel_nb(P, ident, GRP_A, GRP_F)
+
+
+def apply_grp(p, qref):
+    """``grp2q(p_i) ⊗ qref`` for p (S,3) → (S,4)."""
+    P = np.ascontiguousarray(np.asarray(p, float).reshape(-1, 3))
+    return K.from_grp_rel_nb(P, np.ascontiguousarray(qref, dtype=float), GRP_A, GRP_F)
+
+
+def grp_rel(Q, qref):
+    """GRP (S,3) of ``Q_i ⊗ qref⁻¹`` (sign with δq1 ≥ 0)."""
+    return K.grp_rel_nb(np.ascontiguousarray(Q, dtype=float),
+                        np.ascontiguousarray(qref, dtype=float), GRP_A, GRP_F)
+
+
+def psd_sqrt(C):
+    """L (n, r) with L Lᵀ = C for a symmetric positive semi-definite C (eigen-decomposition).
+
+    Only the r columns of eigenvalues above 1e-15 × the largest are kept (r = 0 for C = 0), so
+    a noise sample ``z Lᵀ`` needs r, not n, standard normals per row.
+    """
+    C = 0.5 * (np.asarray(C, float) + np.asarray(C, float).T)
+    if not np.all(np.isfinite(C)):
+        raise ValueError("covariance contains NaN or inf")
+    ev, V = np.linalg.eigh(C)
+    top = float(ev.max()) if ev.size else 0.0
+    keep = ev > 1e-15 * top if top > 0 else np.zeros(ev.shape, bool)
+    return V[:, keep] * np.sqrt(ev[keep])[None, :]
+
+
+class single_thread:
+    """Context manager running numba parallel kernels on one thread.
+
+    The Kalman filters evaluate kernels on 1–20 states per call; waking a thread pool for that
+    costs far more than the work (tens of ms per call on a loaded 2-core machine), so they run
+    single-threaded. The previous thread count is restored on exit.
+    """
+
+    def __enter__(self):
+        import numba
+
+        self._n = numba.get_num_threads()
+        numba.set_num_threads(1)
+        return self
+
+    def __exit__(self, *exc):
+        import numba
+
+        numba.set_num_threads(self._n)
+        return False

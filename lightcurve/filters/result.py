@@ -1,0 +1,226 @@
+"""The :class:`Estimate` of an attitude filter run, its truth comparison and its HDF5 file.
+
+Per epoch k (N epochs, the lightcurve's rows): posterior ``q̂`` (inertial→body, scalar first),
+``ω̂`` (rad/s, body axes), the 6×6 error covariance of ``[δθ (rad), δω (rad/s)]`` (δθ body-frame
+rotation vector / GRP, ``q_true = δq ⊗ q̂``), 1σ bounds, the measurement innovation
+``ν = y − ŷ`` (mag) and its predicted variance (mag²), N_eff for particle filters, and status
+flags. When the lightcurve has truth: attitude error ``δθ`` of ``q_true ⊗ q̂⁻¹`` as a rotation
+vector (deg, body axes; Bernard eq. 9.4–9.6), rate error ``ω_true − ω̂`` (rad/s) and the NEES
+``εₖ = eᵀ P⁻¹ e`` with ``e = [δθ (rad), δω]`` (6 degrees of freedom).
+
+Flags (bit mask per epoch): :data:`FLAG_NAN` measurement NaN (skipped), :data:`FLAG_REFUSED`
+update refused (Cholesky or non-finite; prior kept), :data:`FLAG_INVISIBLE` the estimate
+predicts no reflected light (update skipped), :data:`FLAG_COLLAPSE` all particle weights zero
+(weights reset), :data:`FLAG_RESAMPLED` the PF resampled, :data:`FLAG_NIS` the sliding-window
+NIS test exceeded its 99.9 % bound.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import rotations as rot
+from ..io.atomic import atomic_path
+
+__all__ = ["Estimate", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
+           "FLAG_RESAMPLED", "FLAG_NIS", "read_estimate"]
+
+FLAG_NAN = 1
+FLAG_REFUSED = 2
+FLAG_INVISIBLE = 4
+FLAG_COLLAPSE = 8
+FLAG_RESAMPLED = 16
+FLAG_NIS = 32
+
+_FAIL = FLAG_REFUSED | FLAG_COLLAPSE
+
+
+@dataclass
+class Estimate:
+    """Result of one filter run (module docstring for meanings and units).
+
+    Attributes
+    ----------
+    method : str — "mekf", "ukf" or "bpf"
+    t : (N,) s since the lightcurve's epoch
+    q : (N,4) posterior attitude, inertial→body, scalar first
+    omega_rad_s : (N,3) posterior body rate, rad/s, body axes
+    cov : (N,6,6) error covariance of [δθ (rad), δω (rad/s)]
+    att_sigma_deg : (N,3) 1σ attitude bounds per body axis, deg
+    omega_sigma_rad_s : (N,3) 1σ rate bounds, rad/s
+    innovations : (N,) y − ŷ (mag; NaN when no update)
+    innovation_var : (N,) predicted innovation variance (mag²; NaN when no update)
+    n_eff : (N,) effective sample size (particle filter; NaN otherwise)
+    flags : (N,) int bit mask
+    skipped_nan : int — NaN magnitudes skipped
+    diverged : bool
+    divergence_reason : str
+    runtime_s : float
+    att_error_deg, omega_error_rad_s, nees : truth comparison or None
+    meta : dict of settings (seed, sigmas, particles …)
+    clouds : dict epoch index → (M,3) particle error rotation vectors ``q_true ⊗ q_i⁻¹`` in deg
+        (body axes; BPF with ``keep_clouds`` and truth) or None
+    """
+
+    method: str
+    t: np.ndarray
+    q: np.ndarray
+    omega_rad_s: np.ndarray
+    cov: np.ndarray
+    att_sigma_deg: np.ndarray
+    omega_sigma_rad_s: np.ndarray
+    innovations: np.ndarray
+    innovation_var: np.ndarray
+    n_eff: np.ndarray
+    flags: np.ndarray
+    skipped_nan: int = 0
+    diverged: bool = False
+    divergence_reason: str = ""
+    runtime_s: float = 0.0
+    att_error_deg: np.ndarray | None = None
+    omega_error_rad_s: np.ndarray | None = None
+    nees: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+    clouds: dict | None = None
+
+    def __len__(self):
+        return int(self.t.shape[0])
+
+    # ------------------------------------------------------------------------------------
+    def attach_truth(self, truth_q, truth_omega_rad_s, extra_att_var=0.0):
+        """Fill ``att_error_deg``, ``omega_error_rad_s`` and ``nees`` from the truth.
+
+        ``extra_att_var`` (rad²) is added to the attitude diagonal of the covariance used for
+        the NEES (the ACS jitter of the controlled "jitter" model, which the estimate does not
+        track but the truth contains).
+        """
+        tq = np.asarray(truth_q, float)
+        tw = np.asarray(truth_omega_rad_s, float)
+        if tq.shape != self.q.shape or tw.shape != self.omega_rad_s.shape:
+            raise ValueError(f"truth shapes {tq.shape}, {tw.shape} do not match the estimate "
+                             f"{self.q.shape}, {self.omega_rad_s.shape}")
+        tq = tq / np.linalg.norm(tq, axis=1, keepdims=True)
+        dth = rot.attitude_error_rotvec(tq, rot.quat_normalize(self.q))
+        self.att_error_deg = np.degrees(dth)
+        self.omega_error_rad_s = tw - self.omega_rad_s
+        e = np.concatenate([dth, self.omega_error_rad_s], axis=1)
+        C = self.cov.copy()
+        if extra_att_var:
+            C[:, 0, 0] += extra_att_var
+            C[:, 1, 1] += extra_att_var
+            C[:, 2, 2] += extra_att_var
+        nees = np.full(len(self), np.nan)
+        for k in range(len(self)):
+            try:
+                L = np.linalg.cholesky(C[k])
+            except np.linalg.LinAlgError:
+                continue
+            z = np.linalg.solve(L, e[k])
+            nees[k] = float(z @ z)
+        self.nees = nees
+        return self
+
+    # ------------------------------------------------------------------------------------
+    def summary(self) -> dict:
+        """Final-epoch summary (JSON-ready): RSS errors, 3σ bounds, inside-3σ, runtime."""
+        out = {
+            "method": self.method,
+            "epochs": len(self),
+            "runtime_s": round(float(self.runtime_s), 4),
+            "diverged": bool(self.diverged),
+            "divergence_reason": self.divergence_reason,
+            "skipped_nan": int(self.skipped_nan),
+            "refused_updates": int(np.sum((self.flags & FLAG_REFUSED) > 0)),
+            "invisible_predictions": int(np.sum((self.flags & FLAG_INVISIBLE) > 0)),
+            "final_3sigma_att_deg": [float(x) for x in 3.0 * self.att_sigma_deg[-1]],
+            "final_3sigma_omega_deg_s": [float(x) for x in
+                                         np.degrees(3.0 * self.omega_sigma_rad_s[-1])],
+        }
+        if np.any(np.isfinite(self.n_eff)):
+            out["final_n_eff"] = float(self.n_eff[-1])
+        if self.att_error_deg is not None:
+            ea = self.att_error_deg[-1]
+            ew = np.degrees(self.omega_error_rad_s[-1])
+            inside = (np.all(np.abs(ea) <= 3.0 * self.att_sigma_deg[-1])
+                      and np.all(np.abs(ew) <= np.degrees(3.0 * self.omega_sigma_rad_s[-1])))
+            out.update({
+                "final_att_error_rss_deg": float(np.linalg.norm(ea)),
+                "final_omega_error_rss_deg_s": float(np.linalg.norm(ew)),
+                "final_att_error_deg": [float(x) for x in ea],
+                "final_omega_error_deg_s": [float(x) for x in ew],
+                "inside_3sigma": bool(inside),
+                "final_nees": float(self.nees[-1]) if self.nees is not None else None,
+            })
+        return out
+
+    # ------------------------------------------------------------------------------------
+    def write(self, path) -> Path:
+        """Write the estimate to an HDF5 file (atomic: temporary file, then rename)."""
+        import json
+
+        import h5py
+
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            with h5py.File(tmp, "w") as h:
+                h.attrs["format"] = "lightcurve-estimate"
+                h.attrs["format_version"] = 1
+                h.attrs["method"] = self.method
+                h.attrs["skipped_nan"] = int(self.skipped_nan)
+                h.attrs["diverged"] = int(self.diverged)
+                h.attrs["divergence_reason"] = self.divergence_reason
+                h.attrs["runtime_s"] = float(self.runtime_s)
+                h.attrs["meta_json"] = json.dumps(self.meta, default=str)
+                for name, units in (("t", "s"), ("q", "inertial->body quaternion, scalar first"),
+                                    ("omega_rad_s", "rad/s body axes"),
+                                    ("cov", "[dtheta rad, domega rad/s] covariance"),
+                                    ("att_sigma_deg", "deg"), ("omega_sigma_rad_s", "rad/s"),
+                                    ("innovations", "mag"), ("innovation_var", "mag^2"),
+                                    ("n_eff", "particles"), ("flags", "bit mask"),
+                                    ("att_error_deg", "deg body axes"),
+                                    ("omega_error_rad_s", "rad/s"), ("nees", "")):
+                    v = getattr(self, name)
+                    if v is None:
+                        continue
+                    d = h.create_dataset(name, data=np.asarray(v))
+                    d.attrs["units"] = units
+                if self.clouds:
+                    g = h.create_group("clouds")
+                    g.attrs["units"] = "deg, particle error rotation vectors, body axes"
+                    for kk, arr in self.clouds.items():
+                        g.create_dataset(f"epoch_{int(kk)}", data=np.asarray(arr))
+        return path
+
+
+def read_estimate(path) -> Estimate:
+    """Read an HDF5 estimate written by :meth:`Estimate.write`."""
+    import json
+
+    import h5py
+
+    from ..errors import InputError
+
+    path = Path(path)
+    try:
+        h = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"cannot open estimate file: {exc}", file=path) from None
+    with h:
+        if h.attrs.get("format") != "lightcurve-estimate":
+            raise InputError("not a lightcurve estimate file", file=path, field="format",
+                             value=h.attrs.get("format"), allowed="lightcurve-estimate")
+        kw = {n: (np.asarray(h[n]) if n in h else None) for n in (
+            "t", "q", "omega_rad_s", "cov", "att_sigma_deg", "omega_sigma_rad_s", "innovations",
+            "innovation_var", "n_eff", "flags", "att_error_deg", "omega_error_rad_s", "nees")}
+        clouds = None
+        if "clouds" in h:
+            clouds = {int(n.split("_")[1]): np.asarray(h["clouds"][n]) for n in h["clouds"]}
+        return Estimate(method=str(h.attrs["method"]), skipped_nan=int(h.attrs["skipped_nan"]),
+                        clouds=clouds,
+                        diverged=bool(h.attrs["diverged"]),
+                        divergence_reason=str(h.attrs["divergence_reason"]),
+                        runtime_s=float(h.attrs["runtime_s"]),
+                        meta=json.loads(str(h.attrs["meta_json"])), **kw)

@@ -1,0 +1,137 @@
+"""Unscented quaternion estimator (USQUE) on magnitudes with GRP error sigma points.
+
+Bernard (2021) eq. 7.51–7.87, after Crassidis & Markley (2003). Global state ``[q̂, ω̂]``
+(inertial→body quaternion scalar first; body rate rad/s), error state ``[δp, δω]`` with ``δp``
+the GRP (a = 1, f = 4) of ``δq = q ⊗ q̂⁻¹``; covariance P (6×6, rad² / (rad/s)²).
+
+Propagation (Δt ≠ 0):
+  sigma points ``χ = [0, ±columns of chol((n+λ) P)]`` (scaled unscented transform of
+  :mod:`lightcurve.estimation.sigma_points`, parameters α, β, κ), mapped to
+  ``q_i = grp2q(δp_i) ⊗ q̂``, ``ω_i = ω̂ + δω_i`` (eq. 7.60–7.66); every point propagated with the
+  nonlinear dynamics; propagated errors ``δp_i = GRP(q_i⁺ ⊗ (q_0⁺)⁻¹)`` (eq. 7.67–7.70);
+  mean ``x̄ = Σ Wᵐ χ⁺``, ``q̂⁻ = grp2q(δp̄) ⊗ q_0⁺``, ``ω̂⁻ = ω̄``;
+  ``P⁻ = Σ Wᶜ (χ⁺ − x̄)(χ⁺ − x̄)ᵀ + Q_d`` (eq. 7.71–7.74) with ``Q_d`` the discrete process noise
+  (uncontrolled η, pseudo-noise) added to the sum, and for the controlled random-walk ACS
+  model ``σ_ζ² I`` on the attitude block.
+
+Update (finite magnitude): fresh sigma points about ``q̂⁻`` from P⁻ — augmented with the ACS
+jitter ζ (3 states, covariance σ_ζ² I) for the controlled "jitter" model, so the points are
+``exp(ζ_i) ⊗ grp2q(δp_i) ⊗ q̂⁻`` (the controlled variant's augmented covariance,
+eq. 7.83–7.87) — predicted magnitudes ``Y_i``, ``ŷ = Σ Wᵐ Y``, ``P_yy = Σ Wᶜ (Y−ŷ)² + R``,
+``P_xy``, gain ``K = P_xy / P_yy``, ``δx⁺ = K ν``, ``P⁺ = P⁻ − K P_yy Kᵀ`` (eq. 7.75–7.82);
+reset ``q̂ ← grp2q(δp⁺) ⊗ q̂⁻``, ``ω̂ ← ω̂⁻ + δω⁺``.
+
+Failures: a covariance whose Cholesky factor does not exist (at propagation or update)
+restores the prior for that step and sets :data:`~lightcurve.filters.result.FLAG_REFUSED` (at
+propagation the covariance is then propagated linearly, ``Φ P Φᵀ + Q_d``, so the filter goes
+on); a sigma point predicting no reflected light skips the update
+(:data:`~lightcurve.filters.result.FLAG_INVISIBLE`). Never a silent NaN.
+
+Deviation from a fully augmented USQUE: the process noise enters additively (``+ Q_d``) rather
+than as augmented sigma-point columns, and the measurement noise is additive (``+ R``); for the
+additive Gaussian noises of these models the two are equivalent to second order.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
+from . import _kernels as K
+from ._common import FilterProblem, Recorder, apply_grp, grp_rel, single_thread
+from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
+
+__all__ = ["run_ukf"]
+
+
+def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0) -> Estimate:
+    """Run the USQUE/GRP UKF over every epoch (module docstring) → :class:`Estimate`.
+
+    ``alpha``, ``beta``, ``kappa``: scaled-unscented parameters (λ = α²(n+κ) − n, with n = 6,
+    or 9 when the ACS jitter is augmented at the update).
+    """
+    w6 = unscented_weights(6, alpha, beta, kappa)
+    w9 = unscented_weights(9, alpha, beta, kappa) if problem.jitter_zeta() else None
+    with single_thread():
+        return _run(problem, w6, w9)
+
+
+def _sigma_states(q, w, off6):
+    """Quaternions and rates of the sigma points: centre + offsets (2n, 6)."""
+    chi = np.vstack([np.zeros((1, off6.shape[1])), off6])
+    Q = apply_grp(chi[:, :3], q)
+    W = w[None, :] + chi[:, 3:6]
+    return chi, Q, np.ascontiguousarray(W)
+
+
+def _run(p: FilterProblem, w6, w9) -> Estimate:
+    t0 = time.perf_counter()
+    m = p.model
+    dyn = p.dynamics
+    rec = Recorder(p, "ukf")
+    q = p.q0.copy()
+    w = p.omega0.copy()
+    P = p.P0.copy()
+    zc = dyn.zeta_cov
+    for k in range(p.n):
+        if k > 0:
+            dt = float(m.t[k] - m.t[k - 1])
+            if dt != 0.0:
+                Phi, Qd = dyn.transition(w, dt)
+                off, ok = sigma_offsets(P, w6)
+                if ok:
+                    chi, Qs, Ws = _sigma_states(q, w, off)
+                    Qp, Wp = dyn.propagate(Qs, Ws, dt)
+                    dp = grp_rel(Qp, Qp[0])
+                    X = np.hstack([dp, Wp])
+                    xm = w6.wm @ X
+                    D = X - xm
+                    Pn = (D * w6.wc[:, None]).T @ D + Qd
+                    q = apply_grp(xm[None, :3], Qp[0])[0]
+                    w = xm[3:].copy()
+                else:
+                    rec.flags[k] |= FLAG_REFUSED
+                    Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
+                    q, w = Qn[0], Wn[0]
+                    Pn = Phi @ P @ Phi.T + Qd
+                if p.random_walk_zeta():
+                    Pn[:3, :3] += zc
+                P = 0.5 * (Pn + Pn.T)
+        y = m.y[k]
+        if not np.isfinite(y):
+            rec.flags[k] |= FLAG_NAN
+            rec.skipped_nan += 1
+            rec.store(k, q, w, P)
+            continue
+        wts = w9 if w9 is not None else w6
+        Pa = P
+        if w9 is not None:
+            Pa = np.zeros((9, 9))
+            Pa[:6, :6] = P
+            Pa[6:, 6:] = zc
+        off, ok = sigma_offsets(Pa, wts)
+        if not ok:
+            rec.flags[k] |= FLAG_REFUSED
+            rec.store(k, q, w, P)
+            continue
+        chi, Qs, Ws = _sigma_states(q, w, off)
+        if w9 is not None:
+            Qs = K.perturb_rotvec_nb(np.ascontiguousarray(Qs), np.ascontiguousarray(chi[:, 6:9]))
+        Y = m.predict_q(Qs, k)
+        if not np.all(np.isfinite(Y)):
+            rec.flags[k] |= FLAG_INVISIBLE
+            rec.store(k, q, w, P)
+            continue
+        dx, Pn, info = unscented_update(np.zeros(6), P, chi[:, :6], Y[:, None], np.array([y]),
+                                        wts, R=m.sigma[k] ** 2)
+        rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
+        if info.ok:
+            q = apply_grp(dx[None, :3], q)[0]
+            w = w + dx[3:]
+            P = Pn
+        else:
+            rec.flags[k] |= FLAG_REFUSED
+        rec.store(k, q, w, P)
+    return rec.finish(time.perf_counter() - t0)
