@@ -9,6 +9,7 @@ Top-level API (imported lazily so that ``import lightcurve`` stays fast):
 - :func:`simulate` — scenario (object or TOML path) → :class:`Lightcurve`
 - :func:`read_lightcurve` — HDF5 file → :class:`Lightcurve`; :meth:`Lightcurve.write`
 - :func:`load_scenario` — validated scenario from TOML
+- :func:`invert` — Lightcurve → :class:`~lightcurve.filters.Estimate` (MEKF, UKF, particle filter)
 """
 
 from .errors import ConvergenceError, InputError
@@ -16,7 +17,7 @@ from .errors import ConvergenceError, InputError
 __version__ = "0.1.0"
 
 __all__ = ["InputError", "ConvergenceError", "__version__", "simulate", "read_lightcurve",
-           "Lightcurve", "load_scenario"]
+           "Lightcurve", "load_scenario", "invert"]
 
 
 def simulate(scenario, seed=None):
@@ -37,6 +38,10 @@ def __getattr__(name):
         from .io import lightcurve_h5
 
         return getattr(lightcurve_h5, name)
+    if name == "invert":
+        from .filters.invert import invert
+
+        return invert
     if name == "load_scenario":
         from .studies.scenario import load_scenario
 
