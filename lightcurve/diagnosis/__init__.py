@@ -1,1 +1,23 @@
-"""diagnosis subpackage (see DESIGN.md)."""
+"""Model-mismatch diagnosis (issue 10): where a model and a recording differ, which physics
+effect is missing, its fitted parameters, and the improvement.
+
+Public API::
+
+    diagnose_recording(recording, scenario=None, *, free=None, exclude=()) -> Diagnosis
+    diagnose(problem, ...) -> Diagnosis             # on a Problem built below
+    magnitude_problem(lightcurve, shape, ...) / css_problem(css_ctx, y, sigma) -> Problem
+    write_report(diagnosis, out_dir) -> (diagnosis.json, report.html)
+    cross_validate(problem, fit) -> dict            # leave-one-night-out
+
+Modules: :mod:`.problem` (data + baseline model + free parameters), :mod:`.baseline`
+(least-squares fits, ΔBIC), :mod:`.residuals` (whiteness, χ² band, segments),
+:mod:`.candidates` (scoring every registered effect), :mod:`.diagnose` (orchestration),
+:mod:`.report` (JSON + self-contained HTML), :mod:`.fast` (cached Earthshine).
+"""
+
+from .diagnose import Diagnosis, cross_validate, diagnose, diagnose_recording
+from .problem import Problem, css_problem, magnitude_problem
+from .report import write_report
+
+__all__ = ["Diagnosis", "Problem", "diagnose", "diagnose_recording", "cross_validate",
+           "magnitude_problem", "css_problem", "write_report"]

@@ -278,9 +278,15 @@ class Effect:
             pr = p.prior
             if p.default != 0.0 or p.integer:
                 continue
-            typ = {"normal": pr.a + pr.b, "uniform": 0.5 * (pr.a + pr.b),
-                   "log_uniform": math.sqrt(pr.a * pr.b),
-                   "signed_uniform": 0.5 * (pr.a + pr.b)}.get(pr.kind, p.default)
+            # only the formula of the prior's own kind is evaluated (sqrt needs a, b > 0)
+            if pr.kind == "normal":
+                typ = pr.a + pr.b
+            elif pr.kind in ("uniform", "signed_uniform"):
+                typ = 0.5 * (pr.a + pr.b)
+            elif pr.kind == "log_uniform":
+                typ = math.sqrt(pr.a * pr.b)
+            else:
+                typ = p.default
             typ = min(max(typ, p.min), p.max)
             out[p.name] = typ if np.ndim(out[p.name]) == 0 else np.full(np.shape(out[p.name]), typ)
         return out

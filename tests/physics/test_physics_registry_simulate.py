@@ -134,3 +134,19 @@ def test_simulator_baseline_equals_model_context():
         warnings.simplefilter("ignore")
         lc2 = simulate(parse_scenario(text))
     np.testing.assert_allclose(lc2.truth_mag, ctx.magnitude(t_shift=0.8), atol=1e-6)
+
+
+def test_typical_params_for_every_effect_and_prior_kind():
+    # regression: uniform priors with a negative lower end used to hit sqrt(a*b) of the
+    # log-uniform branch (math domain error); every registered effect must give finite values
+    import math
+
+    from lightcurve.physics import available_effects, get_effect
+
+    for name in available_effects(kind="magnitude"):
+        eff = get_effect(name)
+        vals = eff.typical_params(None) if not eff.params or all(p.per is None for p in eff.params) else None
+        if vals is None:
+            continue
+        for k, v in vals.items():
+            assert all(math.isfinite(x) for x in np.ravel(v)), (name, k, v)

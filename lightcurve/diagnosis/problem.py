@@ -1,0 +1,341 @@
+"""The diagnosis problem: observations, their noise, a baseline model and its free parameters.
+
+A :class:`Problem` holds
+
+* ``y`` (M,) the measurements (apparent magnitudes, or CSS outputs flattened epoch-major)
+  and ``sigma`` (M,) their 1σ noise (same units);
+* ``ctx`` the baseline forward model (:class:`~lightcurve.physics.ModelContext` or
+  :class:`~lightcurve.physics.CSSContext`) — the scenario's model with no effect on;
+* ``free`` the baseline's free parameters (:class:`FreeParam`): a per-site photometric zero
+  point (mag, additive) and/or per-facet reflection parameters of the shape's BRDFs
+  (``Kd``, ``Ks``, ``n`` of Phong, ``xi``/``a``/``m`` of Cook–Torrance …), each with bounds;
+* per-measurement bookkeeping for the residual analysis: time ``t`` (s since the epoch),
+  ``site`` index, ``epoch_index`` (row of ``ctx``), and geometry regimes.
+
+:meth:`Problem.predict` evaluates the model for a baseline parameter vector and a list of
+effect terms ``[(Effect, params), …]`` through :func:`lightcurve.physics.apply_effects`
+(the registry's forward models: the same code that simulates data with effects on).
+Standardised residuals are ``z = (y − ŷ)/σ`` (dimensionless). Predictions that are not
+finite (an effect that puts the object in full shadow, no reflected light) are mapped to a
+fixed large standardised residual (:data:`Z_NONFINITE`) so that optimisers stay defined.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["FreeParam", "Problem", "Z_NONFINITE", "magnitude_problem", "css_problem",
+           "parse_free"]
+
+#: Standardised residual assigned to a non-finite prediction (e.g. an epoch put in umbra).
+Z_NONFINITE = 30.0
+
+#: Finite upper bound used for reflection parameters whose allowed range is unbounded-ish.
+_BRDF_CAP = {"n": 200.0, "m": 1.0}
+
+
+@dataclass
+class FreeParam:
+    """One free baseline parameter.
+
+    ``kind`` is ``"zero_point"`` (``index`` = site index; additive mag, bounds ±``span``) or
+    ``"brdf"`` (``key`` = BRDF parameter name, ``index`` = facet index). ``x0`` is the
+    scenario's value, ``lo``/``hi`` the fit bounds, ``unit`` the unit.
+    """
+
+    name: str
+    kind: str
+    key: str
+    index: int
+    x0: float
+    lo: float
+    hi: float
+    unit: str = "1"
+
+
+@dataclass
+class Problem:
+    """Observations + baseline model + free parameters (module docstring)."""
+
+    kind: str
+    ctx: object
+    y: np.ndarray
+    sigma: np.ndarray
+    t: np.ndarray
+    site: np.ndarray
+    epoch_index: np.ndarray
+    site_names: list
+    free: list = field(default_factory=list)
+    #: (E,) per-epoch geometric descriptors for segment tests (NaN when unknown)
+    elevation_rad: np.ndarray | None = None
+    phase_rad: np.ndarray | None = None
+    shadow_margin: np.ndarray | None = None
+    #: optional (E,) UTC-day-of-night index per epoch, for cross-validation
+    night: np.ndarray | None = None
+    #: names of effects the diagnosis must not propose (e.g. duplicates of free parameters)
+    exclude: tuple = ()
+    label: str = ""
+
+    def __post_init__(self):
+        self.y = np.asarray(self.y, float).ravel()
+        self.sigma = np.asarray(self.sigma, float).ravel()
+        if self.y.shape != self.sigma.shape:
+            raise ValueError("y and sigma must have the same length")
+        if not np.all(self.sigma > 0):
+            raise InputError("every measurement sigma must be positive", field="mag_sigma")
+
+    # -- sizes --------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of measurements M."""
+        return int(self.y.size)
+
+    @property
+    def n_free(self) -> int:
+        return len(self.free)
+
+    def x0(self) -> np.ndarray:
+        return np.array([p.x0 for p in self.free], float)
+
+    def bounds(self):
+        return (np.array([p.lo for p in self.free], float), np.array([p.hi for p in self.free], float))
+
+    # -- the model ------------------------------------------------------------------------
+    def base_context(self, theta=None):
+        """The baseline context with the reflection parameters of ``theta`` applied."""
+        ctx = self.ctx
+        if theta is None or self.kind != "magnitude":
+            return ctx
+        brdf = {}
+        for p, v in zip(self.free, np.asarray(theta, float)):
+            if p.kind == "brdf":
+                brdf.setdefault(p.key, ctx.shape.facet_params(p.key))[p.index] = v
+        if not brdf:
+            return ctx
+        return ctx.with_state(shape=ctx.shape.copy_with(check=False, **brdf))
+
+    def zero_point(self, theta) -> np.ndarray:
+        """Additive magnitude (M,) of the free per-site zero points (0 when none)."""
+        out = np.zeros(self.n)
+        if theta is None:
+            return out
+        for p, v in zip(self.free, np.asarray(theta, float)):
+            if p.kind == "zero_point":
+                out[self.site == p.index] += v
+        return out
+
+    def predict(self, theta=None, terms=()) -> np.ndarray:
+        """Model measurements (M,) for baseline parameters ``theta`` and effect ``terms``.
+
+        ``terms``: sequence of ``(Effect, params)``; applied with
+        :func:`lightcurve.physics.apply_effects` (documented order).
+        """
+        from ..physics import ConfiguredEffect, apply_effects
+
+        ctx = self.base_context(theta)
+        if terms:
+            y = apply_effects(ctx, [ConfiguredEffect(e, dict(p)) for e, p in terms])
+        else:
+            y = ctx.evaluate()
+        y = np.asarray(y, float)
+        y = y.ravel() if self.kind == "css" else y[self.epoch_index]
+        return y + self.zero_point(theta)
+
+    def standardized(self, pred) -> np.ndarray:
+        """z = (y − ŷ)/σ (M,), non-finite predictions mapped to ±:data:`Z_NONFINITE`."""
+        z = (self.y - pred) / self.sigma
+        return np.where(np.isfinite(z), z, Z_NONFINITE)
+
+    def chi2(self, pred) -> float:
+        z = self.standardized(pred)
+        return float(z @ z)
+
+    def subset(self, mask) -> "Problem":
+        """The problem restricted to the measurements where ``mask`` (M,) is true.
+
+        The context keeps only the epochs those measurements need (so expensive effects
+        evaluate fewer epochs).
+        """
+        from ..physics.context import CSSContext
+
+        mask = np.asarray(mask, bool)
+        ep = np.unique(self.epoch_index[mask])
+        remap = -np.ones(len(self.ctx), np.int64)
+        remap[ep] = np.arange(ep.size)
+        ctx = _subset_context(self.ctx, ep)
+
+        def sel(a):
+            return None if a is None else np.asarray(a)[ep]
+
+        if isinstance(self.ctx, CSSContext):
+            # CSS measurements are epoch-major (K, S): keep whole epochs
+            S = self.ctx.n_sensors
+            full = np.zeros(len(self.ctx), bool)
+            full[ep] = True
+            m2 = np.repeat(full, S)
+            return Problem(self.kind, ctx, self.y[m2], self.sigma[m2], self.t[m2], self.site[m2],
+                           remap[self.epoch_index[m2]], self.site_names, list(self.free),
+                           sel(self.elevation_rad), sel(self.phase_rad), sel(self.shadow_margin),
+                           sel(self.night), self.exclude, self.label)
+        return Problem(self.kind, ctx, self.y[mask], self.sigma[mask], self.t[mask], self.site[mask],
+                       remap[self.epoch_index[mask]], self.site_names, list(self.free),
+                       sel(self.elevation_rad), sel(self.phase_rad), sel(self.shadow_margin),
+                       sel(self.night), self.exclude, self.label)
+
+
+def _subset_context(ctx, ep):
+    """A context restricted to epochs ``ep`` (sorted indices)."""
+    from dataclasses import fields, replace
+
+    from ..physics.context import CSSContext
+
+    n = len(ctx)
+    changes = {}
+    for f in fields(ctx):
+        if f.name.startswith("_"):
+            continue
+        v = getattr(ctx, f.name)
+        if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n and f.name not in ("array",):
+            changes[f.name] = v[ep]
+    if isinstance(ctx, CSSContext):
+        return replace(ctx, **changes)
+    attitude_fn = ctx.attitude_fn
+    if attitude_fn is not None:
+        # row-aligned callables see the rows of the subset only
+        changes["attitude_fn"] = _RowSubset(attitude_fn, ep, n)
+    return replace(ctx, _cache={}, **changes)
+
+
+class _RowSubset:
+    """Wrap a row-aligned ``attitude_fn(t (N,))`` so it can be called with a subset of rows."""
+
+    def __init__(self, fn, rows, n):
+        self.fn, self.rows, self.n = fn, np.asarray(rows), n
+
+    def __call__(self, t_rows):
+        if hasattr(self.fn, "rows_call"):
+            return self.fn.rows_call(self.rows, t_rows)
+        raise ValueError("attitude_fn of a subset context must support rows_call")
+
+
+# ----------------------------------------------------------------------------------------
+# construction
+# ----------------------------------------------------------------------------------------
+_FREE_WORDS = ("none", "zero_point", "reflection")
+
+
+def parse_free(text, shape=None) -> list[str]:
+    """Validate a ``--free`` value: comma-separated words from ``none``, ``zero_point``,
+    ``reflection`` (every BRDF parameter of every facet) or BRDF parameter names
+    (``Kd``, ``Ks``, ``n``, ``xi``, ``a``, ``m`` …). Raises InputError naming the field."""
+    words = [w.strip() for w in str(text).split(",") if w.strip()]
+    allowed = list(_FREE_WORDS) + (sorted(shape.param_table) if shape is not None else [])
+    for w in words:
+        if w not in _FREE_WORDS and (shape is None or w not in shape.param_table):
+            raise InputError("unknown free-parameter name", field="--free", value=w,
+                             allowed=", ".join(allowed))
+    if "none" in words:
+        if len(words) > 1:
+            raise InputError("'none' cannot be combined with other names", field="--free", value=text)
+        return []
+    return words
+
+
+def _free_params(words, shape, site_names, zero_point_span_mag=3.0):
+    from ..photometry.brdf import get_brdf  # noqa: F401  (registry import for bounds)
+
+    out = []
+    if "zero_point" in words:
+        for k, s in enumerate(site_names):
+            out.append(FreeParam(f"zero_point[{s}]", "zero_point", s, k, 0.0,
+                                 -zero_point_span_mag, zero_point_span_mag, "mag"))
+    keys = set()
+    if "reflection" in words:
+        keys = set(shape.param_table)
+    keys |= {w for w in words if w not in _FREE_WORDS}
+    for key in sorted(keys, key=lambda k: list(shape.param_table).index(k)):
+        vals = shape.param_table[key]
+        for i, v in enumerate(vals):
+            if np.isnan(v):
+                continue
+            m = shape.materials[i]
+            lo, hi = m.brdf.param_bounds.get(key, (-np.inf, np.inf, False, False))[:2]
+            hi = min(hi, _BRDF_CAP.get(key, hi))
+            lo = max(lo, 1e-6 if key in ("a", "m") else lo)
+            if not np.isfinite(lo) or not np.isfinite(hi):
+                raise InputError(f"BRDF parameter {key!r} has no finite range to fit within",
+                                 field="--free", value=key)
+            x0 = float(min(max(v, lo), hi))
+            out.append(FreeParam(f"{key}[{i}:{m.name}]", "brdf", key, i, x0, float(lo), float(hi)))
+    return out
+
+
+def _night_index(t, site_index, site_lla_deg_m, epoch_utc):
+    """Local-night index (E,) of each epoch: UTC day of (t + longitude/15 h − 12 h)."""
+    from ..geometry.time import parse_epoch
+
+    ep = parse_epoch(epoch_utc)
+    sec0 = ep.hour * 3600 + ep.minute * 60 + ep.second + ep.microsecond * 1e-6
+    lon = np.asarray(site_lla_deg_m, float)[np.asarray(site_index), 1]
+    local = sec0 + np.asarray(t, float) + lon / 15.0 * 3600.0 - 12 * 3600.0
+    return np.floor(local / 86400.0).astype(np.int64)
+
+
+def _shadow_margin(r_obj, r_sun):
+    """Distance (m) of the object outside the Earth's (cylindrical) shadow boundary.
+
+    Positive when the object is sunward of the terminator plane or outside the cylinder:
+    ``|r⊥| − R⊕`` on the night side, +inf on the day side (a coarse "near-shadow" measure).
+    """
+    s = r_sun / np.linalg.norm(r_sun, axis=1, keepdims=True)
+    along = np.sum(r_obj * s, axis=1)
+    perp = np.linalg.norm(r_obj - along[:, None] * s, axis=1)
+    return np.where(along > 0, np.inf, perp - 6378137.0)
+
+
+def magnitude_problem(lc, shape, *, q=None, omega=None, attitude_fn=None, sun_mag=None,
+                      ignore_eclipse=None, free=(), label="") -> Problem:
+    """A magnitude :class:`Problem` from a :class:`~lightcurve.io.Lightcurve`.
+
+    ``q``/``omega``: the model attitude (N,4)/(N,3) (default: the file's truth);
+    ``attitude_fn``: attitude at shifted times (row-aligned, see ModelContext);
+    ``free``: words of :func:`parse_free`. Epochs whose baseline magnitude is not finite
+    (no lit facet towards the observer) or whose measurement is NaN are left out.
+    """
+    from ..physics import ModelContext
+
+    ctx = ModelContext.from_lightcurve(lc, shape, q=q, omega=omega, sun_mag=sun_mag,
+                                       ignore_eclipse=ignore_eclipse, attitude_fn=attitude_fn)
+    m0 = ctx.evaluate()
+    keep = np.isfinite(m0) & np.isfinite(lc.mag) & np.isfinite(lc.mag_sigma)
+    if not np.any(keep):
+        raise InputError("no epoch where both the model and the recording have a magnitude",
+                         file=lc.attrs.get("file"), field="mag")
+    free_words = list(free)
+    phase = lc.phase_angle_rad
+    n = len(lc)
+    prob = Problem("magnitude", ctx, lc.mag, lc.mag_sigma, lc.t, lc.site, np.arange(n),
+                   list(lc.site_names), _free_params(free_words, shape, lc.site_names),
+                   elevation_rad=lc.elevation_rad, phase_rad=phase,
+                   shadow_margin=_shadow_margin(lc.r_obj_eci_m, lc.r_sun_eci_m),
+                   night=_night_index(lc.t, lc.site, lc.site_lla_deg_m, lc.epoch_utc),
+                   exclude=("zero_point",) if "zero_point" in free_words else (),
+                   label=label)
+    return prob if np.all(keep) else prob.subset(keep)
+
+
+def css_problem(ctx, y, sigma, *, label="") -> Problem:
+    """A CSS :class:`Problem`: ``ctx`` a :class:`~lightcurve.physics.CSSContext` (the model
+    without effects), ``y`` (K,S) measured outputs, ``sigma`` scalar or (K,S) noise."""
+    y = np.asarray(y, float)
+    K, S = y.shape
+    if K != len(ctx) or S != ctx.n_sensors:
+        raise ValueError(f"y must have shape ({len(ctx)}, {ctx.n_sensors}), got {y.shape}")
+    sig = np.broadcast_to(np.asarray(sigma, float), y.shape)
+    ep = np.repeat(np.arange(K), S)
+    return Problem("css", ctx, y.ravel(), sig.ravel(), np.asarray(ctx.t)[ep], np.tile(np.arange(S), K),
+                   ep, [f"css{k}" for k in range(S)], [], label=label)
