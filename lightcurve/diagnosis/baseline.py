@@ -29,31 +29,8 @@ GRID_PARAMS = ("t_start_s",)
 
 
 def typical_params(effect, ctx=None) -> dict:
-    """Parameters of typical size (as :meth:`Effect.typical_params`, evaluated safely).
-
-    The default, or for a zero default the prior's centre (uniform), geometric centre
-    (log-uniform), mean + sd (normal) or the centre of |x| (signed uniform). (The
-    registry's method evaluates every prior kind's formula eagerly and fails with a math
-    domain error for a uniform prior with a negative lower end, e.g. an azimuth.)
-    """
-    out = effect.default_params(ctx)
-    for p in effect.params:
-        pr = p.prior
-        if p.default != 0.0 or p.integer:
-            continue
-        if pr.kind == "normal":
-            typ = pr.a + pr.b
-        elif pr.kind == "uniform":
-            typ = 0.5 * (pr.a + pr.b)
-        elif pr.kind == "log_uniform":
-            typ = math.sqrt(pr.a * pr.b)
-        elif pr.kind == "signed_uniform":
-            typ = 0.5 * (pr.a + pr.b)
-        else:
-            typ = p.default
-        typ = min(max(typ, p.min), p.max)
-        out[p.name] = typ if np.ndim(out[p.name]) == 0 else np.full(np.shape(out[p.name]), typ)
-    return out
+    """Parameters of typical size of an effect (:meth:`Effect.typical_params`)."""
+    return effect.typical_params(ctx)
 
 
 def prior_bounds(spec) -> tuple[float, float]:

@@ -1,0 +1,761 @@
+"""On-orbit CSS calibration filters (O'Keefe 2015, §4.2-4.4): full and reduced.
+
+Extended consider Kalman filter over (indices for N sensors)::
+
+    x = [ σ (0:3),  β (3:6),  g_κ (6:6+N),  (δα_κ, δε_κ) (6+N:6+3N),  b_κ (6+3N:6+4N) ]
+
+* ``σ``: MRP attitude σ_BN (inertial→body), ``β``: gyro bias (rad/s) — the MRP EKF of
+  :mod:`lightcurve.css.attitude_ekf` (eq. 4.5-4.11) is the core;
+* ``g_κ = C C_κ``: total scale factor of sensor κ (the common factor C is not separable
+  from the individual ones with CSS data alone, so the product is estimated);
+* ``δα_κ, δε_κ``: azimuth/elevation misalignment of the normal (rad, eq. 2.19);
+* ``b_κ``: *considered* albedo-model error of sensor κ (units of the solar irradiance):
+  never updated (Schmidt gain rows zero), first-order Gauss-Markov with 1σ ``consider_sigma``
+  and time constant ``consider_tau_s``; its covariance and cross covariances are carried.
+
+Measurement of sensor κ (eq. 2.21, 4.12-4.20)::
+
+    h_κ = g_κ [ ν f(n̂'_κ · C(σ) ŝ_N) + n̂'_κ · C(σ) V_κ,N + b_κ ]
+    V_κ = Σ_{j ∈ sunlit ∩ in view ∩ FOV_κ} a_j ĉ_j               (albedo vector sum, eq. 2.15)
+
+with ``n̂'_κ`` the nominal normal rotated by the estimated misalignment, ``ν`` the lit
+fraction, ``a_j`` the cell irradiance ratios of :mod:`lightcurve.css.albedo` and ``ĉ_j`` the
+spacecraft→cell directions.  Because ``C(σ) V`` is linear in ``V``, the albedo part of every
+Jacobian needs only the per-sensor *vector sum* ``V_κ`` (eq. 4.21-4.34 in compact form)::
+
+    ∂h/∂σ   = g_κ n̂'ᵀ [ ν ∂(C ŝ_N)/∂σ  +  ∂(C V_κ,N)/∂σ ]     (∂(C a)/∂σ: rotations.mrp_dcm_vec_jacobian)
+    ∂h/∂g_κ = ν f + n̂'·V_κ,B
+    ∂h/∂δα  = g_κ (∂n̂'/∂α)·(ν ŝ_B + V_κ,B),   ∂n̂'/∂α = [−cos ε sin α, cos ε cos α, 0]
+    ∂h/∂δε  = g_κ (∂n̂'/∂ε)·(ν ŝ_B + V_κ,B),   ∂n̂'/∂ε = [−sin ε cos α, −sin ε sin α, cos ε]
+    ∂h/∂b_κ = g_κ
+
+(cell membership of the FOV is not differentiated).  Cells are evaluated only inside the
+latitude/longitude window of the spherical cap visible from the spacecraft, and only when
+sunlit and in view — the cost is independent of the grid's global size (benchmark
+``benchmarks/css_calibration.py``).
+
+Measurement noise (§4.2, our concrete form):
+``R_κ = max(σ_css², σ_floor²) + (k_alb g_κ A_κ)² + (g_κ A_edge,κ)²`` (white noise with a floor,
+a relative albedo-model uncertainty, and the irradiance of the albedo cells lying within the
+FOV-edge margin, whose membership of the FOV is uncertain — large for coarse grids); sensors are used when
+their *predicted* output exceeds ``threshold`` (selecting on the noisy measured output would
+bias weak-signal innovations) or their output exceeds 3 × ``threshold`` (so a badly predicted
+sensor cannot lock itself out), and the model predicts light on them, except near the FOV
+edge (``fov_edge_margin`` in cosine, widened by the 3σ uncertainty of the normal); a per-sensor
+innovation gate (``gate_sensor``, χ²₁) rejects outliers; when the NIS of the accepted set
+exceeds ``gate × m`` the whole R is inflated by ``NIS/(gate m)`` (at most ``inflate_max``).
+
+Reduced filter (§4.3): no albedo model (``V_κ = 0``), the albedo enters only through the
+considered bias ``b_κ`` with a larger σ.
+
+Star-tracker updates (a separate update, :func:`~lightcurve.css.attitude_ekf.star_tracker_update_nb`)
+make the attitude observable about the Sun line; without them the calibration of a tumbling
+spacecraft is not observable from CSS data alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numba
+import numpy as np
+
+from ..estimation.kalman import joseph_update_nb
+from ..estimation.rng import as_generator
+from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
+from .albedo import AlbedoMap, builtin_albedo_map, earth_rotation_angle
+from .attitude_ekf import (mrp_dcm_nb, mrp_dcm_vec_jac_nb, mrp_propagate_nb,
+                           mrp_switch_cov_nb, mtv3_nb, mv3_nb, star_tracker_update_nb)
+from .sensors import CSSArray, normal_to_azel
+
+__all__ = ["AlbedoCells", "CalibrationParams", "CalibrationResult", "run_calibration",
+           "calibration_measurement_nb", "calibration_update_nb", "albedo_vectors_nb",
+           "CalibrationCase", "simulate_calibration_case", "state_layout", "acceptance_summary",
+           "r3_nb"]
+
+
+# ---------------------------------------------------------------------------------------
+# albedo grid with row/column structure (window search)
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AlbedoCells:
+    """Earth-fixed cell geometry of a regular albedo map, kept on its (nlat, nlon) grid.
+
+    centers_m (nlat·nlon, 3) m, normals (nlat·nlon, 3) unit geodetic normals, rho_area_m2
+    (nlat·nlon,) = ρ A (m²), lat_c (nlat,) rad cell-centre latitudes, lon_w0 rad west edge of
+    column 0, dlon rad column width, dlat_max rad largest row height.
+    """
+
+    centers_m: np.ndarray
+    normals: np.ndarray
+    rho_area_m2: np.ndarray
+    lat_c: np.ndarray
+    nlat: int
+    nlon: int
+    lon_w0: float
+    dlon: float
+    dlat_max: float
+    source: str = "map"
+
+    @classmethod
+    def from_map(cls, amap: AlbedoMap) -> "AlbedoCells":
+        from .albedo import _E2, WGS84_A_M, authalic_latitude, cell_areas_m2
+
+        lat_e, lon_e = np.asarray(amap.lat_edges_rad), np.asarray(amap.lon_edges_rad)
+        # cell centres at the authalic-latitude midpoint, as AlbedoGrid (the truth model)
+        beta_e = authalic_latitude(lat_e)
+        beta_c = np.arcsin(0.5 * (np.sin(beta_e[:-1]) + np.sin(beta_e[1:])))
+        phi_f = np.linspace(-np.pi / 2, np.pi / 2, 20001)
+        lat_c = np.interp(beta_c, authalic_latitude(phi_f), phi_f)
+        lon_c = 0.5 * (lon_e[:-1] + lon_e[1:])
+        LAT, LON = np.meshgrid(lat_c, lon_c, indexing="ij")
+        sp, cp = np.sin(LAT), np.cos(LAT)
+        Nr = WGS84_A_M / np.sqrt(1.0 - _E2 * sp ** 2)
+        centers = np.stack([Nr * cp * np.cos(LON), Nr * cp * np.sin(LON), Nr * (1 - _E2) * sp],
+                           -1).reshape(-1, 3)
+        normals = np.stack([cp * np.cos(LON), cp * np.sin(LON), sp], -1).reshape(-1, 3)
+        ra = (cell_areas_m2(lat_e, lon_e) * amap.values).reshape(-1)
+        dlon = float(np.mean(np.diff(lon_e)))
+        if not np.allclose(np.diff(lon_e), dlon):
+            raise ValueError("AlbedoCells needs equal-width longitude columns")
+        return cls(np.ascontiguousarray(centers), np.ascontiguousarray(normals),
+                   np.ascontiguousarray(ra), lat_c, lat_c.size, lon_c.size, float(lon_e[0]),
+                   dlon, float(np.max(np.diff(lat_e))), amap.source)
+
+    @classmethod
+    def none(cls) -> "AlbedoCells":
+        """An empty grid (no albedo)."""
+        z = np.zeros((0, 3))
+        return cls(z, z.copy(), np.zeros(0), np.zeros(0), 0, 0, -np.pi, 2 * np.pi, np.pi, "none")
+
+    def args(self):
+        return (self.centers_m, self.normals, self.rho_area_m2, self.lat_c, self.nlat, self.nlon,
+                self.lon_w0, self.dlon, self.dlat_max)
+
+
+@numba.njit(cache=True)
+def r3_nb(theta, v):
+    """R3(θ) v: ECI → Earth-fixed for the Earth rotation angle θ (rad)."""
+    c = np.cos(theta)
+    s = np.sin(theta)
+    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+
+
+@numba.njit(cache=True)
+def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                      r_E, s_E, nE, cos_fov, hE, edge_m):
+    """Per-sensor albedo vector sums V_κ = Σ a_j ĉ_j (Earth-fixed, (N,3)) over the cells that
+    are sunlit, in view of the spacecraft and inside sensor κ's FOV (normals nE (N,3),
+    structure-horizon normals hE (N,3), Earth-fixed).  Only rows/columns of the cap visible
+    from r_E (m) are visited.  ``edge_m`` (N,): cosine margin about each FOV cut-off; the
+    irradiance Σ a_j c_j of the cells inside that band (whose membership is uncertain) is
+    returned as ``A_edge``.  Returns (V (N,3), A_edge (N,), number of cells evaluated)."""
+    N = nE.shape[0]
+    V = np.zeros((N, 3))
+    Aedge = np.zeros(N)
+    if nlat == 0:
+        return V, Aedge, 0
+    rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
+    lam0 = np.arccos(min(1.0, 6356752.0 / rn))  # visible cap half angle (polar radius: safe)
+    phi = np.arcsin(r_E[2] / rn)
+    lon = np.arctan2(r_E[1], r_E[0])
+    lo = phi - lam0 - dlat_max
+    hi = phi + lam0 + dlat_max
+    full_lon = hi >= 0.5 * np.pi - dlat_max or lo <= -0.5 * np.pi + dlat_max
+    if full_lon:
+        c0 = 0
+        ncol = nlon
+    else:
+        # longitude half-width of a spherical cap of radius λ centred at latitude φ (not
+        # containing a pole): asin(sin λ / cos φ); λ widened by one row for the cell size
+        half = np.arcsin(min(1.0, np.sin(lam0 + dlat_max) / np.cos(phi))) + dlon
+        c0 = int(np.floor((lon - half - lon_w0) / dlon))
+        ncol = int(np.ceil(2.0 * half / dlon)) + 2
+        if ncol > nlon:
+            ncol = nlon
+            c0 = 0
+    count = 0
+    for i in range(nlat):
+        if lat_c[i] < lo or lat_c[i] > hi:
+            continue
+        for cc in range(ncol):
+            jc = (c0 + cc) % nlon
+            j = i * nlon + jc
+            if rho_area[j] <= 0.0:
+                continue
+            count += 1
+            cs = cnormals[j, 0] * s_E[0] + cnormals[j, 1] * s_E[1] + cnormals[j, 2] * s_E[2]
+            if cs <= 0.0:
+                continue
+            dx = r_E[0] - centers[j, 0]
+            dy = r_E[1] - centers[j, 1]
+            dz = r_E[2] - centers[j, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            d = np.sqrt(d2)
+            cv = (cnormals[j, 0] * dx + cnormals[j, 1] * dy + cnormals[j, 2] * dz) / d
+            if cv <= 0.0:
+                continue
+            a = rho_area[j] * cs * cv / (np.pi * d2)
+            ux = -dx / d
+            uy = -dy / d
+            uz = -dz / d
+            for k in range(N):
+                c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
+                if c > 0.0 and abs(c - cos_fov[k]) < edge_m[k]:
+                    Aedge[k] += a * c
+                if c < cos_fov[k] or c <= 0.0:
+                    continue
+                if hE[k, 0] * ux + hE[k, 1] * uy + hE[k, 2] * uz < 0.0:
+                    continue
+                V[k, 0] += a * ux
+                V[k, 1] += a * uy
+                V[k, 2] += a * uz
+    return V, Aedge, count
+
+
+# ---------------------------------------------------------------------------------------
+# measurement model and update
+# ---------------------------------------------------------------------------------------
+@numba.njit(cache=True)
+def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E,
+                               cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
+                               dlat_max, edge_m):
+    """Predicted outputs h (N,), Jacobian H (N, n) over the full state (n = 6 + 4N), the
+    direct part D (N,) and the albedo part A (N,) of each sensor (before the gain g_κ), and
+    the cosine c (N,) between each (misaligned) normal and the Sun direction, and the albedo
+    irradiance A_edge (N,) of the cells within ``edge_m`` (N,) of each FOV cut-off.
+
+    az0, el0 (N,) nominal azimuth/elevation of the normals (rad); cos_fov (N,); horizon_B
+    (N,3) structure-horizon normals, body; s_N unit Sun direction (inertial); lit fraction;
+    theta Earth rotation angle (rad); r_E, s_E spacecraft position (m) and unit Sun
+    direction, Earth-fixed; the rest: :meth:`AlbedoCells.args`.
+    """
+    N = az0.shape[0]
+    n = x.shape[0]
+    s = x[0:3].copy()
+    C = mrp_dcm_nb(s)
+    s_B = mv3_nb(C, s_N)
+    nb = np.empty((N, 3))
+    da = np.empty((N, 3))
+    de = np.empty((N, 3))
+    for k in range(N):
+        a = az0[k] + x[6 + N + 2 * k]
+        e = el0[k] + x[6 + N + 2 * k + 1]
+        ca, sa, ce, se = np.cos(a), np.sin(a), np.cos(e), np.sin(e)
+        nb[k, 0] = ce * ca
+        nb[k, 1] = ce * sa
+        nb[k, 2] = se
+        da[k, 0] = -ce * sa
+        da[k, 1] = ce * ca
+        da[k, 2] = 0.0
+        de[k, 0] = -se * ca
+        de[k, 1] = -se * sa
+        de[k, 2] = ce
+    # albedo vector sums (Earth-fixed -> inertial)
+    V_N = np.zeros((N, 3))
+    Aedge = np.zeros(N)
+    if nlat > 0:
+        nE = np.empty((N, 3))
+        hE = np.empty((N, 3))
+        for k in range(N):
+            nE[k] = r3_nb(theta, mtv3_nb(C, nb[k]))
+            hE[k] = r3_nb(theta, mtv3_nb(C, horizon_B[k]))
+        V_E, Aedge, _ = albedo_vectors_nb(cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0,
+                                          dlon, dlat_max, r_E, s_E, nE, cos_fov, hE, edge_m)
+        for k in range(N):
+            V_N[k] = r3_nb(-theta, V_E[k])
+    Js = mrp_dcm_vec_jac_nb(s, s_N)
+    h = np.zeros(N)
+    H = np.zeros((N, n))
+    D = np.zeros(N)
+    A = np.zeros(N)
+    cosd = np.zeros(N)
+    for k in range(N):
+        g = x[6 + k]
+        c = nb[k, 0] * s_B[0] + nb[k, 1] * s_B[1] + nb[k, 2] * s_B[2]
+        cosd[k] = c
+        direct = False
+        if lit > 0.0 and c >= cos_fov[k] and c > 0.0:
+            if (horizon_B[k, 0] * s_B[0] + horizon_B[k, 1] * s_B[1]
+                    + horizon_B[k, 2] * s_B[2]) >= 0.0:
+                direct = True
+        u = np.zeros(3)  # ν ŝ_B (if direct) + V_B
+        if direct:
+            D[k] = lit * c
+            u += lit * s_B
+        has_alb = V_N[k, 0] != 0.0 or V_N[k, 1] != 0.0 or V_N[k, 2] != 0.0
+        if has_alb:
+            V_B = mv3_nb(C, V_N[k])
+            A[k] = nb[k, 0] * V_B[0] + nb[k, 1] * V_B[1] + nb[k, 2] * V_B[2]
+            u += V_B
+        h[k] = g * (D[k] + A[k] + x[6 + 3 * N + k])
+        # σ columns
+        row = np.zeros(3)
+        if direct:
+            row += lit * mtv3_nb(Js, nb[k])
+        if has_alb:
+            row += mtv3_nb(mrp_dcm_vec_jac_nb(s, V_N[k]), nb[k])
+        for j in range(3):
+            H[k, j] = g * row[j]
+        H[k, 6 + k] = D[k] + A[k] + x[6 + 3 * N + k]
+        H[k, 6 + N + 2 * k] = g * (da[k, 0] * u[0] + da[k, 1] * u[1] + da[k, 2] * u[2])
+        H[k, 6 + N + 2 * k + 1] = g * (de[k, 0] * u[0] + de[k, 1] * u[1] + de[k, 2] * u[2])
+        H[k, 6 + 3 * N + k] = g
+    return h, H, D, A, cosd, Aedge
+
+
+@numba.njit(cache=True)
+def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E,
+                          s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
+                          dlat_max, nu_out, s_out):
+    """CSS measurement update in place (see module docstring).
+
+    prm: :meth:`CalibrationParams.as_array`.  nu_out, s_out (N,) receive every sensor's prior
+    innovation y − h and its variance H P Hᵀ + R for sensors whose predicted output is above
+    the threshold (NaN otherwise) — the per-sensor statistics of the fault detector.
+    Returns (m used, NIS of the used set (NaN if none), inflation factor).
+    """
+    N = az0.shape[0]
+    n = x.shape[0]
+    sig, floor, kalb, thr = prm[0], prm[1], prm[2], prm[3]
+    gate, infl_max, gate_s = prm[4], prm[5], prm[6]
+    margin = prm[13]
+    # FOV-edge margin per sensor: base + 3σ of the normal's direction (misalignment)
+    mk = np.empty(N)
+    for k in range(N):
+        ia = 6 + N + 2 * k
+        sin_fov = np.sqrt(max(0.0, 1.0 - cos_fov[k] * cos_fov[k]))
+        mk[k] = margin + prm[14] * sin_fov * np.sqrt(P[ia, ia] + P[ia + 1, ia + 1])
+    h, H, D, A, cosd, Aedge = calibration_measurement_nb(
+        x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
+        lat_c, nlat, nlon, lon_w0, dlon, dlat_max, mk)
+    r0 = max(sig * sig, floor * floor)
+    Rk = np.empty(N)
+    idx = np.empty(N, dtype=np.int64)
+    m = 0
+    for k in range(N):
+        # albedo-model uncertainty: relative part + the cells whose FOV membership is uncertain
+        Rk[k] = r0 + (kalb * x[6 + k] * A[k]) ** 2 + (x[6 + k] * Aedge[k]) ** 2
+        nu_out[k] = np.nan
+        s_out[k] = np.nan
+        if lit > 0.0 and abs(cosd[k] - cos_fov[k]) < mk[k]:
+            continue  # Sun at the FOV edge: the cut-off makes the model unreliable
+        pred = h[k] > thr
+        # selection on the *prediction*: selecting on the noisy output (y > thr) would bias
+        # the innovations of weakly lit sensors upwards; a clearly lit output (y > 3 thr)
+        # is used as well, so that a badly predicted sensor cannot lock itself out
+        if pred or (y[k] > 3.0 * thr and D[k] + A[k] > 0.0):
+            v = Rk[k]
+            for a in range(n):
+                if H[k, a] != 0.0:
+                    acc = 0.0
+                    for b in range(n):
+                        acc += P[a, b] * H[k, b]
+                    v += H[k, a] * acc
+            if pred:
+                nu_out[k] = y[k] - h[k]
+                s_out[k] = v
+            if D[k] + A[k] > 0.0:
+                if gate_s <= 0.0 or (y[k] - h[k]) ** 2 / v <= gate_s:
+                    idx[m] = k
+                    m += 1
+    if m == 0:
+        return 0, np.nan, 1.0
+    Hm = np.empty((m, n))
+    nu = np.empty(m)
+    R = np.zeros((m, m))
+    for i in range(m):
+        k = idx[i]
+        Hm[i] = H[k]
+        nu[i] = y[k] - h[k]
+        R[i, i] = Rk[k]
+    cons = np.zeros(n, dtype=np.bool_)
+    for i in range(6 + 3 * N, n):
+        cons[i] = True
+    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
+    if not ok:
+        return 0, np.nan, 1.0
+    infl = 1.0
+    if nis > gate * m:
+        infl = min(nis / (gate * m), infl_max)
+        xn, Pn, nis2, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R * infl, cons)
+        if not ok:
+            return 0, np.nan, 1.0
+    for i in range(n):
+        x[i] += xn[i]
+        for j in range(n):
+            P[i, j] = Pn[i, j]
+    mrp_switch_cov_nb(x, P)
+    return m, nis, infl
+
+
+@numba.njit(cache=True)
+def _consider_propagate(x, P, N, dt, tau, sig_b):
+    """Gauss-Markov propagation of the considered albedo errors b (estimate stays 0)."""
+    n = x.shape[0]
+    if tau <= 0.0:
+        return
+    e = np.exp(-dt / tau)
+    q = sig_b * sig_b * (1.0 - e * e)
+    i0 = 6 + 3 * N
+    for i in range(i0, n):
+        x[i] *= e
+        for j in range(n):
+            P[i, j] *= e
+            P[j, i] *= e
+    for i in range(i0, n):
+        P[i, i] += q
+
+
+def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0, P0, prm,
+                         az0, el0, cos_fov, horizon_B, cells_args):
+    """Whole-recording loop: propagate with the gyro, star-tracker update, CSS update.
+
+    A Python loop over the compiled per-step kernels (≈10 µs of call overhead per sample;
+    no separate whole-loop kernel to compile).  Returns X (K,n), Pdiag (K,n), P_end (n,n),
+    nis (K,), m (K,), NU (K,N), S (K,N), nis_st (K,).
+    """
+    K = t.shape[0]
+    N = az0.shape[0]
+    n = x0.shape[0]
+    X = np.zeros((K, n))
+    Pd = np.zeros((K, n))
+    NIS = np.full(K, np.nan)
+    NISST = np.full(K, np.nan)
+    M = np.zeros(K, dtype=np.int64)
+    NU = np.full((K, N), np.nan)
+    SS = np.full((K, N), np.nan)
+    x = x0.copy()
+    P = P0.copy()
+    arw, rrw, qp = prm[7], prm[8], prm[9]
+    tau, sig_b, sig_st = prm[10], prm[11], prm[12]
+    cons = np.zeros(n, dtype=np.bool_)
+    cons[6 + 3 * N:] = True
+    nu_k = np.empty(N)
+    s_k = np.empty(N)
+    iq = np.arange(6, 6 + 3 * N)
+    for k in range(K):
+        if k > 0:
+            dt = t[k] - t[k - 1]
+            mrp_propagate_nb(x, P, W[k - 1], dt, arw, rrw, 0.0)
+            if qp > 0.0:
+                P[iq, iq] += qp * dt
+            _consider_propagate(x, P, N, dt, tau, sig_b)
+        if stvalid[k]:
+            nis_st, ok = star_tracker_update_nb(x, P, QST[k], sig_st, cons)
+            if ok:
+                NISST[k] = nis_st
+        m, nis, infl = calibration_update_nb(x, P, Y[k], prm, az0, el0, cos_fov, horizon_B,
+                                             sun_N[k], lit[k], theta[k], r_E[k], s_E[k],
+                                             *cells_args, nu_k, s_k)
+        M[k] = m
+        NIS[k] = nis
+        NU[k] = nu_k
+        SS[k] = s_k
+        X[k] = x
+        Pd[k] = np.diagonal(P)
+    return X, Pd, P, NIS, M, NU, SS, NISST
+
+
+# ---------------------------------------------------------------------------------------
+# object layer
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CalibrationParams:
+    """Tuning of the calibration filter (dimensionless outputs, SI otherwise).
+
+    sigma_css: CSS output noise 1σ; noise_floor: smallest measurement 1σ; albedo_frac:
+    relative 1σ of the modelled albedo part; threshold: activity threshold; gate: NIS gate per
+    measurement above which R is inflated; inflate_max; gate_sensor: per-sensor χ²₁ outlier
+    gate on the prior innovation (0: off); arw, rrw: gyro σ_v (rad/√s), σ_u (rad/s^1.5);
+    q_param: random-walk density on scale/misalignment states (1/s, rad²/s); consider_tau_s,
+    consider_sigma: Gauss-Markov time constant (s) and 1σ of the considered albedo error;
+    sigma_st_rad: star-tracker 1σ per axis (rad); fov_edge_margin: sensors whose predicted
+    Sun cosine lies within this distance (plus ``fov_edge_sigmas`` × sin ψ × the 1σ direction
+    uncertainty of the sensor normal, √(P_δαδα + P_δεδε)) of the FOV cut-off cos ψ are skipped (the step of
+    the output at the edge, ≈ cos ψ, makes small attitude/misalignment errors look like huge
+    innovations); use_albedo: full (True) or reduced (False)
+    filter; sigma_att0_rad, sigma_bias0, sigma_scale0, sigma_mis0_rad: initial 1σ.
+    """
+
+    sigma_css: float = 0.017
+    noise_floor: float = 0.01
+    albedo_frac: float = 0.1
+    threshold: float = 0.05
+    gate: float = 9.0
+    inflate_max: float = 100.0
+    gate_sensor: float = 25.0
+    arw: float = 2.9e-5
+    rrw: float = 1e-8
+    q_param: float = 0.0
+    consider_tau_s: float = 300.0
+    consider_sigma: float = 0.003
+    sigma_st_rad: float = float(np.radians(0.02))
+    fov_edge_margin: float = 0.03
+    fov_edge_sigmas: float = 2.0
+    use_albedo: bool = True
+    sigma_att0_rad: float = float(np.radians(1.0))
+    sigma_bias0: float = float(np.radians(0.05))
+    sigma_scale0: float = 0.3
+    sigma_mis0_rad: float = float(np.radians(2.0))
+
+    @classmethod
+    def reduced(cls, **kw) -> "CalibrationParams":
+        """§4.3 defaults: no albedo model; albedo as a considered bias of 1σ 0.05 full scale
+        correlated over 300 s (Earth-facing sensors see up to ~0.27 at 400 km)."""
+        base = dict(use_albedo=False, consider_sigma=0.05, consider_tau_s=300.0)
+        base.update(kw)
+        return cls(**base)
+
+    def as_array(self) -> np.ndarray:
+        return np.array([self.sigma_css, self.noise_floor, self.albedo_frac, self.threshold,
+                         self.gate, self.inflate_max, self.gate_sensor, self.arw, self.rrw,
+                         self.q_param, self.consider_tau_s, self.consider_sigma,
+                         self.sigma_st_rad, self.fov_edge_margin,
+                         self.fov_edge_sigmas], dtype=float)
+
+    def for_gyro(self, spec) -> "CalibrationParams":
+        """A copy with the ARW/RRW of a :class:`~lightcurve.css.gyro.GyroSpec`."""
+        from dataclasses import replace
+
+        return replace(self, arw=float(spec.arw), rrw=float(spec.rrw))
+
+
+def state_layout(n_sensors: int) -> dict:
+    """Slices of the state vector: sigma, bias, scale, misalignment ((N,2) via reshape),
+    consider (albedo error)."""
+    N = int(n_sensors)
+    return {"sigma": slice(0, 3), "bias": slice(3, 6), "scale": slice(6, 6 + N),
+            "misalignment": slice(6 + N, 6 + 3 * N), "consider": slice(6 + 3 * N, 6 + 4 * N),
+            "n": 6 + 4 * N}
+
+
+def initial_state(css: CSSArray, q0, params: CalibrationParams):
+    """x0 (nominal calibration, zero bias, attitude q0) and diagonal P0."""
+    N = css.n_sensors
+    L = state_layout(N)
+    x0 = np.zeros(L["n"])
+    x0[L["sigma"]] = quat_to_mrp(np.asarray(q0, dtype=float))
+    x0[L["scale"]] = 1.0
+    p = np.zeros(L["n"])
+    p[L["sigma"]] = params.sigma_att0_rad ** 2 / 16.0
+    p[L["bias"]] = params.sigma_bias0 ** 2
+    p[L["scale"]] = params.sigma_scale0 ** 2
+    p[L["misalignment"]] = params.sigma_mis0_rad ** 2
+    p[L["consider"]] = params.consider_sigma ** 2
+    return x0, np.diag(p)
+
+
+@dataclass
+class CalibrationResult:
+    """Filter output. t (K,); x (K,n) state history; p_diag (K,n); P_end (n,n); nis (K,) NIS
+    of the CSS update (NaN when none); n_used (K,); innov, innov_var (K,N) per-sensor prior
+    innovations and variances (NaN when not evaluated); nis_st (K,) star-tracker NIS;
+    layout: :func:`state_layout`."""
+
+    t: np.ndarray
+    x: np.ndarray
+    p_diag: np.ndarray
+    P_end: np.ndarray
+    nis: np.ndarray
+    n_used: np.ndarray
+    innov: np.ndarray
+    innov_var: np.ndarray
+    nis_st: np.ndarray
+    layout: dict
+
+    def scale(self):
+        """(K,N) estimated total scale factors g_κ."""
+        return self.x[:, self.layout["scale"]]
+
+    def misalignment_rad(self):
+        """(K,N,2) estimated (δα, δε), rad."""
+        m = self.x[:, self.layout["misalignment"]]
+        return m.reshape(m.shape[0], -1, 2)
+
+    def sigma3_scale(self):
+        return 3.0 * np.sqrt(self.p_diag[:, self.layout["scale"]])
+
+    def sigma3_misalignment_rad(self):
+        v = 3.0 * np.sqrt(self.p_diag[:, self.layout["misalignment"]])
+        return v.reshape(v.shape[0], -1, 2)
+
+
+def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
+                    params: CalibrationParams = CalibrationParams(), albedo="builtin",
+                    q_star=None, star_valid=None, q0=None, theta=None) -> CalibrationResult:
+    """Run the full (``params.use_albedo``) or reduced calibration filter on a recording.
+
+    css: nominal sensor set; t (K,) s; Y (K,N) outputs; gyro (K,3) rad/s; sun_N (K,3) unit
+    Sun directions (ECI/GCRS); lit (K,) lit fractions; r_I_m (K,3) spacecraft positions (ECI,
+    m); epoch_utc: scenario epoch (for the Earth rotation angle); albedo: "builtin" (10°
+    zonal), an :class:`AlbedoMap`, or an :class:`AlbedoCells`; q_star (K,4) star-tracker
+    quaternions (inertial→body) with star_valid (K,) flags; q0 initial attitude (defaults to
+    the first star-tracker sample).
+    """
+    t = np.ascontiguousarray(t, dtype=float)
+    K = t.size
+    Y = np.ascontiguousarray(Y, dtype=float)
+    N = css.n_sensors
+    if Y.shape != (K, N):
+        raise ValueError(f"Y must have shape ({K}, {N})")
+    W = np.ascontiguousarray(gyro, dtype=float)
+    sun_N = np.ascontiguousarray(sun_N, dtype=float)
+    r_I = np.ascontiguousarray(r_I_m, dtype=float)
+    lit = np.ascontiguousarray(np.broadcast_to(lit, (K,)), dtype=float)
+    if theta is None:
+        theta = earth_rotation_angle(epoch_utc, t)
+    theta = np.ascontiguousarray(theta, dtype=float)
+    c, s = np.cos(theta), np.sin(theta)
+    r_E = np.column_stack([c * r_I[:, 0] + s * r_I[:, 1], -s * r_I[:, 0] + c * r_I[:, 1], r_I[:, 2]])
+    s_E = np.column_stack([c * sun_N[:, 0] + s * sun_N[:, 1], -s * sun_N[:, 0] + c * sun_N[:, 1],
+                           sun_N[:, 2]])
+    if not params.use_albedo:
+        cells = AlbedoCells.none()
+    elif isinstance(albedo, AlbedoCells):
+        cells = albedo
+    elif isinstance(albedo, AlbedoMap):
+        cells = AlbedoCells.from_map(albedo)
+    elif albedo == "builtin" or albedo is None:
+        cells = AlbedoCells.from_map(builtin_albedo_map(10.0))
+    else:
+        raise ValueError("albedo must be 'builtin', an AlbedoMap or AlbedoCells")
+    if q_star is None:
+        QS = np.zeros((K, 4))
+        QS[:, 0] = 1.0
+        sv = np.zeros(K, dtype=bool)
+    else:
+        QS = np.ascontiguousarray(q_star, dtype=float)
+        sv = np.ones(K, dtype=bool) if star_valid is None else np.asarray(star_valid, dtype=bool)
+    if q0 is None:
+        if not sv.any():
+            raise ValueError("q0 is required when there is no star-tracker sample")
+        q0 = QS[np.flatnonzero(sv)[0]]
+    x0, P0 = initial_state(css, q0, params)
+    az0, el0 = normal_to_azel(css.normals)
+    out = run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QS, sv, x0, P0,
+                               params.as_array(), np.ascontiguousarray(az0),
+                               np.ascontiguousarray(el0), np.cos(css.fov_half_angle_rad),
+                               np.ascontiguousarray(css.horizon_normals), cells.args())
+    X, Pd, Pend, NIS, M, NU, SS, NISST = out
+    return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N))
+
+
+# ---------------------------------------------------------------------------------------
+# §4.4 case: one orbit, uncontrolled, dual pyramid, scale factors dispersed 30 %
+# ---------------------------------------------------------------------------------------
+@dataclass
+class CalibrationCase:
+    """A simulated calibration case (truth + measurements).
+
+    css_nominal: the flight-software model; t, Y, gyro (K,3), gyro_bias (K,3) true bias,
+    q_true (K,4), sun_N, lit, r_I_m; scale_true (N,) true g_κ; misalignment_true (N,2) rad;
+    q_star (K,4), star_valid (K,) star-tracker samples; epoch_utc; info: truth info dict.
+    """
+
+    css_nominal: CSSArray
+    t: np.ndarray
+    Y: np.ndarray
+    gyro: np.ndarray
+    gyro_bias: np.ndarray
+    q_true: np.ndarray
+    sun_N: np.ndarray
+    lit: np.ndarray
+    r_I_m: np.ndarray
+    scale_true: np.ndarray
+    misalignment_true: np.ndarray
+    q_star: np.ndarray
+    star_valid: np.ndarray
+    epoch_utc: str
+    info: dict = field(default_factory=dict)
+
+
+ORBIT_PERIOD_400KM_S = 2.0 * np.pi * np.sqrt((6378137.0 + 400e3) ** 3 / 3.986004418e14)
+
+
+def simulate_calibration_case(rng, *, css: CSSArray | None = None, duration_s=None, dt_s=1.0,
+                              albedo_truth="builtin", scale_sigma=0.3,
+                              misalignment_sigma_deg=2.0, noise_sigma=0.017, gyro="tactical",
+                              rate_sigma_deg_s=1.0, star_period_s=10.0,
+                              sigma_st_rad=float(np.radians(0.02)),
+                              epoch_utc="2015-03-01T00:00:00Z") -> CalibrationCase:
+    """Simulate the §4.4 case: 400 km polar orbit, uncontrolled tumbling (initial rates
+    N(0, rate_sigma²) per axis), dual pyramid (70° FOV) by default, total scale factors
+    N(1, scale_sigma²) (clipped to ≥ 0.05 by the truth model), misalignments N(0,
+    misalignment_sigma²) per angle, CSS noise, Earth albedo (``albedo_truth``: "builtin",
+    an AlbedoMap, or False), Farrenkopf gyro of the given grade (no scale/misalignment
+    errors) and a star tracker every ``star_period_s`` s (0: none) with 1σ ``sigma_st_rad``
+    per axis.  ``duration_s`` defaults to one orbit (5553 s).
+    """
+    from .configurations import dual_pyramid
+    from .gyro import gyro_grade, simulate_gyro
+    from .truth import Dispersions, Scenario, simulate
+
+    g = as_generator(rng)
+    css = dual_pyramid() if css is None else css
+    dur = ORBIT_PERIOD_400KM_S if duration_s is None else float(duration_s)
+    alb = None if albedo_truth == "builtin" else albedo_truth
+    disp = Dispersions(rate_sigma_deg_s=rate_sigma_deg_s, css_scale_common_sigma=0.0,
+                       css_scale_sigma=scale_sigma,
+                       css_misalignment_sigma_deg=misalignment_sigma_deg,
+                       css_noise_sigma=noise_sigma)
+    sc = Scenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=dur, dt_s=dt_s,
+                  epoch_utc=epoch_utc, albedo=alb, dispersions=disp)
+    r = simulate(sc, g)
+    spec = gyro_grade(gyro) if isinstance(gyro, str) else gyro
+    w_meas, bias = simulate_gyro(r.omega, dt_s, spec, g, detailed=False)
+    K = r.t.size
+    sv = np.zeros(K, dtype=bool)
+    if star_period_s > 0:
+        step = max(1, int(round(star_period_s / dt_s)))
+        sv[::step] = True
+    dq = rotvec_to_quat(g.normal(0.0, sigma_st_rad, (K, 3)))
+    qst = quat_mult(dq, r.q)
+    scale_true = r.info["css_scale_common"] * np.asarray(r.info["css_scale_individual"])
+    return CalibrationCase(css, r.t, r.y, w_meas, bias, r.q, r.info["sun_I_hat"], r.lit,
+                           r.info["r_I_m"], scale_true, np.asarray(r.info["css_misalignment_rad"]),
+                           qst, sv, epoch_utc, {"spec": spec, **r.info})
+
+
+def acceptance_summary(case: CalibrationCase, res: CalibrationResult, *, lit_threshold=0.3):
+    """End-of-run calibration summary per sensor.
+
+    Returns a dict with ``saw_sun`` (N,) (direct-Sun output above ``lit_threshold`` at some
+    sample), ``exposure_s`` (N,) (time with the direct output above ``lit_threshold``), final ``scale_err``, ``scale_3sigma``, ``mis_err_deg`` (N,2), ``mis_3sigma_deg``
+    (N,2), the ``attitude_err_deg`` history and ``bias_err`` (K,3) rad/s.
+    """
+    from ..rotations import attitude_error_angle, mrp_to_quat
+
+    N = case.css_nominal.n_sensors
+    true_css = case.css_nominal.with_errors(scale_individual=case.scale_true,
+                                            misalignment_rad=case.misalignment_true)
+    s_B = np.einsum("kij,kj->ki", _dcm_batch(case.q_true), case.sun_N)
+    direct = true_css.signals(s_B, case.lit, clip=True)
+    saw = np.any(direct > lit_threshold, axis=0)
+    dt = float(np.median(np.diff(case.t))) if case.t.size > 1 else 0.0
+    exposure_s = np.sum(direct > lit_threshold, axis=0) * dt
+    g_hat = res.scale()[-1]
+    m_hat = res.misalignment_rad()[-1]
+    q_hat = mrp_to_quat(res.x[:, 0:3])
+    return {
+        "saw_sun": saw,
+        "exposure_s": exposure_s,
+        "scale_err": case.scale_true - g_hat,
+        "scale_3sigma": res.sigma3_scale()[-1],
+        "mis_err_deg": np.degrees(case.misalignment_true - m_hat),
+        "mis_3sigma_deg": np.degrees(res.sigma3_misalignment_rad()[-1]),
+        "attitude_err_deg": np.degrees(attitude_error_angle(case.q_true, q_hat)),
+        "bias_err": case.gyro_bias - res.x[:, 3:6],
+        "n_sensors": N,
+    }
+
+
+def _dcm_batch(q):
+    from ..rotations import quat_to_dcm
+
+    return quat_to_dcm(q)
+
+
+def params_dict(p: CalibrationParams) -> dict:
+    """Parameters as a plain dict (for reports)."""
+    return asdict(p)
