@@ -29,9 +29,7 @@ residuals before/after against time, and against each chosen effect's signature.
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 import json
 import math
 from pathlib import Path
@@ -171,12 +169,10 @@ def diagnosis_json(d) -> dict:
 
 # ----------------------------------------------------------------------------------------
 def _png(fig) -> str:
-    import matplotlib.pyplot as plt
+    """Base64 PNG of a figure (closed afterwards); shared with the study report."""
+    from ..report.html import figure_to_data_uri
 
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
+    return figure_to_data_uri(fig).split(",", 1)[1]
 
 
 def _figures(d):

@@ -1,0 +1,210 @@
+"""Self-contained HTML reports (figures embedded as base64 PNG; open offline).
+
+:func:`write_study_report` writes the Monte Carlo filter-comparison report of a study: the
+traffic-light table laid out like Bernard (2021) fig. 9.4 — rows are filter × σθ, columns are
+dynamics × number of sites × σω × r — each cell coloured green / yellow / red
+(:func:`lightcurve.studies.metrics.traffic_light`) and showing the six counts of runs whose
+final error left the 3σ bound ``[θx θy θz | ωx ωy ωz]``; then a table of every cell with the
+median and 95th-percentile final RSS attitude error, failures and median runtime; then the
+RSS-attitude-error-versus-time envelopes (median and 95th percentile over the runs of every σω
+and r) per filter, dynamics, number of sites and σθ.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import itertools
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..io.atomic import atomic_write_text  # noqa: E402
+
+__all__ = ["write_study_report", "figure_to_data_uri", "fig94_table_html"]
+
+_BG = {"green": "#8fd18f", "yellow": "#f3e27a", "red": "#ee8a80"}
+_ROW_AXES = ("filter", "reflection", "sigma_theta_deg")
+_COL_AXES = ("dynamics", "sites", "sigma_omega_deg_s", "r_percent")
+_LABEL = {"filter": "filter", "reflection": "reflection", "sigma_theta_deg": "σθ (°)",
+          "dynamics": "dynamics", "sites": "sites", "sigma_omega_deg_s": "σω (°/s)",
+          "r_percent": "r (%)"}
+_FILTER_NAME = {"mekf": "EKF (MEKF)", "ukf": "UKF", "bpf": "PF"}
+
+
+def figure_to_data_uri(fig) -> str:
+    """PNG data URI (``data:image/png;base64,…``) of a matplotlib figure (which is closed)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _uniq(cells, key):
+    out = []
+    for c in cells:
+        if c[key] not in out:
+            out.append(c[key])
+    return out
+
+
+def _fmt(key, v):
+    if key == "filter":
+        return _FILTER_NAME.get(v, v)
+    if key == "sites":
+        return f"{v} site" + ("s" if int(v) != 1 else "")
+    return html.escape(str(v))
+
+
+def fig94_table_html(cells: list) -> str:
+    """The traffic-light table (module docstring) as an HTML ``<table>``."""
+    rows_axes = [k for k in _ROW_AXES if len(_uniq(cells, k)) > 1 or k != "reflection"]
+    col_axes = list(_COL_AXES)
+    rvals = [_uniq(cells, k) for k in rows_axes]
+    cvals = [_uniq(cells, k) for k in col_axes]
+    index = {tuple(c[k] for k in rows_axes + col_axes): c for c in cells}
+    cols = list(itertools.product(*cvals))
+    out = ['<table class="fig94">']
+    # header rows: one per column axis, with colspans
+    for level, key in enumerate(col_axes):
+        span = int(np.prod([len(v) for v in cvals[level + 1:]])) if level + 1 < len(cvals) else 1
+        out.append("<tr>" + "".join(f'<th class="corner">{_LABEL[k]}</th>' if level == len(col_axes) - 1
+                                    else '<th class="corner"></th>' for k in rows_axes))
+        reps = int(np.prod([len(v) for v in cvals[:level]])) if level else 1
+        cells_h = [f'<th colspan="{span}">{_LABEL[key]} = {_fmt(key, v)}</th>' if key not in
+                   ("dynamics", "sites") else f'<th colspan="{span}">{_fmt(key, v)}</th>'
+                   for _ in range(reps) for v in cvals[level]]
+        out.append("".join(cells_h) + "</tr>")
+    for rv in itertools.product(*rvals):
+        out.append("<tr>" + "".join(f"<th>{_fmt(k, v)}</th>" for k, v in zip(rows_axes, rv)))
+        for cv in cols:
+            c = index.get(tuple(rv) + tuple(cv))
+            if c is None:
+                out.append('<td class="none">–</td>')
+                continue
+            o = c["outside_3sigma"]
+            title = (f"{c['runs']} runs, {c['failures']} failed; median RSS "
+                     f"{c['rss_att_deg_median']:.3g}°, p95 {c['rss_att_deg_p95']:.3g}°")
+            out.append(f'<td style="background:{_BG[c["color"]]}" title="{html.escape(title)}">'
+                       f'{o[0]} {o[1]} {o[2]}<br>{o[3]} {o[4]} {o[5]}'
+                       + (f'<br><b>{c["failures"]} failed</b>' if c["failures"] else "")
+                       + "</td>")
+        out.append("</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def _cells_table_html(cells: list, keys: list) -> str:
+    head = "".join(f"<th>{html.escape(_LABEL.get(k, k))}</th>" for k in keys)
+    head += ("<th>runs</th><th>outside 3σ θx θy θz ωx ωy ωz</th><th>colour</th>"
+             "<th>RSS att. median (°)</th><th>RSS att. p95 (°)</th>"
+             "<th>RSS rate median (°/s)</th><th>diverged</th><th>failures</th>"
+             "<th>runtime median (s)</th>")
+    rows = []
+    for c in cells:
+        r = "".join(f"<td>{_fmt(k, c[k])}</td>" for k in keys)
+        r += (f"<td>{c['runs']}</td><td>{' '.join(map(str, c['outside_3sigma']))}</td>"
+              f'<td style="background:{_BG[c["color"]]}">{c["color"]}</td>'
+              f"<td>{c['rss_att_deg_median']:.4g}</td><td>{c['rss_att_deg_p95']:.4g}</td>"
+              f"<td>{c['rss_omega_deg_s_median']:.4g}</td><td>{c['diverged']}</td>"
+              f"<td>{c['failures']}</td><td>{c['runtime_s_median']:.3g}</td>")
+        rows.append(f"<tr>{r}</tr>")
+    return f'<table class="cells"><tr>{head}</tr>' + "\n".join(rows) + "</table>"
+
+
+def _envelope_figures(envelopes) -> list:
+    """One figure per filter: panels per (dynamics, sites), median (solid) and p95 (dashed)
+    RSS attitude error versus time per σθ (runs of every σω and r pooled)."""
+    figs = []
+    filters = []
+    for cell, _ in envelopes:
+        if cell["filter"] not in filters:
+            filters.append(cell["filter"])
+    for flt in filters:
+        sub = [(c, e) for c, e in envelopes if c["filter"] == flt and len(e[0])]
+        if not sub:
+            continue
+        panels = []
+        for c, _ in sub:
+            if (c["dynamics"], c["sites"]) not in panels:
+                panels.append((c["dynamics"], c["sites"]))
+        thetas = sorted({c["sigma_theta_deg"] for c, _ in sub})
+        cmap = plt.get_cmap("viridis")
+        colours = {th: cmap(i / max(1, len(thetas) - 1) * 0.85) for i, th in enumerate(thetas)}
+        ncol = min(2, len(panels))
+        nrow = int(np.ceil(len(panels) / ncol))
+        fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 3.4 * nrow), squeeze=False,
+                                 sharey=True, layout="constrained")
+        for ax, (dyn, ns) in zip(axes.ravel(), panels):
+            for c, (t, p50, p95, _p5) in sub:
+                if (c["dynamics"], c["sites"]) != (dyn, ns):
+                    continue
+                col = colours[c["sigma_theta_deg"]]
+                ax.semilogy(t, p50, color=col, lw=1.4)
+                ax.semilogy(t, p95, color=col, lw=0.9, ls="--")
+            ax.set_title(f"{_FILTER_NAME.get(flt, flt)} — {dyn}, {_fmt('sites', ns)}", fontsize=9)
+            ax.set_xlabel("t (s)")
+            ax.grid(True, which="both", alpha=0.3)
+        for ax in axes[:, 0]:
+            ax.set_ylabel("RSS attitude error (°)")
+        for ax in axes.ravel()[len(panels):]:
+            ax.set_visible(False)
+        handles = [plt.Line2D([], [], color=colours[th], label=f"σθ = {th:g}°") for th in thetas]
+        handles += [plt.Line2D([], [], color="k", label="median"),
+                    plt.Line2D([], [], color="k", ls="--", lw=0.7, label="95th percentile")]
+        fig.legend(handles=handles, loc="outside upper center", ncol=len(handles), fontsize=8)
+        figs.append((flt, figure_to_data_uri(fig)))
+    return figs
+
+
+_CSS = """
+body{font-family:sans-serif;margin:1.5em;max-width:1400px}
+table{border-collapse:collapse;margin:1em 0;font-size:12px}
+td,th{border:1px solid #999;padding:3px 5px;text-align:center}
+table.fig94 td{font-family:monospace;min-width:4.5em}
+th.corner{border:none}
+img{max-width:100%}
+"""
+
+
+def write_study_report(path, summary: dict, envelopes=()) -> None:
+    """Write the study report (module docstring) to ``path`` (atomic, self-contained HTML).
+
+    Parameters
+    ----------
+    path : path of ``report.html``
+    summary : the dict written to ``summary.json`` (:func:`lightcurve.studies.runner.summarize`)
+    envelopes : sequence of ``(group dict, (t_s, p50_deg, p95_deg, p5_deg))`` from
+        :func:`lightcurve.studies.metrics.rss_envelope`; the dict has ``filter``, ``dynamics``,
+        ``sites``, ``sigma_theta_deg``
+    """
+    cells = summary["cells"]
+    keys = [k for k in summary.get("grid_keys", []) if k != "reflection"
+            or len(_uniq(cells, "reflection")) > 1]
+    ncol = {c: sum(1 for x in cells if x["color"] == c) for c in _BG}
+    n_runs = sum(c["runs"] for c in cells)
+    n_fail = sum(c["failures"] for c in cells)
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(summary['study'])}"
+             f"</title><style>{_CSS}</style></head><body>",
+             f"<h1>Study {html.escape(summary['study'])}</h1>",
+             f"<p>{len(cells)} cells × {summary['runs_per_cell']} runs; {n_runs} runs finished, "
+             f"{n_fail} failed. Colours: {ncol['green']} green, {ncol['yellow']} yellow, "
+             f"{ncol['red']} red. Study seed {summary['seed']}, hash "
+             f"<code>{summary['study_hash'][:16]}</code>.</p>",
+             "<h2>Runs outside the 3σ bound at the final epoch (layout of Bernard 2021 fig. 9.4)</h2>",
+             "<p>Each box: number of runs whose final error component lies outside ±3σ of the "
+             "filter's own covariance; first line attitude θx θy θz, second line rate ωx ωy ωz. "
+             "Red: more than 10 runs outside for any component; yellow: 6–10 for some component, "
+             "or two or more components with exactly 5; green: otherwise.</p>",
+             fig94_table_html(cells),
+             "<h2>Every cell</h2>", _cells_table_html(cells, keys),
+             "<h2>RSS attitude error versus time</h2>"]
+    for flt, uri in _envelope_figures(list(envelopes)):
+        parts.append(f"<h3>{html.escape(_FILTER_NAME.get(flt, flt))}</h3><img src='{uri}' "
+                     f"alt='RSS attitude error envelopes, {html.escape(flt)}'>")
+    parts.append("</body></html>")
+    atomic_write_text(path, "\n".join(parts) + "\n")

@@ -1,0 +1,441 @@
+"""Run a study: simulate → invert → metrics for every run, in parallel, resumable.
+
+Output folder ``DIR`` (formats in docs/formats.md, "Studies"):
+
+``DIR/study.json``
+    the study's hash (:func:`lightcurve.studies.study.study_hash`), name, text and cells; a
+    rerun with a changed study (or changed scenario files) is refused unless ``force`` (which
+    discards the stored runs).
+``DIR/runs/<cell tag>_r<run>.h5``
+    one small HDF5 per finished run, written atomically (temporary file, then rename) by the
+    main process as soon as the run's result arrives; failures are stored too (``status =
+    "failed"`` with the error text). A restarted study skips every run that has a file.
+``DIR/summary.json`` and ``DIR/report.html``
+    written when every run is stored (:func:`summarize`).
+
+Executors (all give the same numbers: each run depends only on its seeds, which derive from the
+study seed and the cell, see :mod:`lightcurve.studies.study`): a local process pool (default,
+``workers``), a Dask ``LocalCluster`` started here (``dask_local`` worker processes) or an
+existing Dask cluster (``scheduler="tcp://host:port"``). Dask is imported only for those two and
+its absence is a clear error naming the ``distributed`` extra.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import shutil
+import time
+import traceback
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.atomic import atomic_path, atomic_write_text
+from .metrics import cell_summary, run_metrics
+from .study import GRID_KEYS, RunTask, Study
+
+__all__ = ["limit_blas_threads", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
+           "prepare_output", "RUN_FORMAT"]
+
+RUN_FORMAT = "lightcurve-study-run"
+_SUMMARY_FORMAT = "lightcurve-study-summary"
+
+
+# ----------------------------------------------------------------------------------------
+# one run (executed in a worker)
+# ----------------------------------------------------------------------------------------
+_BLAS_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_BLAS_SETTERS = ("openblas_set_num_threads", "scipy_openblas_set_num_threads",
+                 "scipy_openblas_set_num_threads64_", "openblas_set_num_threads64_")
+
+
+def limit_blas_threads() -> int:
+    """Make BLAS single-threaded in this process and its future children.
+
+    A study runs one filter per worker process; the filters' linear algebra is on 6×6 and
+    smaller matrices, where a multi-threaded OpenBLAS spends most of its time synchronising
+    threads (measured: the MEKF 6× slower on a loaded 2-core machine). Sets the usual
+    environment variables (inherited by spawned workers, e.g. Dask's) and calls the
+    ``*_set_num_threads(1)`` entry points of the OpenBLAS libraries already loaded (found in
+    ``/proc/self/maps``; Linux only, silently skipped elsewhere). Returns how many libraries
+    were limited.
+    """
+    import ctypes
+
+    for k in _BLAS_ENV:
+        os.environ[k] = "1"
+    n = 0
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
+            libs = {ln.split()[-1] for ln in fh if "openblas" in ln.lower() and ".so" in ln}
+    except OSError:
+        return 0
+    for lib in sorted(libs):
+        try:
+            h = ctypes.CDLL(lib)
+        except OSError:
+            continue
+        for name in _BLAS_SETTERS:
+            fn = getattr(h, name, None)
+            if fn is not None:
+                fn(ctypes.c_int(1))
+                n += 1
+                break
+    return n
+
+
+@functools.lru_cache(maxsize=16)
+def _scenario(text: str, file: str):
+    from .scenario import parse_scenario
+
+    return parse_scenario(text, file=file)
+
+
+@functools.lru_cache(maxsize=32)
+def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int):
+    from .simulate import simulate
+
+    sc = _scenario(text, file)
+    sc = replace(sc, measurement=replace(sc.measurement, r_percent=float(r_percent)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the thesis cases ignore the eclipse on purpose
+        return simulate(sc, seed=sim_seed)
+
+
+def execute_task(task: RunTask) -> dict:
+    """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
+    ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
+
+    Never raises for a failing run: the result has ``status = "failed"`` and ``error`` (the
+    traceback text). Simulated lightcurves are cached per process (the same lightcurve serves
+    every filter and initial-error setting of a run index).
+
+    Returns
+    -------
+    dict
+        ``run_id``, ``cell`` (dict), ``run``, ``sim_seed``, ``filter_seed``, ``status``,
+        ``error``, ``wall_s`` and, on success, ``metrics`` plus per-epoch arrays ``t`` (s),
+        ``att_error_deg``, ``att_sigma_deg`` (N×3, deg, body axes), ``omega_error_rad_s``,
+        ``omega_sigma_rad_s`` (N×3, rad/s).
+    """
+    from ..filters import invert
+
+    t0 = time.perf_counter()
+    c = task.cell
+    res = {"run_id": task.run_id, "cell": c.as_dict(), "run": int(task.run),
+           "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
+           "status": "ok", "error": ""}
+    try:
+        lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
+                         int(task.sim_seed))
+        opts = dict(task.options)
+        kw = {}
+        if c.filter == "bpf" and "particles" in opts:
+            kw["particles"] = int(opts["particles"])
+        if "acs_mode" in opts:
+            kw["acs_mode"] = opts["acs_mode"]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            est = invert(lc, c.filter, seed=int(task.filter_seed),
+                         sigma_theta_deg=float(c.sigma_theta_deg),
+                         sigma_omega_deg_s=float(c.sigma_omega_deg_s), **kw)
+        res["metrics"] = run_metrics(est)
+        res["t"] = np.asarray(est.t, float)
+        res["att_error_deg"] = np.asarray(est.att_error_deg, float)
+        res["att_sigma_deg"] = np.asarray(est.att_sigma_deg, float)
+        res["omega_error_rad_s"] = np.asarray(est.omega_error_rad_s, float)
+        res["omega_sigma_rad_s"] = np.asarray(est.omega_sigma_rad_s, float)
+    except Exception as exc:  # noqa: BLE001 - a failing run is recorded, the study goes on
+        res["status"] = "failed"
+        res["error"] = f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=8)}"
+    res["wall_s"] = time.perf_counter() - t0
+    return res
+
+
+# ----------------------------------------------------------------------------------------
+# run files
+# ----------------------------------------------------------------------------------------
+_ARRAYS = (("t", "s"), ("att_error_deg", "deg, body axes, rotation vector of q_true * q_est^-1"),
+           ("att_sigma_deg", "deg, 1 sigma"), ("omega_error_rad_s", "rad/s, body axes"),
+           ("omega_sigma_rad_s", "rad/s, 1 sigma"))
+
+
+def write_run(out_dir, result: dict, study_hash: str) -> Path:
+    """Store one run's result as ``DIR/runs/<run_id>.h5`` (atomic). Returns the path."""
+    import h5py
+
+    path = Path(out_dir) / "runs" / f"{result['run_id']}.h5"
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h:
+            h.attrs["format"] = RUN_FORMAT
+            h.attrs["format_version"] = 1
+            h.attrs["study_hash"] = study_hash
+            h.attrs["cell_json"] = json.dumps(result["cell"])
+            for k in ("run_id", "status", "error"):
+                h.attrs[k] = str(result[k])
+            for k in ("run", "sim_seed", "filter_seed"):
+                h.attrs[k] = int(result[k])
+            h.attrs["wall_s"] = float(result["wall_s"])
+            if result["status"] == "ok":
+                h.attrs["metrics_json"] = json.dumps(result["metrics"])
+                for name, units in _ARRAYS:
+                    d = h.create_dataset(name, data=np.asarray(result[name], float))
+                    d.attrs["units"] = units
+    return path
+
+
+def read_run(path) -> dict:
+    """Read a run file written by :func:`write_run` (same keys as :func:`execute_task`)."""
+    import h5py
+
+    path = Path(path)
+    try:
+        h = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"cannot open run file: {exc}", file=path) from None
+    with h:
+        if h.attrs.get("format") != RUN_FORMAT:
+            raise InputError("not a study run file", file=path, field="format",
+                             value=h.attrs.get("format"), allowed=RUN_FORMAT)
+        out = {k: str(h.attrs[k]) for k in ("run_id", "status", "error", "study_hash")}
+        out.update({k: int(h.attrs[k]) for k in ("run", "sim_seed", "filter_seed")})
+        out["wall_s"] = float(h.attrs["wall_s"])
+        out["cell"] = json.loads(str(h.attrs["cell_json"]))
+        if out["status"] == "ok":
+            out["metrics"] = json.loads(str(h.attrs["metrics_json"]))
+            for name, _ in _ARRAYS:
+                out[name] = np.asarray(h[name])
+    return out
+
+
+def finished_runs(out_dir) -> set:
+    """Run ids with a stored file under ``DIR/runs`` (temporary files are ignored)."""
+    d = Path(out_dir) / "runs"
+    if not d.is_dir():
+        return set()
+    return {p.stem for p in d.glob("*.h5") if not p.name.startswith(".")}
+
+
+def prepare_output(out_dir, study: Study, force: bool = False) -> None:
+    """Create ``DIR`` and ``DIR/study.json``; refuse a different study unless ``force``.
+
+    With ``force`` and a different stored study, the stored runs, summary and report are
+    deleted first.
+    """
+    out = Path(out_dir)
+    meta = out / "study.json"
+    h = study.hash
+    if meta.exists():
+        try:
+            old = json.loads(meta.read_text(encoding="utf-8")).get("study_hash")
+        except (OSError, ValueError):
+            old = None
+        if old != h:
+            if not force:
+                raise InputError(
+                    "the output folder holds runs of a different study (the study file or one "
+                    "of its scenario files changed); use --force to discard them, or another -o",
+                    file=study.source, field="study_hash", value=h[:16],
+                    allowed=f"{str(old)[:16]} (stored in {meta})")
+            shutil.rmtree(out / "runs", ignore_errors=True)
+            for f in ("summary.json", "report.html"):
+                (out / f).unlink(missing_ok=True)
+    (out / "runs").mkdir(parents=True, exist_ok=True)
+    for stale in (out / "runs").glob(".*.h5.*"):  # temporary files of a killed run
+        stale.unlink(missing_ok=True)
+    if not meta.exists() or force:
+        doc = {"format": "lightcurve-study", "format_version": 1, "study_hash": h,
+               "name": study.name, "seed": study.seed, "source": study.source,
+               "study_toml": study.text, "cells": [c.as_dict() for c in study.cells]}
+        atomic_write_text(meta, json.dumps(doc, indent=1) + "\n")
+
+
+# ----------------------------------------------------------------------------------------
+# executors: generators of results in completion order
+# ----------------------------------------------------------------------------------------
+def _iter_inline(tasks):
+    for t in tasks:
+        yield execute_task(t)
+
+
+def _iter_pool(tasks, workers):
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
+    # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["lightcurve.studies.runner", "lightcurve.filters"])
+    else:
+        ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                             initializer=limit_blas_threads) as ex:
+        pending = set()
+        it = iter(tasks)
+        # bounded in-flight queue: the results come back as they complete
+        for t in it:
+            pending.add(ex.submit(execute_task, t))
+            if len(pending) >= 4 * workers:
+                break
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                yield f.result()
+                nxt = next(it, None)
+                if nxt is not None:
+                    pending.add(ex.submit(execute_task, nxt))
+
+
+def _import_distributed():
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise InputError("Dask executors need the 'distributed' extra: pip install "
+                         "'lightcurve[distributed]'", field="executor",
+                         value="--scheduler/--dask-local") from None
+    return distributed
+
+
+def _iter_dask(tasks, *, address=None, n_workers=None):
+    distributed = _import_distributed()
+    cluster = None
+    if address is None:
+        cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
+                                           processes=True, dashboard_address=None)
+        client = distributed.Client(cluster)
+    else:
+        try:
+            client = distributed.Client(address, timeout=30)
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot connect to the Dask scheduler: {exc}", field="--scheduler",
+                             value=address) from None
+    try:
+        futs = [client.submit(execute_task, t, key=f"lightcurve-run-{t.run_id}-{t.filter_seed}",
+                              pure=False) for t in tasks]
+        for fut in distributed.as_completed(futs):
+            res = fut.result()
+            fut.release()
+            yield res
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# ----------------------------------------------------------------------------------------
+def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | None = None,
+              scheduler: str | None = None, dask_local: int | None = None, force: bool = False,
+              progress: bool = True, write_report: bool = True) -> dict:
+    """Run (or resume) a study and write ``summary.json`` and ``report.html``.
+
+    Parameters
+    ----------
+    study : Study — from :func:`lightcurve.studies.study.load_study`
+    out_dir : path — output folder (module docstring)
+    runs : int, optional — runs per cell (default the study's)
+    workers : int, optional — process-pool size (default ``os.cpu_count()``; 1 runs inline)
+    scheduler : str, optional — address of an existing Dask scheduler (``tcp://…``)
+    dask_local : int, optional — start a Dask LocalCluster with this many worker processes
+    force : bool — discard stored runs of a different study instead of refusing
+    progress : bool — tqdm progress bar (runs done, failures, time left) on stderr
+
+    Returns
+    -------
+    dict — the summary (as written to ``summary.json``)
+    """
+    if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
+        raise InputError("choose one executor: --workers, --scheduler or --dask-local",
+                         field="executor")
+    n = study.runs if runs is None else int(runs)
+    if n < 1:
+        raise InputError("runs must be >= 1", field="runs", value=n, allowed=">= 1")
+    out = Path(out_dir)
+    prepare_output(out, study, force=force)
+    tasks = study.tasks(n)
+    done = finished_runs(out)
+    todo = [t for t in tasks if t.run_id not in done]
+    # runs sharing a simulated lightcurve (same dynamics, sites, r and run index: common
+    # random numbers) back to back, so each worker's lightcurve cache serves them
+    todo.sort(key=lambda t: (t.cell.scenario_key, t.run))
+    limit_blas_threads()  # before any worker starts (inherited) and for inline runs
+    failures = 0
+    if todo:
+        if scheduler is not None:
+            it = _iter_dask(todo, address=scheduler)
+        elif dask_local is not None:
+            it = _iter_dask(todo, n_workers=int(dask_local))
+        else:
+            w = int(workers or os.cpu_count() or 1)
+            it = _iter_inline(todo) if w == 1 else _iter_pool(todo, w)
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), disable=not progress,
+                   unit="run", desc=study.name, mininterval=0.5, dynamic_ncols=True)
+        h = study.hash
+        try:
+            for res in it:
+                write_run(out, res, h)
+                if res["status"] != "ok":
+                    failures += 1
+                bar.set_postfix(failures=failures, refresh=False)
+                bar.update(1)
+        finally:
+            bar.close()
+    return summarize(study, out, runs=n, write_report=write_report)
+
+
+def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: bool = True) -> dict:
+    """Aggregate the stored runs into ``DIR/summary.json`` (and ``DIR/report.html``).
+
+    Only the runs 0…runs−1 of each cell are used (a study extended and then summarised with
+    fewer runs ignores the extra files). Cells keep the study's grid order.
+    """
+    from .metrics import rss_envelope
+
+    out = Path(out_dir)
+    n = study.runs if runs is None else int(runs)
+    cells, groups = [], {}
+    for c in study.cells:
+        mets, fails, ts, rss, errors, walls = [], 0, [], [], [], []
+        for i in range(n):
+            p = out / "runs" / f"{c.tag}_r{i:05d}.h5"
+            if not p.exists():
+                continue
+            r = read_run(p)
+            walls.append(r["wall_s"])
+            if r["status"] != "ok":
+                fails += 1
+                errors.append(r["error"].splitlines()[0] if r["error"] else "")
+                continue
+            mets.append(r["metrics"])
+            ts.append(r["t"])
+            rss.append(np.linalg.norm(r["att_error_deg"], axis=1))
+        entry = cell_summary(c.as_dict(), mets, fails)
+        entry["missing"] = int(n - len(mets) - fails)
+        if errors:
+            entry["first_error"] = errors[0]
+        cells.append(entry)
+        # envelopes pool the runs of every σω and r: one curve per (filter, dynamics, sites, σθ)
+        gk = (c.filter, c.dynamics, c.sites, c.sigma_theta_deg, c.reflection)
+        g = groups.setdefault(gk, ({"filter": c.filter, "dynamics": c.dynamics, "sites": c.sites,
+                                    "sigma_theta_deg": c.sigma_theta_deg,
+                                    "reflection": c.reflection}, [], []))
+        g[1].extend(ts)
+        g[2].extend(rss)
+    envelopes = [(g[0], rss_envelope(g[1], g[2])) for g in groups.values()]
+    summary = {"format": _SUMMARY_FORMAT, "format_version": 1, "study": study.name,
+               "study_hash": study.hash, "seed": study.seed, "runs_per_cell": n,
+               "grid_keys": list(GRID_KEYS), "cells": cells}
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
+    if write_report:
+        from ..report.html import write_study_report
+
+        write_study_report(out / "report.html", summary, envelopes)
+    return summary
+

@@ -1,0 +1,288 @@
+"""Study files: a Monte Carlo grid of filter runs over simulated lightcurves.
+
+A study TOML (documented in docs/formats.md, section "Studies") names base scenario files and a
+grid of settings; every combination of the grid values is one *cell*, and each cell is run
+``runs`` times. Example::
+
+    [study]
+    name = "thesis-fig9-4"
+    seed = 94                 # study seed; every run's seeds derive from it and the cell
+    runs = 100
+    # base scenario per (dynamics, sites); {dynamics} and {sites} are filled from the grid;
+    # relative paths resolve against the study file's folder
+    scenario = "../thesis/leo-ic1-fast-spin-{dynamics}-{sites}site.toml"
+
+    [grid]
+    filter = ["mekf", "ukf"]              # lightcurve.filters.METHODS
+    dynamics = ["controlled", "uncontrolled"]
+    sites = [1, 2]                        # number of sites (the scenario file's [[sites]])
+    sigma_theta_deg = [3.0, 5.0, 10.0]    # 1σ initial attitude error per axis, deg
+    sigma_omega_deg_s = [0.02, 0.2]       # 1σ initial rate error per axis, deg/s
+    r_percent = [1.0, 10.0]               # measurement noise r (Bernard eq. 9.3), overrides
+                                          # the scenario's measurement.r_percent
+    reflection = ["none"]                 # reflection-parameter model estimated with the
+                                          # attitude; only "none" exists yet
+
+    [options]                             # optional filter settings shared by every cell
+    particles = 1000                      # BPF particles
+    acs_mode = "random_walk"              # controlled model: "random_walk" or "jitter"
+
+Seeds (reproducible, independent of worker count and executor): the simulation seed of run
+``i`` derives from the study seed, the *scenario* part of the cell key (dynamics, sites,
+r_percent) and ``i`` — so every filter and every initial-error setting sees the same simulated
+lightcurves (common random numbers) — and the filter seed from the study seed, the full cell
+key and ``i``; both through :class:`numpy.random.SeedSequence` seeded with SHA-256 words of the
+key text.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.tomlio import Section, load_toml
+
+__all__ = ["Study", "Cell", "RunTask", "load_study", "GRID_KEYS", "REFLECTION_MODELS",
+           "cell_key", "run_seeds", "study_hash"]
+
+#: grid axes in table order (also the order of the cell key)
+GRID_KEYS = ("filter", "dynamics", "sites", "sigma_theta_deg", "sigma_omega_deg_s", "r_percent",
+             "reflection")
+#: reflection models accepted in the grid (the reflection-parameter filters of Bernard ch. 8
+#: are not implemented yet; only attitude-and-rate estimation, "none", runs)
+REFLECTION_MODELS = ("none",)
+_KNOWN_REFLECTION = ("none", "model1", "model2", "model3")
+_DYNAMICS = ("controlled", "uncontrolled")
+_MAX_RUNS = 1_000_000
+
+
+def _fmt(v) -> str:
+    """Canonical text of a grid value for the cell key (floats via repr: exact, stable)."""
+    if isinstance(v, float):
+        return repr(float(v))
+    return str(v)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One combination of grid values (degrees in the *_deg keys, r in percent)."""
+
+    filter: str
+    dynamics: str
+    sites: int
+    sigma_theta_deg: float
+    sigma_omega_deg_s: float
+    r_percent: float
+    reflection: str = "none"
+
+    @property
+    def key(self) -> str:
+        """Canonical text key, e.g. ``filter=ukf|dynamics=controlled|sites=1|…``."""
+        return cell_key(self)
+
+    @property
+    def scenario_key(self) -> str:
+        """The part of the key that fixes the simulated lightcurve (dynamics, sites, r)."""
+        return f"dynamics={self.dynamics}|sites={self.sites}|r_percent={_fmt(self.r_percent)}"
+
+    @property
+    def tag(self) -> str:
+        """Short file-name-safe hash of the key (12 hex digits)."""
+        return hashlib.sha256(self.key.encode()).hexdigest()[:12]
+
+    def as_dict(self) -> dict:
+        return {k: getattr(self, k) for k in GRID_KEYS}
+
+
+def cell_key(cell: Cell) -> str:
+    """Canonical key text of a cell: ``name=value`` pairs in :data:`GRID_KEYS` order."""
+    return "|".join(f"{k}={_fmt(getattr(cell, k))}" for k in GRID_KEYS)
+
+
+def _seed_from(study_seed: int, text: str, run: int) -> int:
+    words = np.frombuffer(hashlib.sha256(text.encode()).digest(), dtype="<u4").tolist()
+    ss = np.random.SeedSequence([int(study_seed) & 0xFFFFFFFF, int(study_seed) >> 32, *words,
+                                 int(run)])
+    return int(ss.generate_state(1, np.uint64)[0] >> np.uint64(1))  # in [0, 2**63)
+
+
+def run_seeds(study_seed: int, cell: Cell, run: int) -> tuple[int, int]:
+    """``(simulation_seed, filter_seed)`` of run ``run`` (0-based) of ``cell`` (module doc)."""
+    return (_seed_from(study_seed, "sim|" + cell.scenario_key, run),
+            _seed_from(study_seed, "filter|" + cell.key, run))
+
+
+@dataclass(frozen=True)
+class RunTask:
+    """Everything a worker needs for one run (small and picklable; scenario as TOML text)."""
+
+    cell: Cell
+    run: int
+    sim_seed: int
+    filter_seed: int
+    scenario_text: str
+    scenario_file: str
+    options: tuple = ()  # sorted (name, value) pairs of [options]
+
+    @property
+    def run_id(self) -> str:
+        """File stem of the run's result: ``<cell tag>_r<run>``."""
+        return f"{self.cell.tag}_r{self.run:05d}"
+
+
+@dataclass
+class Study:
+    """A validated study (module docstring)."""
+
+    name: str
+    seed: int
+    runs: int
+    cells: list
+    scenario_files: dict  # (dynamics, sites) -> Path
+    scenario_texts: dict  # (dynamics, sites) -> str
+    options: dict = field(default_factory=dict)
+    source: str = ""
+    text: str = ""
+
+    @property
+    def hash(self) -> str:
+        """SHA-256 of the study text and every scenario text it uses (:func:`study_hash`)."""
+        return study_hash(self)
+
+    def tasks(self, runs: int | None = None) -> list:
+        """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
+        n = self.runs if runs is None else int(runs)
+        opts = tuple(sorted(self.options.items()))
+        out = []
+        for c in self.cells:
+            f = self.scenario_files[(c.dynamics, c.sites)]
+            txt = self.scenario_texts[(c.dynamics, c.sites)]
+            for i in range(n):
+                s, fs = run_seeds(self.seed, c, i)
+                out.append(RunTask(c, i, s, fs, txt, str(f), opts))
+        return out
+
+
+def study_hash(study: Study) -> str:
+    """Hex SHA-256 over the study file text and the scenario texts (sorted by key).
+
+    ``--runs`` is not part of it: adding runs to a finished study reuses the stored ones.
+    """
+    h = hashlib.sha256(study.text.encode())
+    for k in sorted(study.scenario_texts):
+        h.update(f"\0{k[0]}|{k[1]}\0".encode())
+        h.update(study.scenario_texts[k].encode())
+    return h.hexdigest()
+
+
+def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open=False):
+    raw = sec.raw(key)
+    vals = raw if isinstance(raw, list) else [raw]
+    if not vals:
+        raise InputError("expected a non-empty list", file=sec.file, field=sec._field(key), value=raw)
+    out = []
+    for v in vals:
+        ok = (kind is str and isinstance(v, str)) or (kind is int and isinstance(v, int)
+              and not isinstance(v, bool)) or (kind is float and isinstance(v, (int, float))
+              and not isinstance(v, bool) and np.isfinite(v))
+        if not ok:
+            raise InputError(f"expected a list of {kind.__name__}", file=sec.file,
+                             field=sec._field(key), value=raw)
+        if choices is not None and v not in choices:
+            raise InputError("unknown value", file=sec.file, field=sec._field(key), value=v,
+                             allowed=", ".join(map(str, choices)))
+        if (min is not None and (v < min or (min_open and v == min))) or (max is not None and v > max):
+            raise InputError("out of range", file=sec.file, field=sec._field(key), value=v,
+                             allowed=f"{'(' if min_open else '['}{min}, {max}]")
+        out.append(kind(v))
+    if len(set(out)) != len(out):
+        raise InputError("duplicate values", file=sec.file, field=sec._field(key), value=raw)
+    return out
+
+
+def load_study(path) -> Study:
+    """Load and validate a study TOML (module docstring); every scenario file is parsed.
+
+    Raises
+    ------
+    InputError
+        Naming the file, key and allowed values for any bad entry; a reflection model other
+        than "none" is refused (the reflection models are not implemented yet).
+    """
+    from ..filters import METHODS
+    from .scenario import parse_scenario
+
+    path = Path(path)
+    doc = load_toml(path)
+    text = path.read_text(encoding="utf-8")
+    root = Section(doc, file=path)
+    st = root.section("study")
+    name = st.str("name", path.stem)
+    seed = st.int("seed", 0, min=0, max=2**63 - 1)
+    runs = st.int("runs", 100, min=1, max=_MAX_RUNS)
+    template = st.str("scenario")
+    st.check_unknown(extra_allowed=("description",))
+
+    g = root.section("grid")
+    axes = {
+        "filter": _list(g, "filter", str, choices=METHODS),
+        "dynamics": _list(g, "dynamics", str, choices=_DYNAMICS),
+        "sites": _list(g, "sites", int, min=1, max=16),
+        "sigma_theta_deg": _list(g, "sigma_theta_deg", float, min=0.0, max=180.0, min_open=True),
+        "sigma_omega_deg_s": _list(g, "sigma_omega_deg_s", float, min=0.0, max=360.0, min_open=True),
+        "r_percent": _list(g, "r_percent", float, min=0.0, max=100.0, min_open=True),
+        "reflection": _list(g, "reflection", str, choices=_KNOWN_REFLECTION) if g.has("reflection")
+        else ["none"],
+    }
+    for v in axes["reflection"]:
+        if v not in REFLECTION_MODELS:
+            raise InputError("the reflection models are not implemented yet; only attitude and "
+                             "rate estimation runs", file=path, field="grid.reflection", value=v,
+                             allowed="none")
+    g.check_unknown()
+
+    opts = {}
+    o = root.section("options", {})
+    if o.has("particles"):
+        opts["particles"] = o.int("particles", min=2, max=10_000_000)
+    if o.has("acs_mode"):
+        opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
+    o.check_unknown()
+    root.check_unknown()
+
+    files, texts = {}, {}
+    for dyn in axes["dynamics"]:
+        for ns in axes["sites"]:
+            try:
+                rel = template.format(dynamics=dyn, sites=ns)
+            except (KeyError, IndexError, ValueError) as exc:
+                raise InputError(f"bad placeholder in the scenario template ({exc}); use "
+                                 "{dynamics} and {sites}", file=path, field="study.scenario",
+                                 value=template) from None
+            f = Path(rel)
+            if not f.is_absolute():
+                f = path.parent / f
+            if not f.is_file():
+                raise InputError("scenario file not found", file=path, field="study.scenario",
+                                 value=str(f), allowed="an existing scenario TOML for every "
+                                 "(dynamics, sites) of the grid")
+            txt = f.read_text(encoding="utf-8")
+            sc = parse_scenario(txt, file=f)
+            if sc.attitude.dynamics != dyn:
+                raise InputError(f"scenario {f.name} has dynamics {sc.attitude.dynamics!r}, the "
+                                 f"grid cell needs {dyn!r}", file=path, field="study.scenario",
+                                 value=str(f))
+            if len(sc.sites) != ns:
+                raise InputError(f"scenario {f.name} has {len(sc.sites)} site(s), the grid cell "
+                                 f"needs {ns}", file=path, field="study.scenario", value=str(f))
+            files[(dyn, ns)] = f.resolve()
+            texts[(dyn, ns)] = txt
+    cells = [Cell(*vals) for vals in itertools.product(*(axes[k] for k in GRID_KEYS))]
+    return Study(name=name, seed=seed, runs=runs, cells=cells, scenario_files=files,
+                 scenario_texts=texts, options=opts, source=str(path), text=text)
+

@@ -1,0 +1,128 @@
+"""Study files, seeds, metrics and the traffic-light rule (no filter runs; fast)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lightcurve.errors import InputError
+from lightcurve.studies.metrics import (cell_summary, outside_3sigma, rss_envelope,
+                                        traffic_light)
+from lightcurve.studies.study import Cell, load_study, run_seeds
+
+
+def test_load_study_grid_and_seeds(study_file):
+    s = load_study(study_file)
+    assert [c.filter for c in s.cells] == ["ukf", "mekf"]
+    assert s.runs == 3 and s.seed == 7
+    tasks = s.tasks()
+    assert len(tasks) == 6 and len({t.run_id for t in tasks}) == 6
+    # common random numbers: the simulation seed depends on (dynamics, sites, r, run) only,
+    # so both filters see the same lightcurve of run i; the filter seeds differ
+    a = {(t.cell.filter, t.run): t for t in tasks}
+    for i in range(3):
+        assert a["ukf", i].sim_seed == a["mekf", i].sim_seed
+        assert a["ukf", i].filter_seed != a["mekf", i].filter_seed
+    assert len({a["ukf", i].sim_seed for i in range(3)}) == 3
+    # seeds are a pure function of (study seed, cell, run): recomputing gives the same numbers,
+    # another study seed gives others
+    c = s.cells[0]
+    assert run_seeds(7, c, 2) == run_seeds(7, c, 2) == (a["ukf", 2].sim_seed, a["ukf", 2].filter_seed)
+    assert run_seeds(8, c, 2)[0] != run_seeds(7, c, 2)[0]
+    assert all(0 <= x < 2**63 for t in tasks for x in (t.sim_seed, t.filter_seed))
+    # the hash covers the scenario texts: editing a scenario changes it
+    h = s.hash
+    f = study_file.parent / "tiny-controlled-1site.toml"
+    f.write_text(f.read_text().replace("acs_sigma_deg = 0.1", "acs_sigma_deg = 0.2"))
+    assert load_study(study_file).hash != h
+
+
+def test_cell_key_is_canonical():
+    c1 = Cell("ukf", "controlled", 1, 3.0, 0.02, 1.0)
+    c2 = Cell("ukf", "controlled", 1, 3.0, 0.02, 10.0)
+    assert c1.key == ("filter=ukf|dynamics=controlled|sites=1|sigma_theta_deg=3.0|"
+                      "sigma_omega_deg_s=0.02|r_percent=1.0|reflection=none")
+    assert c1.tag != c2.tag and c1.scenario_key != c2.scenario_key
+
+
+def test_reflection_models_refused(tmp_path, make_study):
+    p = make_study(tmp_path, reflection=["none", "model1"])
+    with pytest.raises(InputError, match="reflection models are not implemented") as ei:
+        load_study(p)
+    assert "grid.reflection" in str(ei.value) and "model1" in str(ei.value)
+    p = make_study(tmp_path, reflection=["lambert?"])
+    with pytest.raises(InputError, match="grid.reflection"):
+        load_study(p)
+
+
+@pytest.mark.parametrize("bad, field", [
+    ('filter = ["kf"]', "grid.filter"),
+    ('sigma_theta_deg = [-1.0]', "grid.sigma_theta_deg"),
+    ('sites = [2]', "study.scenario"),  # no 2-site file next to the study
+])
+def test_bad_study_entries(tmp_path, make_study, bad, field):
+    p = make_study(tmp_path)
+    key = bad.split(" =")[0]
+    lines = [bad if ln.startswith(key + " =") else ln for ln in p.read_text().splitlines()]
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError) as ei:
+        load_study(p)
+    assert field in str(ei.value) and str(p.name) in str(ei.value)
+
+
+def test_dynamics_mismatch_refused(tmp_path, make_study):
+    p = make_study(tmp_path)
+    # the template points both dynamics at the controlled file
+    p.write_text(p.read_text().replace('"tiny-{dynamics}-{sites}site.toml"',
+                                       '"tiny-controlled-{sites}site.toml"')
+                 .replace('dynamics = ["controlled"]', 'dynamics = ["controlled", "uncontrolled"]'))
+    with pytest.raises(InputError, match="needs 'uncontrolled'"):
+        load_study(p)
+
+
+def test_traffic_light_rule():
+    # Bernard (2021) fig. 9.4 legend: red if > 10 runs outside for any component; yellow for
+    # 6-9 or for two or more components with exactly 5; green otherwise
+    assert traffic_light([0] * 6) == "green"
+    assert traffic_light([5, 0, 0, 0, 0, 0]) == "green"
+    assert traffic_light([5, 4, 4, 4, 4, 4]) == "green"
+    assert traffic_light([5, 5, 0, 0, 0, 0]) == "yellow"
+    assert traffic_light([0, 0, 6, 0, 0, 0]) == "yellow"
+    assert traffic_light([0, 0, 0, 0, 0, 9]) == "yellow"
+    assert traffic_light([0, 0, 0, 0, 0, 11]) == "red"
+    assert traffic_light([100, 0, 0, 0, 0, 0]) == "red"
+
+
+def test_outside_3sigma_matches_direct_check():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        ea, sa = rng.normal(size=3), rng.uniform(0.1, 1, 3)
+        ew, sw = rng.normal(size=3) * 1e-3, rng.uniform(1e-4, 1e-3, 3)
+        got = outside_3sigma(ea, sa, ew, sw)
+        want = [abs(ea[i]) > 3 * sa[i] for i in range(3)] + [abs(ew[i]) > 3 * sw[i] for i in range(3)]
+        assert got.tolist() == want
+    # NaN error or bound counts as outside
+    assert outside_3sigma([np.nan, 0, 0], [1, 1, 1], [0, 0, 0], [1, np.nan, 1]).tolist() == \
+        [True, False, False, False, True, False]
+
+
+def test_cell_summary_counts_and_percentiles():
+    runs = [{"outside": [1, 0, 0, 0, 0, 1], "rss_att_deg": float(i), "rss_omega_deg_s": 0.0,
+             "diverged": False, "runtime_s": 0.1} for i in range(1, 21)]
+    c = cell_summary({"filter": "ukf"}, runs, failures=2)
+    assert c["outside_3sigma"] == [20, 0, 0, 0, 0, 20] and c["color"] == "red"
+    assert c["runs"] == 20 and c["failures"] == 2
+    # numpy linear-interpolation percentiles of 1..20: median 10.5, p95 = 1 + 0.95*19
+    assert c["rss_att_deg_median"] == pytest.approx(10.5)
+    assert c["rss_att_deg_p95"] == pytest.approx(19.05)
+    json.dumps(c)  # JSON-ready
+
+
+def test_rss_envelope_percentiles():
+    t = np.linspace(0, 10, 11)
+    curves = [np.full(11, float(k)) for k in range(101)]  # constant curves 0..100
+    g, p50, p95, p5 = rss_envelope([t] * 101, curves, n_grid=5)
+    assert g[0] == 0 and g[-1] == 10
+    assert np.allclose(p50, 50) and np.allclose(p95, 95) and np.allclose(p5, 5)
