@@ -582,7 +582,7 @@ def _cmd_invert(args) -> int:
                          roughening=args.roughening, resampling=args.resampling,
                          ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
                          pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
-                         kappa=args.kappa)
+                         kappa=args.kappa, reflection=args.reflection)
         except InputError as exc:  # report, go on with the other files, exit 2 at the end
             print(f"lightcurve: error: {exc}", file=sys.stderr)
             summary[stem] = {"file": str(f), "method": args.method, "error": str(exc)}
@@ -651,6 +651,10 @@ def _register_filters(sub) -> None:
     p.add_argument("--alpha", type=_num(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
     p.add_argument("--beta", type=_num(), default=2.0, help="UKF beta (default 2)")
     p.add_argument("--kappa", type=_num(), default=0.0, help="UKF kappa (default 0)")
+    p.add_argument("--reflection", choices=("none", "random-walk", "model1", "model2"),
+                   default="none",
+                   help="per-site magnitude-bias states for uncertain reflection parameters "
+                   "(Bernard ch. 8; MEKF and UKF only; default none)")
     p.add_argument("--plot", action="store_true", help="also write a PNG per file")
     p.set_defaults(func=_cmd_invert)
 
@@ -795,12 +799,16 @@ def _cmd_fit_reflection(args) -> int:
                                                  field="file name"))
     s = fit.summary()
     d = s["diagnostics"]
+    if "attitude_warning" in s["meta"]:
+        print(f"warning: {s['meta']['attitude_warning']}", file=sys.stderr)
     print(f"converged: {d['n_steps']} steps, max tau {d['tau_max_steps']:.1f}, acceptance "
           f"{d['mean_acceptance']:.2f}, {s['n_samples']} samples")
     for r in s["parameters"]:
         print(f"  {r['name']:>8s}  median {r['median']:.4g}  [{r['q005']:.4g}, {r['q995']:.4g}] "
               f"(99%)  post/prior width {r['width_ratio']:.2f}"
-              f"{'  identified' if r['identified'] else ''}")
+              f"{'  identified' if r['identified'] else ''}"
+              + (f"  truth {r['truth']:.4g}{'' if r['truth_in_99'] else ' OUTSIDE 99%'}"
+                 if "truth" in r else ""))
     print(f"posterior-predictive 95% coverage of the measurements: {s['predictive_coverage_95']:.3f}")
     print(f"wrote {jpath}, {cpath}, {ppath}")
     return 0

@@ -154,7 +154,7 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
            initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
            acs_mode="random_walk", pseudo_noise=0.0, eta_sigma_deg_s2=None, inertia_kg_m2=None,
            alpha=1.0, beta=2.0, kappa=0.0, error="grp", jacobian="analytic",
-           keep_clouds=()) -> Estimate:
+           keep_clouds=(), reflection="none", reflection_frac=0.1) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -181,6 +181,11 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     alpha, beta, kappa : UKF scaling parameters.
     error, jacobian : MEKF options (see :func:`lightcurve.filters.mekf.run_mekf`).
     keep_clouds : BPF epochs whose particle error clouds are kept (fig. 9.6-style plots).
+    reflection : {"none", "random-walk", "model1", "model2"}
+        Per-site magnitude-bias states for uncertain reflection parameters (Bernard ch. 8;
+        :mod:`lightcurve.filters.reflection`), MEKF and UKF only so far (the BPF raises
+        NotImplementedError); the estimate then carries ``bias`` and ``bias_sigma`` (N,S).
+    reflection_frac : float > 0 — relative 1σ of the reflection parameters behind eq. 8.10.
 
     Returns
     -------
@@ -196,14 +201,28 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
                             pseudo_noise=pseudo_noise, eta_sigma_deg_s2=eta_sigma_deg_s2,
                             inertia_kg_m2=inertia_kg_m2)
     problem.meta["method"] = method
+    bias = None
+    if reflection != "none":
+        from .reflection import REFLECTION_CHOICES, SiteBias
+
+        if reflection not in REFLECTION_CHOICES:
+            raise InputError("unknown reflection model", field="reflection", value=reflection,
+                             allowed=", ".join(REFLECTION_CHOICES))
+        fr = float(reflection_frac)
+        if not (fr > 0 and np.isfinite(fr)):
+            raise InputError("must be > 0", field="reflection_frac", value=reflection_frac)
+        if method == "bpf":
+            raise NotImplementedError("reflection-bias states are implemented in the MEKF and "
+                                      "the UKF only; the BPF (and Model 3) are not done yet")
+        bias = SiteBias.from_problem(reflection, problem, frac=fr)
     if method == "mekf":
         from .mekf import run_mekf
 
-        return run_mekf(problem, error=error, jacobian=jacobian)
+        return run_mekf(problem, error=error, jacobian=jacobian, bias=bias)
     if method == "ukf":
         from .ukf import run_ukf
 
-        return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa)
+        return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias)
     from .bpf import run_bpf
 
     problem.meta.update({"particles": int(particles), "roughening": float(roughening),

@@ -15,6 +15,10 @@ Per epoch k (times sorted as in the lightcurve; two sites may share a time, Δt 
    update of ``δx`` from zero (:func:`lightcurve.estimation.joseph_update`), then the reset
    ``q̂ ← δq(δθ⁺) ⊗ q̂`` (GRP: ``δq = grp2q(δθ⁺)``, a = 1, f = 4; small angle:
    ``δq = normalise([1, δθ⁺/2])``), ``ω̂ ← ω̂ + δω⁺``.
+   With a reflection bias model (``bias``, :mod:`lightcurve.filters.reflection`) the error
+   state is ``[δθ, δω, b_1 … b_S]``: ``ŷ = m(q̂) + b̂_site``, ``H = [∂m/∂δθ, 0, e_site]``, the
+   bias block propagates with its own diagonal ``Φ_b, Q_b``; the Estimate's covariance keeps
+   the 6×6 attitude/rate block and ``est.bias`` / ``est.bias_sigma`` (N,S) hold the biases.
    A refused update (S not positive definite, non-finite values) keeps the prior and sets
    :data:`~lightcurve.filters.result.FLAG_REFUSED`; an estimate that predicts no reflected
    light (m = +inf) skips the update with :data:`~lightcurve.filters.result.FLAG_INVISIBLE`.
@@ -44,7 +48,7 @@ def _reset(q, dth, error):
     return qn / np.linalg.norm(qn)
 
 
-def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic") -> Estimate:
+def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=None) -> Estimate:
     """Run the MEKF over every epoch of ``problem`` (module docstring) → :class:`Estimate`.
 
     Parameters
@@ -54,16 +58,18 @@ def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic") -> Est
         How the error rotation ``δθ⁺`` is mapped back to a quaternion at the reset.
     jacobian : {"analytic", "numeric"}
         ``∂m/∂δθ`` from :func:`lightcurve.photometry.magnitude_partials` or central differences.
+    bias : :class:`lightcurve.filters.reflection.SiteBias` or None
+        Per-site reflection-bias states (module docstring); None = attitude and rate only.
     """
     if error not in ("grp", "small_angle"):
         raise ValueError(f"error must be 'grp' or 'small_angle', got {error!r}")
     if jacobian not in ("analytic", "numeric"):
         raise ValueError(f"jacobian must be 'analytic' or 'numeric', got {jacobian!r}")
     with single_thread():
-        return _run(problem, error, jacobian)
+        return _run(problem, error, jacobian, bias)
 
 
-def _run(problem, error, jacobian):
+def _run(problem, error, jacobian, bias=None):
     t0 = time.perf_counter()
     p = problem
     m = p.model
@@ -71,13 +77,29 @@ def _run(problem, error, jacobian):
     rec = Recorder(p, "mekf")
     q = p.q0.copy()
     w = p.omega0.copy()
-    P = p.P0.copy()
+    nb = 0 if bias is None else bias.n_sites
+    nx = 6 + nb
+    P = np.zeros((nx, nx))
+    P[:6, :6] = p.P0
+    b = np.zeros(nb)
+    if nb:
+        P[6:, 6:] = np.diag(bias.var0)
+        b_hist = np.full((p.n, nb), np.nan)
+        bs_hist = np.full((p.n, nb), np.nan)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
             dt = float(m.t[k] - m.t[k - 1])
             if dt != 0.0:
-                Phi, Qd = dyn.transition(w, dt)
+                Phi6, Qd6 = dyn.transition(w, dt)
+                Phi, Qd = Phi6, Qd6
+                if nb:
+                    phib, qb = bias.transition(dt, w)
+                    Phi = np.zeros((nx, nx))
+                    Qd = np.zeros((nx, nx))
+                    Phi[:6, :6], Qd[:6, :6] = Phi6, Qd6
+                    Phi[6:, 6:], Qd[6:, 6:] = np.diag(phib), np.diag(qb)
+                    b = phib * b
                 Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
                 q, w = Qn[0], Wn[0]
                 P = Phi @ P @ Phi.T + Qd
@@ -94,18 +116,31 @@ def _run(problem, error, jacobian):
             if not np.isfinite(yhat) or not np.all(np.isfinite(Hth)):
                 rec.flags[k] |= FLAG_INVISIBLE
             else:
-                H = np.zeros((1, 6))
+                H = np.zeros((1, nx))
                 H[0, :3] = Hth
+                if nb:
+                    s = int(bias.site[k])
+                    H[0, 6 + s] = 1.0
+                    yhat += float(b[s])
                 R = m.sigma[k] ** 2
                 if p.jitter_zeta():
                     R = R + float(Hth @ zc @ Hth)
-                dx, Pn, info = joseph_update(np.zeros(6), P, y, H, R, h=yhat)
+                dx, Pn, info = joseph_update(np.zeros(nx), P, y, H, R, h=yhat)
                 rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
                 if info.ok:
                     q = _reset(q, dx[:3], error)
-                    w = w + dx[3:]
+                    w = w + dx[3:6]
+                    b = b + dx[6:]
                     P = Pn
                 else:
                     rec.flags[k] |= FLAG_REFUSED
-        rec.store(k, q, w, P)
-    return rec.finish(time.perf_counter() - t0)
+        rec.store(k, q, w, P[:6, :6])
+        if nb:
+            b_hist[k] = b
+            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[6:], 0.0, None))
+    est = rec.finish(time.perf_counter() - t0)
+    if nb:
+        est.bias, est.bias_sigma = b_hist, bs_hist
+        est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
+                                      bias_sigma_final_mag=bs_hist[-1].tolist())
+    return est

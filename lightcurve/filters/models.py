@@ -267,6 +267,7 @@ class MagnitudeModel:
     ----------
     dim_y : int = 1
     t, y, sigma : (N,) arrays (s, mag, mag)
+    site : (N,) int site index of every epoch (per-site reflection biases)
     """
 
     dim_y = 1
@@ -277,6 +278,8 @@ class MagnitudeModel:
         self.y = np.asarray(curve.mag, float)
         self.sigma = np.asarray(curve.mag_sigma, float)
         N = self.t.shape[0]
+        site = getattr(curve, "site", None)
+        self.site = np.zeros(N, np.int64) if site is None else np.asarray(site, np.int64).reshape(-1)
         if self.y.shape != (N,) or self.sigma.shape != (N,):
             raise InputError("mag and mag_sigma must have one entry per time", field="mag",
                              value=(self.y.shape, self.sigma.shape), allowed=f"({N},)")

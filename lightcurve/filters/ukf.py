@@ -21,6 +21,11 @@ eq. 7.83–7.87) — predicted magnitudes ``Y_i``, ``ŷ = Σ Wᵐ Y``, ``P_yy = 
 ``P_xy``, gain ``K = P_xy / P_yy``, ``δx⁺ = K ν``, ``P⁺ = P⁻ − K P_yy Kᵀ`` (eq. 7.75–7.82);
 reset ``q̂ ← grp2q(δp⁺) ⊗ q̂⁻``, ``ω̂ ← ω̂⁻ + δω⁺``.
 
+Reflection biases (``bias``, :mod:`lightcurve.filters.reflection`): the error state becomes
+``[δp, δω, b_1 … b_S]`` (n = 6 + S); the bias columns of the sigma points propagate with the
+diagonal linear ``Φ_b`` (plus ``Q_b``) and add to the predicted magnitude of their site,
+``Y_i = m(q_i) + b̂_site + δb_i,site``; ``est.bias`` / ``est.bias_sigma`` (N,S) hold them.
+
 Failures: a covariance whose Cholesky factor does not exist (at propagation or update)
 restores the prior for that step and sets :data:`~lightcurve.filters.result.FLAG_REFUSED` (at
 propagation the covariance is then propagated linearly, ``Φ P Φᵀ + Q_d``, so the filter goes
@@ -46,16 +51,18 @@ from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 __all__ = ["run_ukf"]
 
 
-def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0) -> Estimate:
+def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0, bias=None) -> Estimate:
     """Run the USQUE/GRP UKF over every epoch (module docstring) → :class:`Estimate`.
 
     ``alpha``, ``beta``, ``kappa``: scaled-unscented parameters (λ = α²(n+κ) − n, with n = 6,
-    or 9 when the ACS jitter is augmented at the update).
+    or 9 when the ACS jitter is augmented at the update; + S with ``bias``).
+    ``bias``: :class:`lightcurve.filters.reflection.SiteBias` or None.
     """
-    w6 = unscented_weights(6, alpha, beta, kappa)
-    w9 = unscented_weights(9, alpha, beta, kappa) if problem.jitter_zeta() else None
+    nx = 6 + (0 if bias is None else bias.n_sites)
+    w6 = unscented_weights(nx, alpha, beta, kappa)
+    w9 = unscented_weights(nx + 3, alpha, beta, kappa) if problem.jitter_zeta() else None
     with single_thread():
-        return _run(problem, w6, w9)
+        return _run(problem, w6, w9, bias)
 
 
 def _sigma_states(q, w, off6):
@@ -66,72 +73,102 @@ def _sigma_states(q, w, off6):
     return chi, Q, np.ascontiguousarray(W)
 
 
-def _run(p: FilterProblem, w6, w9) -> Estimate:
+def _run(p: FilterProblem, w6, w9, bias=None) -> Estimate:
     t0 = time.perf_counter()
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "ukf")
     q = p.q0.copy()
     w = p.omega0.copy()
-    P = p.P0.copy()
+    nb = 0 if bias is None else bias.n_sites
+    nx = 6 + nb
+    P = np.zeros((nx, nx))
+    P[:6, :6] = p.P0
+    b = np.zeros(nb)
+    if nb:
+        P[6:, 6:] = np.diag(bias.var0)
+        b_hist = np.full((p.n, nb), np.nan)
+        bs_hist = np.full((p.n, nb), np.nan)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
             dt = float(m.t[k] - m.t[k - 1])
             if dt != 0.0:
                 Phi, Qd = dyn.transition(w, dt)
+                if nb:
+                    phib, qb = bias.transition(dt, w)
+                    Phi6, Qd6 = Phi, Qd
+                    Phi, Qd = np.zeros((nx, nx)), np.zeros((nx, nx))
+                    Phi[:6, :6], Qd[:6, :6] = Phi6, Qd6
+                    Phi[6:, 6:], Qd[6:, 6:] = np.diag(phib), np.diag(qb)
                 off, ok = sigma_offsets(P, w6)
                 if ok:
                     chi, Qs, Ws = _sigma_states(q, w, off)
                     Qp, Wp = dyn.propagate(Qs, Ws, dt)
                     dp = grp_rel(Qp, Qp[0])
-                    X = np.hstack([dp, Wp])
+                    X = np.hstack([dp, Wp] + ([(b + chi[:, 6:]) * phib] if nb else []))
                     xm = w6.wm @ X
                     D = X - xm
                     Pn = (D * w6.wc[:, None]).T @ D + Qd
                     q = apply_grp(xm[None, :3], Qp[0])[0]
-                    w = xm[3:].copy()
+                    w = xm[3:6].copy()
+                    b = xm[6:].copy()
                 else:
                     rec.flags[k] |= FLAG_REFUSED
                     Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
                     q, w = Qn[0], Wn[0]
+                    if nb:
+                        b = phib * b
                     Pn = Phi @ P @ Phi.T + Qd
                 if p.random_walk_zeta():
                     Pn[:3, :3] += zc
                 P = 0.5 * (Pn + Pn.T)
-        y = m.y[k]
-        if not np.isfinite(y):
-            rec.flags[k] |= FLAG_NAN
-            rec.skipped_nan += 1
-            rec.store(k, q, w, P)
-            continue
-        wts = w9 if w9 is not None else w6
-        Pa = P
-        if w9 is not None:
-            Pa = np.zeros((9, 9))
-            Pa[:6, :6] = P
-            Pa[6:, 6:] = zc
-        off, ok = sigma_offsets(Pa, wts)
-        if not ok:
-            rec.flags[k] |= FLAG_REFUSED
-            rec.store(k, q, w, P)
-            continue
-        chi, Qs, Ws = _sigma_states(q, w, off)
-        if w9 is not None:
-            Qs = K.perturb_rotvec_nb(np.ascontiguousarray(Qs), np.ascontiguousarray(chi[:, 6:9]))
-        Y = m.predict_q(Qs, k)
-        if not np.all(np.isfinite(Y)):
-            rec.flags[k] |= FLAG_INVISIBLE
-            rec.store(k, q, w, P)
-            continue
-        dx, Pn, info = unscented_update(np.zeros(6), P, chi[:, :6], Y[:, None], np.array([y]),
-                                        wts, R=m.sigma[k] ** 2)
-        rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
-        if info.ok:
-            q = apply_grp(dx[None, :3], q)[0]
-            w = w + dx[3:]
-            P = Pn
-        else:
-            rec.flags[k] |= FLAG_REFUSED
-        rec.store(k, q, w, P)
-    return rec.finish(time.perf_counter() - t0)
+        q, w, b, P = _epoch(p, k, q, w, b, P, nx, nb, w6, w9, zc, rec, bias)
+        rec.store(k, q, w, P[:6, :6])
+        if nb:
+            b_hist[k] = b
+            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[6:], 0.0, None))
+    est = rec.finish(time.perf_counter() - t0)
+    if nb:
+        est.bias, est.bias_sigma = b_hist, bs_hist
+        est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
+                                      bias_sigma_final_mag=bs_hist[-1].tolist())
+    return est
+
+
+def _epoch(p, k, q, w, b, P, nx, nb, w6, w9, zc, rec, bias):
+    """Measurement update of epoch k → the new (q, w, b, P) (the prior when skipped)."""
+    m = p.model
+    prior = (q, w, b, P)
+    y = m.y[k]
+    if not np.isfinite(y):
+        rec.flags[k] |= FLAG_NAN
+        rec.skipped_nan += 1
+        return prior
+    wts = w9 if w9 is not None else w6
+    Pa = P
+    if w9 is not None:
+        Pa = np.zeros((nx + 3, nx + 3))
+        Pa[:nx, :nx] = P
+        Pa[nx:, nx:] = zc
+    off, ok = sigma_offsets(Pa, wts)
+    if not ok:
+        rec.flags[k] |= FLAG_REFUSED
+        return prior
+    chi, Qs, Ws = _sigma_states(q, w, off)
+    if w9 is not None:
+        Qs = K.perturb_rotvec_nb(np.ascontiguousarray(Qs), np.ascontiguousarray(chi[:, nx:nx + 3]))
+    Y = m.predict_q(Qs, k)
+    if not np.all(np.isfinite(Y)):
+        rec.flags[k] |= FLAG_INVISIBLE
+        return prior
+    if nb:
+        s = int(bias.site[k])
+        Y = Y + b[s] + chi[:, 6 + s]
+    dx, Pn, info = unscented_update(np.zeros(nx), P, chi[:, :nx], Y[:, None], np.array([y]),
+                                    wts, R=m.sigma[k] ** 2)
+    rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
+    if info.ok:
+        return apply_grp(dx[None, :3], q)[0], w + dx[3:6], b + dx[6:], Pn
+    rec.flags[k] |= FLAG_REFUSED
+    return prior

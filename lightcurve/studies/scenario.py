@@ -5,7 +5,8 @@ seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (li
 mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
 ``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
-(physics effects switched on; see the diagnosis issue).
+(physics effects switched on; see the diagnosis issue), ``[reflection]`` (truth reflection
+parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
 
 from __future__ import annotations
@@ -75,6 +76,22 @@ class MeasurementSpec:
 
 
 @dataclass
+class ReflectionSpec:
+    """``[reflection]``: perturb the truth reflection parameters (Bernard §10.1).
+
+    Every selected parameter p of every Cook–Torrance facet becomes p + N(0, (sigma_frac·p)²)
+    (redrawn until in range: ξ, a in (0,1); m, A > 0) from a stream seeded by the scenario seed
+    and independent of the attitude and noise streams. ``params`` ⊆ {"xi", "a", "m", "A"}
+    (A = facet area, m²). The filters keep using the nominal shape; the truth values are stored
+    in the lightcurve file's ``attrs["reflection_truth"]`` (JSON).
+    """
+
+    perturb: bool = True
+    sigma_frac: float = 0.1
+    params: tuple = ("xi", "a", "m", "A")
+
+
+@dataclass
 class Scenario:
     """A validated scenario (see module docstring)."""
 
@@ -90,6 +107,8 @@ class Scenario:
     effects: dict = field(default_factory=dict)
     #: ``[recording]`` column mapping (lightcurve.io.recording.RecordingSpec) or None
     recording: object = None
+    #: ``[reflection]`` truth perturbation (:class:`ReflectionSpec`) or None
+    reflection: object = None
     name: str = ""
     source: str = ""
     text: str = ""
@@ -263,7 +282,20 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         if meas.ignore_eclipse and "penumbra" in effects and effects["penumbra"].get("enabled", True):
             raise InputError("the penumbra effect contradicts measurement.ignore_eclipse = true",
                              file=file, field="effects.penumbra")
+    refl = root.section("reflection", None)
+    if refl is not None:
+        kinds = refl.raw("params", ["xi", "a", "m", "A"])
+        if (not isinstance(kinds, list) or not kinds
+                or any(k not in ("xi", "a", "m", "A") for k in kinds) or len(set(kinds)) != len(kinds)):
+            raise InputError("expected a non-empty list of distinct reflection parameters",
+                             file=file, field="reflection.params", value=kinds,
+                             allowed='"xi", "a", "m", "A"')
+        refl_spec = ReflectionSpec(perturb=refl.bool("perturb", True),
+                                   sigma_frac=refl.float("sigma_frac", 0.1, min=0.0, max=1.0),
+                                   params=tuple(kinds))
+        refl.check_unknown()
+        refl = refl_spec
     root.check_unknown()
     return Scenario(epoch_utc=epoch, duration_s=duration, cadence_s=cadence, seed=seed, orbit=orbit,
                     shape=shape, attitude=att, sites=sites, measurement=meas, effects=effects,
-                    recording=rec, name=name, source=str(file), text=text or "")
+                    recording=rec, name=name, source=str(file), text=text or "", reflection=refl)

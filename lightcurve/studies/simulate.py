@@ -121,6 +121,22 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     seed = scenario.seed if seed is None else int(seed)
     rng_att, rng_noise = _rngs(seed)
     meas = scenario.measurement
+    refl_truth = None
+    refl = getattr(scenario, "reflection", None)
+    if refl is not None and refl.perturb:
+        # [reflection] (Bernard §10.1): the truth shape's parameters are perturbed; own stream,
+        # independent of the attitude and noise streams (their draws are unchanged)
+        import json
+        from dataclasses import replace
+
+        from .fit_reflection import perturb_reflection
+
+        rng_refl = np.random.default_rng(np.random.SeedSequence([int(seed), 0x2EF1EC7]))
+        shape_true, vals = perturb_reflection(scenario.shape, rng_refl, frac=refl.sigma_frac,
+                                              kinds=refl.params)
+        refl_truth = json.dumps({k: [None if np.isnan(x) else float(x) for x in v]
+                                 for k, v in vals.items()})
+        scenario = replace(scenario, shape=shape_true)
 
     t, site_idx = build_schedule(scenario.duration_s, scenario.cadence_s,
                                  [s.windows_s for s in scenario.sites])
@@ -207,4 +223,6 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     )
     if effects_json is not None:
         lc.attrs["effects"] = effects_json
+    if refl_truth is not None:
+        lc.attrs["reflection_truth"] = refl_truth
     return (lc, counts) if return_counts else lc
