@@ -233,6 +233,28 @@ def load_albedo_map(path) -> AlbedoMap:
     return AlbedoMap.regular(vals, source=path.name)
 
 
+@numba.njit(cache=True, inline="always")
+def cell_irradiance_nb(centers, cnormals, rho_area, j, r_sat, s_hat):
+    """Albedo irradiance ratio of grid cell ``j`` at ``r_sat`` and the unit direction to the cell.
+
+    Eq. 2.15 for one cell: ``rho A cos(sun) cos(view) / (pi d^2)``, zero unless the cell is both
+    sunlit and in view. Returns ``(ratio, ux, uy, uz)`` (Earth-fixed axes, u from the
+    spacecraft towards the cell).
+    """
+    cs = cnormals[j, 0] * s_hat[0] + cnormals[j, 1] * s_hat[1] + cnormals[j, 2] * s_hat[2]
+    if cs <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    dx = r_sat[0] - centers[j, 0]
+    dy = r_sat[1] - centers[j, 1]
+    dz = r_sat[2] - centers[j, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    d = np.sqrt(d2)
+    cv = (cnormals[j, 0] * dx + cnormals[j, 1] * dy + cnormals[j, 2] * dz) / d
+    if cv <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return rho_area[j] * cs * cv / (np.pi * d2), -dx / d, -dy / d, -dz / d
+
+
 @numba.njit(cache=True)
 def albedo_cells_nb(centers, cnormals, rho_area, r_sat, s_hat):
     """Per-cell irradiance ratios a_j (eq. 2.15) and unit spacecraft→cell directions.
@@ -244,21 +266,13 @@ def albedo_cells_nb(centers, cnormals, rho_area, r_sat, s_hat):
     dirs = np.zeros((M, 3))
     ratio = np.zeros(M)
     for j in range(M):
-        cs = cnormals[j, 0] * s_hat[0] + cnormals[j, 1] * s_hat[1] + cnormals[j, 2] * s_hat[2]
-        if cs <= 0.0:
+        a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_sat, s_hat)
+        if a == 0.0:
             continue
-        dx = r_sat[0] - centers[j, 0]
-        dy = r_sat[1] - centers[j, 1]
-        dz = r_sat[2] - centers[j, 2]
-        d2 = dx * dx + dy * dy + dz * dz
-        d = np.sqrt(d2)
-        cv = (cnormals[j, 0] * dx + cnormals[j, 1] * dy + cnormals[j, 2] * dz) / d
-        if cv <= 0.0:
-            continue
-        ratio[j] = rho_area[j] * cs * cv / (np.pi * d2)
-        dirs[j, 0] = -dx / d
-        dirs[j, 1] = -dy / d
-        dirs[j, 2] = -dz / d
+        ratio[j] = a
+        dirs[j, 0] = ux
+        dirs[j, 1] = uy
+        dirs[j, 2] = uz
     return dirs, ratio
 
 
@@ -273,21 +287,9 @@ def albedo_on_sensors_nb(centers, cnormals, rho_area, r_sat, s_hat, sens_normals
     n_s = sens_normals.shape[0]
     out = np.zeros(n_s)
     for j in range(centers.shape[0]):
-        cs = cnormals[j, 0] * s_hat[0] + cnormals[j, 1] * s_hat[1] + cnormals[j, 2] * s_hat[2]
-        if cs <= 0.0:
+        a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_sat, s_hat)
+        if a == 0.0:
             continue
-        dx = r_sat[0] - centers[j, 0]
-        dy = r_sat[1] - centers[j, 1]
-        dz = r_sat[2] - centers[j, 2]
-        d2 = dx * dx + dy * dy + dz * dz
-        d = np.sqrt(d2)
-        cv = (cnormals[j, 0] * dx + cnormals[j, 1] * dy + cnormals[j, 2] * dz) / d
-        if cv <= 0.0:
-            continue
-        a = rho_area[j] * cs * cv / (np.pi * d2)
-        ux = -dx / d
-        uy = -dy / d
-        uz = -dz / d
         for k in range(n_s):
             c = sens_normals[k, 0] * ux + sens_normals[k, 1] * uy + sens_normals[k, 2] * uz
             if c < cos_fov[k] or c <= 0.0:

@@ -63,7 +63,7 @@ import numpy as np
 from ..estimation.kalman import joseph_update_nb
 from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
-from .albedo import AlbedoMap, builtin_albedo_map, earth_rotation_angle
+from .albedo import AlbedoMap, builtin_albedo_map, cell_irradiance_nb, earth_rotation_angle
 from .attitude_ekf import (mrp_dcm_nb, mrp_dcm_vec_jac_nb, mrp_propagate_nb,
                            mrp_switch_cov_nb, mtv3_nb, mv3_nb, star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
@@ -184,21 +184,9 @@ def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dl
             if rho_area[j] <= 0.0:
                 continue
             count += 1
-            cs = cnormals[j, 0] * s_E[0] + cnormals[j, 1] * s_E[1] + cnormals[j, 2] * s_E[2]
-            if cs <= 0.0:
+            a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_E, s_E)
+            if a == 0.0:
                 continue
-            dx = r_E[0] - centers[j, 0]
-            dy = r_E[1] - centers[j, 1]
-            dz = r_E[2] - centers[j, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            d = np.sqrt(d2)
-            cv = (cnormals[j, 0] * dx + cnormals[j, 1] * dy + cnormals[j, 2] * dz) / d
-            if cv <= 0.0:
-                continue
-            a = rho_area[j] * cs * cv / (np.pi * d2)
-            ux = -dx / d
-            uy = -dy / d
-            uz = -dz / d
             for k in range(N):
                 c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
                 if c > 0.0 and abs(c - cos_fov[k]) < edge_m[k]:

@@ -198,3 +198,32 @@ class single_thread:
 
         numba.set_num_threads(self._n)
         return False
+
+
+def initial_state(p: "FilterProblem", bias=None):
+    """Initial global state and covariance of the Kalman filters, with optional site-bias states.
+
+    Returns ``(q, ω, n_bias, n_x, P, b, b_hist, b_sigma_hist)``: ``P`` is (6+n_bias)² with the
+    attitude/rate block ``p.P0`` and the bias block ``diag(bias.var0)``; the histories are
+    (N, n_bias) NaN arrays (None without bias states).
+    """
+    q = p.q0.copy()
+    w = p.omega0.copy()
+    nb = 0 if bias is None else bias.n_sites
+    nx = 6 + nb
+    P = np.zeros((nx, nx))
+    P[:6, :6] = p.P0
+    b = np.zeros(nb)
+    b_hist = bs_hist = None
+    if nb:
+        P[6:, 6:] = np.diag(bias.var0)
+        b_hist = np.full((p.n, nb), np.nan)
+        bs_hist = np.full((p.n, nb), np.nan)
+    return q, w, nb, nx, P, b, b_hist, bs_hist
+
+
+def attach_bias(est, bias, b_hist, bs_hist) -> None:
+    """Store the site-bias history (mag) and its 1σ in an Estimate and its metadata."""
+    est.bias, est.bias_sigma = b_hist, bs_hist
+    est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
+                                  bias_sigma_final_mag=bs_hist[-1].tolist())

@@ -32,7 +32,7 @@ import numpy as np
 
 from .. import rotations as rot
 from ..estimation.kalman import joseph_update
-from ._common import FilterProblem, Recorder, grp_to_dq, single_thread
+from ._common import FilterProblem, Recorder, attach_bias, grp_to_dq, initial_state, single_thread
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
 __all__ = ["run_mekf"]
@@ -75,17 +75,7 @@ def _run(problem, error, jacobian, bias=None):
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "mekf")
-    q = p.q0.copy()
-    w = p.omega0.copy()
-    nb = 0 if bias is None else bias.n_sites
-    nx = 6 + nb
-    P = np.zeros((nx, nx))
-    P[:6, :6] = p.P0
-    b = np.zeros(nb)
-    if nb:
-        P[6:, 6:] = np.diag(bias.var0)
-        b_hist = np.full((p.n, nb), np.nan)
-        bs_hist = np.full((p.n, nb), np.nan)
+    q, w, nb, nx, P, b, b_hist, bs_hist = initial_state(p, bias)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
@@ -140,7 +130,5 @@ def _run(problem, error, jacobian, bias=None):
             bs_hist[k] = np.sqrt(np.clip(np.diag(P)[6:], 0.0, None))
     est = rec.finish(time.perf_counter() - t0)
     if nb:
-        est.bias, est.bias_sigma = b_hist, bs_hist
-        est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
-                                      bias_sigma_final_mag=bs_hist[-1].tolist())
+        attach_bias(est, bias, b_hist, bs_hist)
     return est

@@ -45,7 +45,8 @@ import numpy as np
 
 from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
 from . import _kernels as K
-from ._common import FilterProblem, Recorder, apply_grp, grp_rel, single_thread
+from ._common import (FilterProblem, Recorder, apply_grp, attach_bias, grp_rel, initial_state,
+                      single_thread)
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
 __all__ = ["run_ukf"]
@@ -78,17 +79,7 @@ def _run(p: FilterProblem, w6, w9, bias=None) -> Estimate:
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "ukf")
-    q = p.q0.copy()
-    w = p.omega0.copy()
-    nb = 0 if bias is None else bias.n_sites
-    nx = 6 + nb
-    P = np.zeros((nx, nx))
-    P[:6, :6] = p.P0
-    b = np.zeros(nb)
-    if nb:
-        P[6:, 6:] = np.diag(bias.var0)
-        b_hist = np.full((p.n, nb), np.nan)
-        bs_hist = np.full((p.n, nb), np.nan)
+    q, w, nb, nx, P, b, b_hist, bs_hist = initial_state(p, bias)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
@@ -130,9 +121,7 @@ def _run(p: FilterProblem, w6, w9, bias=None) -> Estimate:
             bs_hist[k] = np.sqrt(np.clip(np.diag(P)[6:], 0.0, None))
     est = rec.finish(time.perf_counter() - t0)
     if nb:
-        est.bias, est.bias_sigma = b_hist, bs_hist
-        est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
-                                      bias_sigma_final_mag=bs_hist[-1].tolist())
+        attach_bias(est, bias, b_hist, bs_hist)
     return est
 
 
