@@ -227,3 +227,20 @@ def attach_bias(est, bias, b_hist, bs_hist) -> None:
     est.bias, est.bias_sigma = b_hist, bs_hist
     est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
                                   bias_sigma_final_mag=bs_hist[-1].tolist())
+
+
+def augmented_transition(dyn, bias, w, dt, nx):
+    """Error-state transition Φ and discrete process noise Q_d over ``dt`` (s).
+
+    The attitude/rate block comes from ``dyn.transition(ω, dt)``; with site-bias states
+    (``bias`` not None) the bias block is ``diag(φ_b)``, ``diag(q_b)`` from
+    ``bias.transition(dt, ω)``. Returns ``(Φ, Q_d, φ_b)`` (``φ_b`` None without bias states).
+    """
+    Phi6, Qd6 = dyn.transition(w, dt)
+    if nx == 6:
+        return Phi6, Qd6, None
+    phib, qb = bias.transition(dt, w)
+    Phi, Qd = np.zeros((nx, nx)), np.zeros((nx, nx))
+    Phi[:6, :6], Qd[:6, :6] = Phi6, Qd6
+    Phi[6:, 6:], Qd[6:, 6:] = np.diag(phib), np.diag(qb)
+    return Phi, Qd, phib

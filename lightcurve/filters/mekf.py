@@ -32,7 +32,8 @@ import numpy as np
 
 from .. import rotations as rot
 from ..estimation.kalman import joseph_update
-from ._common import FilterProblem, Recorder, attach_bias, grp_to_dq, initial_state, single_thread
+from ._common import (FilterProblem, Recorder, attach_bias, augmented_transition, grp_to_dq,
+                      initial_state, single_thread)
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
 __all__ = ["run_mekf"]
@@ -81,14 +82,8 @@ def _run(problem, error, jacobian, bias=None):
         if k > 0:
             dt = float(m.t[k] - m.t[k - 1])
             if dt != 0.0:
-                Phi6, Qd6 = dyn.transition(w, dt)
-                Phi, Qd = Phi6, Qd6
+                Phi, Qd, phib = augmented_transition(dyn, bias, w, dt, nx)
                 if nb:
-                    phib, qb = bias.transition(dt, w)
-                    Phi = np.zeros((nx, nx))
-                    Qd = np.zeros((nx, nx))
-                    Phi[:6, :6], Qd[:6, :6] = Phi6, Qd6
-                    Phi[6:, 6:], Qd[6:, 6:] = np.diag(phib), np.diag(qb)
                     b = phib * b
                 Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
                 q, w = Qn[0], Wn[0]

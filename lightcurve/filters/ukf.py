@@ -45,8 +45,8 @@ import numpy as np
 
 from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
 from . import _kernels as K
-from ._common import (FilterProblem, Recorder, apply_grp, attach_bias, grp_rel, initial_state,
-                      single_thread)
+from ._common import (FilterProblem, Recorder, apply_grp, attach_bias, augmented_transition,
+                      grp_rel, initial_state, single_thread)
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
 __all__ = ["run_ukf"]
@@ -85,13 +85,7 @@ def _run(p: FilterProblem, w6, w9, bias=None) -> Estimate:
         if k > 0:
             dt = float(m.t[k] - m.t[k - 1])
             if dt != 0.0:
-                Phi, Qd = dyn.transition(w, dt)
-                if nb:
-                    phib, qb = bias.transition(dt, w)
-                    Phi6, Qd6 = Phi, Qd
-                    Phi, Qd = np.zeros((nx, nx)), np.zeros((nx, nx))
-                    Phi[:6, :6], Qd[:6, :6] = Phi6, Qd6
-                    Phi[6:, 6:], Qd[6:, 6:] = np.diag(phib), np.diag(qb)
+                Phi, Qd, phib = augmented_transition(dyn, bias, w, dt, nx)
                 off, ok = sigma_offsets(P, w6)
                 if ok:
                     chi, Qs, Ws = _sigma_states(q, w, off)
