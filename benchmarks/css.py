@@ -1,7 +1,7 @@
 """CSS benchmark: per-update cost of each sun-direction estimator inside a compiled
 trajectory loop (next to O'Keefe table 3.1's C timings) and a tumbling Monte Carlo.
 
-Run:  python benchmarks/css.py [--mc-runs 200] [--samples 200000]
+Run:  python benchmarks/css.py [--mc-runs 200] [--samples 200000] [--seed 1]
 Prints ONE JSON line.  Table 3.1 of the thesis (C code): EKF 1.83 µs propagate + 1.32 µs
 update; our target is ≤ 10 µs per EKF propagate+update.
 """
@@ -38,6 +38,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mc-runs", type=int, default=200)
     ap.add_argument("--samples", type=int, default=200_000)
+    ap.add_argument("--seed", type=int, default=1, help="study seed of the Monte Carlo")
     a = ap.parse_args(argv)
 
     from lightcurve.css.configurations import dual_pyramid
@@ -64,25 +65,37 @@ def main(argv=None):
     for name, mid in (("wavg_us", 0), ("lsmn_us", 1), ("wlsmn_us", 2)):
         out[name] = round(_per_step(lambda: run_single_point_nb(mid, Y, css.normals, 0.5), K), 3)
     out["thesis_table_3_1_ekf_us"] = 1.83 + 1.32
-    # full closed-loop simulation step (truth RK4 + albedo 10 deg + CSS + gyro + EKF + control)
-    sc = Scenario(css, estimator="ekf", gyro="tactical", controlled=True, duration_s=3600.0)
-    simulate(sc, 0)
-    t0 = time.perf_counter()
-    simulate(sc, 1)
-    out["closed_loop_step_us"] = round((time.perf_counter() - t0) / 7201 * 1e6, 2)
+    # full closed-loop simulation step (truth RK4 + albedo 10 deg + CSS + gyro + EKF + control),
+    # with the filter's albedo model (phi grid filter, default) and without it
+    for key, am in (("closed_loop_step_us", True), ("closed_loop_step_no_filter_albedo_us", False)):
+        sc = Scenario(css, estimator="ekf", gyro="tactical", controlled=True, duration_s=3600.0,
+                      filter_params=FilterParams(albedo_model=am))
+        simulate(sc, 0)
+        t0 = time.perf_counter()
+        simulate(sc, 1)
+        out[key] = round((time.perf_counter() - t0) / 7201 * 1e6, 2)
     # tumbling Monte Carlo (uncontrolled, dual pyramid, tactical gyro)
     if a.mc_runs > 0:
-        spec = StudySpec(n_runs=a.mc_runs, duration_s=1800.0, seed=1)
+        def _row(c):
+            r = {"p99_deg": round(c.p99_settled_deg, 2), "p50_deg": round(c.p50_settled_deg, 2)}
+            if c.nees_mean is not None:  # 2-DOF direction NEES: mean 2, 95 % below 5.99
+                r["nees_mean"] = round(c.nees_mean, 2)
+                r["nees_frac_95"] = round(c.nees_frac_95, 3)
+            return r
+
+        spec = StudySpec(n_runs=a.mc_runs, duration_s=1800.0, seed=a.seed)
         t0 = time.perf_counter()
         mc = {}
         for est in ("ekf", "eckf", "wavg", "lsmn", "wlsmn"):
-            c = run_case(spec, est, "tactical")
-            mc[est] = {"p99_deg": round(c.p99_settled_deg, 2), "p50_deg": round(c.p50_settled_deg, 2)}
-        cube = StudySpec(n_runs=a.mc_runs, duration_s=1800.0, seed=1, configuration="cube")
+            mc[est] = _row(run_case(spec, est, "tactical"))
+        # the filters without their albedo model (first-session behaviour)
+        off = StudySpec(n_runs=a.mc_runs, duration_s=1800.0, seed=a.seed,
+                        filter_params=FilterParams(albedo_model=False))
+        for est in ("ekf", "eckf"):
+            mc[est + "_no_filter_albedo"] = _row(run_case(off, est, "tactical"))
+        cube = StudySpec(n_runs=a.mc_runs, duration_s=1800.0, seed=a.seed, configuration="cube")
         for est in ("ekf", "eckf", "lsmn"):
-            c = run_case(cube, est, "tactical")
-            mc["cube_" + est] = {"p99_deg": round(c.p99_settled_deg, 2),
-                                 "p50_deg": round(c.p50_settled_deg, 2)}
+            mc["cube_" + est] = _row(run_case(cube, est, "tactical"))
         out["mc_runs"] = a.mc_runs
         out["mc_tumbling"] = mc
         out["mc_wall_s"] = round(time.perf_counter() - t0, 1)

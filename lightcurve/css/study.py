@@ -29,6 +29,7 @@ Study TOML (``pipelines/css/*.toml``)::
     dt_s = 0.5
     epoch_utc = "2015-03-01T00:00:00Z"
     albedo = "builtin"                 # "builtin", "none", or a CERES/TOMS file path
+    filter_albedo = "builtin"          # the sun-line filters' own albedo model, same choices
     [dispersions]                      # optional overrides of Dispersions fields
     [filter]                           # optional overrides of FilterParams fields
     [control]                          # optional k_gain, p_gain, deadband_deg, u_max
@@ -53,7 +54,7 @@ from .sunline_ekf import FilterParams
 from .truth import ESTIMATORS, MU_EARTH, R_EARTH_M, Dispersions, Scenario, simulate
 
 __all__ = ["StudySpec", "CaseSummary", "run_case", "run_study", "load_study", "write_report",
-           "gyroless_params", "settled_mask", "THESIS_P99_DEG"]
+           "gyroless_params", "settled_mask", "direction_nees", "THESIS_P99_DEG"]
 
 # Values quoted by the issue for the thesis's uncontrolled tumbling dual-pyramid study
 # (99th percentile of the angular error after the first minutes in sunlight, degrees).
@@ -65,6 +66,37 @@ def gyroless_params(base: FilterParams | None = None) -> FilterParams:
     slower rate low-pass and a larger considered rate error."""
     b = base or FilterParams()
     return replace(b, q_proc=1e-3, rate_alpha=0.95, sigma_meas=0.1, consider_sigma=2e-3)
+
+
+def direction_nees(d_hat, P, s_true):
+    """Normalised estimation error squared of the Sun *direction* (2 degrees of freedom).
+
+    The sun-line state ``d`` carries an unknown scale, so only its direction is compared:
+    with ``ŝ = d/|d|`` and an orthonormal basis ``B`` (3×2) of the plane perpendicular to
+    ``ŝ``, ``e = |d| Bᵀ s_true`` (the error of d if its scale were right) and
+    ``NEES = eᵀ (Bᵀ P B)⁻¹ e``, χ² with 2 degrees of freedom for a consistent filter
+    (mean 2, 95 % below 5.991).  d_hat (K,3), P (K,3,3), s_true (K,3) unit; returns (K,)
+    (NaN where d is zero).
+    """
+    d = np.atleast_2d(np.asarray(d_hat, dtype=float))
+    P = np.asarray(P, dtype=float).reshape(-1, 3, 3)
+    s = np.atleast_2d(np.asarray(s_true, dtype=float))
+    nd = np.linalg.norm(d, axis=1)
+    ok = nd > 0
+    u = np.where(ok[:, None], d / np.where(ok, nd, 1.0)[:, None], [1.0, 0.0, 0.0])
+    a = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    b2 = a - np.sum(a * u, axis=1, keepdims=True) * u
+    b2 /= np.linalg.norm(b2, axis=1, keepdims=True)
+    b3 = np.cross(u, b2)
+    B = np.stack([b2, b3], axis=2)  # (K,3,2)
+    e = nd[:, None] * np.einsum("kij,ki->kj", B, s)
+    P2 = np.einsum("kia,kij,kjb->kab", B, P, B)
+    det = P2[:, 0, 0] * P2[:, 1, 1] - P2[:, 0, 1] * P2[:, 1, 0]
+    good = ok & (det > 0)
+    det = np.where(good, det, 1.0)
+    q = (P2[:, 1, 1] * e[:, 0] ** 2 - 2 * P2[:, 0, 1] * e[:, 0] * e[:, 1]
+         + P2[:, 0, 0] * e[:, 1] ** 2) / det
+    return np.where(good, q, np.nan)
 
 
 def settled_mask(t, lit, settle_s):
@@ -79,6 +111,21 @@ def settled_mask(t, lit, settle_s):
             entry = t[k]
         last_entry[k] = entry
     return sun & (t - last_entry >= settle_s)
+
+
+_MAP_CACHE: dict = {}
+
+
+def _albedo_choice(name):
+    """'builtin' → None (built-in zonal model), 'none' → False (off), else a loaded map
+    (cached per path so that every run shares one grid)."""
+    if name == "builtin":
+        return None
+    if name == "none":
+        return False
+    if name not in _MAP_CACHE:
+        _MAP_CACHE[name] = load_albedo_map(name)
+    return _MAP_CACHE[name]
 
 
 @dataclass
@@ -98,6 +145,7 @@ class StudySpec:
     dt_s: float = 0.5
     epoch_utc: str = "2015-03-01T00:00:00Z"
     albedo: str = "builtin"
+    filter_albedo: str = "builtin"
     dispersions: Dispersions = field(default_factory=Dispersions)
     filter_params: FilterParams = field(default_factory=FilterParams)
     control: ControlParams = field(default_factory=ControlParams)
@@ -108,18 +156,14 @@ class StudySpec:
             css = configuration_by_name(self.configuration, fov_half_angle_deg=self.fov_half_angle_deg)
         else:
             css = configuration_by_name(self.configuration)
-        if self.albedo == "builtin":
-            alb = None
-        elif self.albedo == "none":
-            alb = False
-        else:
-            alb = load_albedo_map(self.albedo)
+        alb = _albedo_choice(self.albedo)
+        falb = _albedo_choice(self.filter_albedo)
         g = None if gyro in (None, "none") else gyro
         fp = self.filter_params if g is not None else gyroless_params(self.filter_params)
         return Scenario(css, estimator=estimator, gyro=g, controlled=self.controlled,
                         duration_s=self.duration_s, dt_s=self.dt_s, epoch_utc=self.epoch_utc,
                         dispersions=self.dispersions, filter_params=fp, control=self.control,
-                        albedo=alb)
+                        albedo=alb, filter_albedo=falb)
 
 
 @dataclass
@@ -139,6 +183,8 @@ class CaseSummary:
     t: np.ndarray | None = None
     envelope_deg: dict | None = None
     pointing_envelope_deg: dict | None = None
+    nees_mean: float | None = None
+    nees_frac_95: float | None = None
 
     def as_dict(self):
         d = {k: v for k, v in asdict(self).items()
@@ -160,6 +206,7 @@ def run_case(spec: StudySpec, estimator: str, gyro, progress=None) -> CaseSummar
     period = _orbit_period(sc.altitude_m)
     errs, settled, above15, above30 = [], [], [], []
     perr, t15, pa15, pa30 = [], [], [], []
+    nees = []
     t = None
     for i in range(spec.n_runs):
         r = simulate(sc, np.random.SeedSequence([spec.seed, i]))
@@ -169,6 +216,8 @@ def run_case(spec: StudySpec, estimator: str, gyro, progress=None) -> CaseSummar
         sun = r.lit > 0.999
         errs.append(np.where(sun, r.error_deg, np.nan))  # envelopes over sunlit samples
         settled.append(r.error_deg[m])
+        if r.p_cov is not None:
+            nees.append(direction_nees(r.d_hat[m], r.p_cov[m], r.s_true[m]))
         above15.append(np.sum((r.error_deg > 15) & sun) * dt)
         above30.append(np.sum((r.error_deg > 30) & sun) * dt)
         if spec.controlled:
@@ -198,6 +247,13 @@ def run_case(spec: StudySpec, estimator: str, gyro, progress=None) -> CaseSummar
                        float(np.percentile(allsettled, 99)), float(np.percentile(allsettled, 50)),
                        float(np.mean(above15) / orbits), float(np.mean(above30) / orbits),
                        t=t, envelope_deg=env)
+    if nees:
+        allnees = np.concatenate(nees)
+        allnees = allnees[np.isfinite(allnees)]
+        if allnees.size:
+            # consistency of the sun-line filters (2-DOF chi-square: mean 2, 95 % < 5.991)
+            summ.nees_mean = float(np.mean(allnees))
+            summ.nees_frac_95 = float(np.mean(allnees < 5.991))
     if spec.controlled:
         Pm = np.vstack(perr)
         summ.pointing_time_to_15_s = float(np.nanmedian(t15)) if np.any(np.isfinite(t15)) else None
@@ -269,13 +325,20 @@ def load_study(path) -> StudySpec:
             p = Path(path).parent / p
         alb = str(p)
         load_albedo_map(alb)  # validate early
+    falb = sc.str("filter_albedo", "builtin")
+    if falb not in ("builtin", "none"):
+        p = Path(falb)
+        if not p.is_absolute():
+            p = Path(path).parent / p
+        falb = str(p)
+        load_albedo_map(falb)  # validate early
     spec = replace(
         spec, configuration=conf,
         fov_half_angle_deg=sc.float("fov_half_angle_deg", DEFAULT_FOV_HALF_ANGLE_DEG, min=0.0,
                                     max=90.0, min_open=True),
         estimators=tuple(ests), gyros=tuple(gyros), controlled=sc.bool("controlled", False),
         duration_s=sc.float("duration_s", 1800.0, min=1.0), dt_s=sc.float("dt_s", 0.5, min=1e-3, max=60.0),
-        epoch_utc=sc.str("epoch_utc", "2015-03-01T00:00:00Z"), albedo=alb)
+        epoch_utc=sc.str("epoch_utc", "2015-03-01T00:00:00Z"), albedo=alb, filter_albedo=falb)
     sc.check_unknown()
     spec.dispersions = _overrides(doc.section("dispersions", None), spec.dispersions)
     spec.filter_params = _overrides(doc.section("filter", None), spec.filter_params)

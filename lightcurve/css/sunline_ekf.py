@@ -26,6 +26,24 @@ not consult; the behaviour follows the description in the issue):
   below it) keeps the filter responsive after long spells of many active sensors;
 * Joseph-form update and symmetrisation every step.
 
+Earth-albedo model in the filter (our addition; ``FilterParams.albedo_model``, on by default,
+used where the spacecraft position and the Sun are known — the truth simulation — and off
+for recordings without positions).  Unmodelled albedo (up to ~0.1 of full scale on the
+*active* sensors at 400 km) was the dominant error of the filter (error budget in
+``tests/css/test_css_albedo_filter.py``).  The filter knows its position and the Sun, hence
+the sunlit Earth cells in an attitude-free Sun–nadir frame
+(:func:`~lightcurve.css.albedo.albedo_sun_frame_nb`, its own albedo model, default the
+built-in zonal one), and the Sun direction in body axes (its state), but not the rotation φ
+of the body about the Sun line, which decides where the Earth is in body axes.  A grid
+(point-mass) filter over φ (``albedo_n_phi`` hypotheses, each a constant once the body
+reference is propagated with the gyro rate and the known orbital rotation of the Sun–nadir
+axis) is updated by the readings of the "dark" sensors — those that cannot see the Sun, whose
+output is albedo only.  Its posterior gives each active sensor's expected albedo ā and its
+variance; the update then uses ``h = n̂·d + |d| ā`` (the common scale multiplies the albedo
+too), ``H = n̂ + ā d/|d|`` and ``R = σ² + |d|² (var + (albedo_rel_sigma ā)²)``.  With
+``albedo_phi = False`` φ is instead averaged with a uniform prior (much weaker: the mean over
+φ removes only a third of the albedo error).
+
 Extended consider Kalman filter (§3.2.2, continuous-discrete): the rate error ``c`` (gyro
 bias, or the error of the successive-estimate rate without a gyro) is a *consider*
 parameter with fixed covariance ``P_cc = σ_c² I``: it is not estimated, but its effect on
@@ -55,10 +73,12 @@ import numba
 import numpy as np
 
 from ._linalg import inv_nb
+from .albedo import albedo_phi_nb, expected_albedo_nb
 from .single_point import lsmn_nb
 
 __all__ = ["FilterParams", "FILTER_KINDS", "run_filter", "run_filter_nb", "ekf_propagate_nb",
-           "ekf_update_nb", "eckf_propagate_nb", "eckf_update_nb", "successive_rate_nb",
+           "ekf_update_nb", "ekf_update_albedo_nb", "albedo_measurement_nb",
+           "filter_step_albedo_nb", "phi_state_size", "eckf_propagate_nb", "eckf_update_nb", "successive_rate_nb",
            "rotation_step_nb"]
 
 FILTER_KINDS = ("ekf", "eckf")
@@ -68,11 +88,12 @@ FILTER_KINDS = ("ekf", "eckf")
 class FilterParams:
     """Tuning of the sun-line filters (dimensionless outputs, SI time).
 
-    Defaults were tuned on the §2.4 tumbling Monte Carlo with CERES-level albedo: the filter
-    has no albedo model, so Earth albedo (up to ~0.27 of full scale on an Earth-facing
-    sensor at 400 km) is treated as measurement noise — a high activity threshold (0.5)
+    Defaults were tuned (first session) on the §2.4 tumbling Monte Carlo with the filter
+    *without* an albedo model: Earth albedo (up to ~0.27 of full scale on an Earth-facing
+    sensor at 400 km) treated as measurement noise — a high activity threshold (0.5)
     keeps albedo-dominated sensors out and σ = 0.3 lets the tumbling average the remaining
-    albedo bias.  The optional scale pseudo-measurement and dark-sensor updates are off by
+    albedo bias.  They were kept when the albedo model (``albedo_model``, on by default
+    where position and Sun are known; see the module docstring) was added.  The optional scale pseudo-measurement and dark-sensor updates are off by
     default (both made the albedo/misalignment case worse in that study).
 
     sigma_meas: CSS output noise σ used in R; q_proc: process noise density (1/s) on d;
@@ -86,7 +107,18 @@ class FilterParams:
     while their measured output does not and the predicted Sun is inside the FOV
     ``fov_half_angle_deg`` (the nominal FOV of the sensors; use :meth:`for_css`);
     reset_after_s: after this long without any active sensor (eclipse), the covariance is
-    reset to ``p0`` at the first new measurement (0 disables).
+    reset to ``p0`` at the first new measurement (0 disables);
+    albedo_model: model the expected Earth albedo in the measurement (see
+    :func:`expected_albedo_nb` and the module docstring) — needs the spacecraft position and
+    the Sun (the truth simulation supplies them; recordings without positions run with it
+    off); albedo_rel_sigma: 1σ relative error of the filter's albedo model (fraction of the
+    predicted albedo, added to R); albedo_n_phi: number of rotation angles φ about the Sun
+    line on the grid; albedo_phi: estimate φ with a grid (point-mass) filter from the
+    albedo-only readings of the sensors that cannot see the Sun (otherwise φ is averaged
+    with a uniform prior); albedo_sigma: noise σ of those readings (full scale 1);
+    albedo_phi_mix: fraction of uniform weight mixed in per step (lets the φ estimate move
+    and recover); albedo_dark_margin: a sensor is "dark" when n̂·ŝ < cos ψ − margin;
+    albedo_phi_temper: exponent (≤ 1) on the φ likelihood (1: none).
     """
 
     sigma_meas: float = 0.3
@@ -104,6 +136,14 @@ class FilterParams:
     use_dark_sensors: bool = False
     fov_half_angle_deg: float = 70.0
     reset_after_s: float = 60.0
+    albedo_model: bool = True
+    albedo_rel_sigma: float = 0.3
+    albedo_n_phi: int = 36
+    albedo_phi: bool = True
+    albedo_sigma: float = 0.02
+    albedo_phi_mix: float = 1e-3
+    albedo_dark_margin: float = 0.1
+    albedo_phi_temper: float = 1.0
 
     def as_array(self) -> np.ndarray:
         """Parameters packed for the numba kernels (order of the fields; the FOV as its
@@ -214,36 +254,76 @@ def _active(y, threshold, d, normals, use_predicted, cos_fov):
 
 
 @numba.njit(cache=True)
+def albedo_measurement_nb(d, normal, a):
+    """Predicted output and Jacobian row of one active sensor with expected albedo ``a``:
+    ``h = n̂·d + |d| a``, ``∂h/∂d = n̂ + a d/|d|`` (a held fixed).  Returns (h, H (3,))."""
+    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    h = normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2] + nd * a
+    H = np.empty(3)
+    for j in range(3):
+        H[j] = normal[j] + a * d[j] / nd
+    return h, H
+
+
+@numba.njit(cache=True)
+def ekf_update_albedo_nb(d, P, y, normals, sigma, threshold, gate, inflate_max, p_floor,
+                         alb_mean, alb_var, alb_rel):
+    """:func:`ekf_update_nb` with the expected-albedo measurement (see
+    :func:`albedo_measurement_nb`; ``alb_mean``/``alb_var`` (N,) per sensor,
+    ``R_κ = σ² + |d|² (var_κ + (alb_rel ā_κ)²)``).  Returns (m, NIS, inflation)."""
+    dummy = np.zeros((3, 3))
+    return _update_core(d, P, dummy, y, normals, sigma, threshold, gate, inflate_max, p_floor,
+                        False, 0.0, False, 0.0, alb_mean, alb_var, alb_rel)
+
+
+@numba.njit(cache=True)
 def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_floor, consider,
-                 norm_sigma, use_predicted, cos_fov):
-    """Shared EKF / consider update; returns (m, NIS, inflation)."""
+                 norm_sigma, use_predicted, cos_fov, alb_mean, alb_var, alb_rel):
+    """Shared EKF / consider update; returns (m, NIS, inflation).
+
+    ``alb_mean``/``alb_var`` (N,) are the expected albedo on each sensor and its variance
+    (:func:`~lightcurve.css.albedo.expected_albedo_nb`, units of the solar irradiance) or
+    empty arrays (no albedo model).  With them the measurement of sensor κ is
+    ``h_κ(d) = n̂_κ·d + |d| ā_κ`` (the common scale |d| multiplies the albedo exactly as it
+    multiplies the direct term), ``H_κ = n̂_κ + ā_κ d/|d|`` (ā's slow dependence on the
+    direction is neglected) and ``R_κ = σ² + |d|² (var_κ + (alb_rel ā_κ)²)``.
+    """
     idx = _active(y, threshold, d, normals, use_predicted, cos_fov)
     m_css = idx.shape[0]
     if m_css == 0:
         return 0, 0.0, 1.0
     nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     use_norm = norm_sigma > 0.0 and nd > 1e-9
+    use_alb = alb_mean.shape[0] == normals.shape[0] and nd > 1e-9
     m = m_css + (1 if use_norm else 0)
     H = np.empty((m, 3))
     nu = np.empty(m)
+    rv = np.empty(m)
+    r = sigma * sigma
     for i in range(m_css):
         k = idx[i]
         H[i, 0] = normals[k, 0]
         H[i, 1] = normals[k, 1]
         H[i, 2] = normals[k, 2]
         nu[i] = y[k] - (H[i, 0] * d[0] + H[i, 1] * d[1] + H[i, 2] * d[2])
+        rv[i] = r
+        if use_alb:
+            a = alb_mean[k]
+            h, Hr = albedo_measurement_nb(d, normals[k], a)
+            nu[i] = y[k] - h
+            for j in range(3):
+                H[i, j] = Hr[j]
+            rv[i] += nd * nd * (alb_var[k] + (alb_rel * a) ** 2)
     if use_norm:
         # scale pseudo-measurement |d| = 1 (outputs are normalised to full scale 1)
         H[m_css, 0] = d[0] / nd
         H[m_css, 1] = d[1] / nd
         H[m_css, 2] = d[2] / nd
         nu[m_css] = 1.0 - nd
-    r = sigma * sigma
+        rv[m_css] = norm_sigma * norm_sigma
     S = H @ P @ H.T
-    for i in range(m_css):
-        S[i, i] += r
-    if use_norm:
-        S[m_css, m_css] += norm_sigma * norm_sigma
+    for i in range(m):
+        S[i, i] += rv[i]
     Si, ok = inv_nb(S)
     if not ok:
         return 0, 0.0, 1.0
@@ -260,7 +340,7 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
                     Pxc[i, j] *= np.sqrt(infl)
         S = H @ P @ H.T
         for i in range(m):
-            S[i, i] += r
+            S[i, i] += rv[i]
         Si, ok = inv_nb(S)
     K = P @ H.T @ Si
     dx = K @ nu
@@ -268,12 +348,9 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
         d[i] += dx[i]
     IKH = np.eye(3) - K @ H
     KR = K.copy()
-    for i in range(m_css):
+    for i in range(m):
         for j in range(3):
-            KR[j, i] *= r
-    if use_norm:
-        for j in range(3):
-            KR[j, m_css] *= norm_sigma * norm_sigma
+            KR[j, i] *= rv[i]
     Pn = IKH @ P @ IKH.T + KR @ K.T
     for i in range(3):
         for j in range(3):
@@ -296,7 +373,7 @@ def ekf_update_nb(d, P, y, normals, sigma, threshold, gate, inflate_max, p_floor
     inflation, inflation factor)."""
     dummy = np.zeros((3, 3))
     return _update_core(d, P, dummy, y, normals, sigma, threshold, gate, inflate_max, p_floor,
-                        False, norm_sigma, use_predicted, cos_fov)
+                        False, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0)
 
 
 @numba.njit(cache=True)
@@ -352,7 +429,7 @@ def eckf_update_nb(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max,
                    norm_sigma, use_predicted, cos_fov):
     """Schmidt consider update in place; returns (m, NIS, inflation)."""
     return _update_core(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_floor,
-                        True, norm_sigma, use_predicted, cos_fov)
+                        True, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0)
 
 
 @numba.njit(cache=True)
@@ -406,7 +483,134 @@ def filter_init_nb(y, normals, prm):
 @numba.njit(cache=True)
 def filter_step_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset=False):
     """One propagate+update of the EKF (kind 0) or ECKF (kind 1), in place; ``reset`` first
-    sets the covariance back to p0 (end of an eclipse).  Returns (m, NIS, inflation)."""
+    sets the covariance back to p0 (end of an eclipse).  Returns (m, NIS, inflation).
+    No albedo model (see :func:`filter_step_albedo_nb`)."""
+    e3 = np.zeros((0, 3))
+    return filter_step_albedo_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset,
+                                 e3, np.zeros(0), 0, np.zeros(0), e3, np.zeros(0), np.zeros(3),
+                                 np.zeros(3))
+
+
+@numba.njit(cache=True)
+def _rotate_about_nb(v, axis, ang):
+    """Active rotation of v by angle ``ang`` (rad) about unit ``axis`` (Rodrigues)."""
+    c = np.cos(ang)
+    s = np.sin(ang)
+    kx = np.array([axis[1] * v[2] - axis[2] * v[1], axis[2] * v[0] - axis[0] * v[2],
+                   axis[0] * v[1] - axis[1] * v[0]])
+    kd = axis[0] * v[0] + axis[1] * v[1] + axis[2] * v[2]
+    return v * c + kx * s + axis * kd * (1.0 - c)
+
+
+def phi_state_size(params: "FilterParams") -> int:
+    """Length of the φ grid-filter state array of :func:`filter_step_albedo_nb`."""
+    return 7 + int(params.albedo_n_phi)
+
+
+@numba.njit(cache=True)
+def _phi_filter_nb(d, omega, dt, y, normals, prm, alb_coords, alb_ratio, alb_m, cos_fov_s,
+                   horizon, phi_state, e2_I, s_I, a_mean, a_var):
+    """Propagate and update the φ grid filter; fill the albedo mean/variance per sensor.
+
+    ``phi_state`` = [r_b (3), e2 of the previous step (3, inertial), started flag,
+    log-weights (n_phi)].  ``r_b`` is the body-axes image of the Sun–nadir axis e₂ under
+    hypothesis φ = 0: it rotates with the body (gyro rate, like d) and about the Sun line by
+    the known inertial rotation δψ of e₂ (orbital motion), so every hypothesis φ_i is a
+    constant.  The likelihood of φ_i uses the "dark" sensors (Sun at least a margin outside
+    the FOV): y_κ = |d| a_κ(φ_i) + noise, σ² = σ_a² + |d|² (rel a_κ(φ_i))².
+    Returns True when the albedo mean/variance were filled.
+    """
+    n_phi = int(prm[17])
+    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    if nd < 1e-9:
+        return False
+    sb = d / nd
+    if phi_state[6] < 0.5:
+        k = 0 if abs(sb[0]) < 0.9 else 1
+        rb = -sb[k] * sb
+        rb[k] += 1.0
+        for i in range(3):
+            phi_state[i] = rb[i]
+            phi_state[3 + i] = e2_I[i]
+        for i in range(n_phi):
+            phi_state[7 + i] = 0.0
+        phi_state[6] = 1.0
+    else:
+        Phi = rotation_step_nb(omega, dt)
+        rb = Phi @ phi_state[0:3]
+        e2p = phi_state[3:6]
+        cx = e2p[1] * e2_I[2] - e2p[2] * e2_I[1]
+        cy = e2p[2] * e2_I[0] - e2p[0] * e2_I[2]
+        cz = e2p[0] * e2_I[1] - e2p[1] * e2_I[0]
+        dpsi = np.arctan2(s_I[0] * cx + s_I[1] * cy + s_I[2] * cz,
+                          e2p[0] * e2_I[0] + e2p[1] * e2_I[1] + e2p[2] * e2_I[2])
+        rb = _rotate_about_nb(rb, sb, dpsi)
+        c = rb[0] * sb[0] + rb[1] * sb[1] + rb[2] * sb[2]
+        rb = rb - c * sb
+        nr = np.sqrt(rb[0] ** 2 + rb[1] ** 2 + rb[2] ** 2)
+        if nr < 1e-9:
+            return False
+        for i in range(3):
+            phi_state[i] = rb[i] / nr
+            phi_state[3 + i] = e2_I[i]
+    if alb_m == 0:
+        return False
+    n_s = normals.shape[0]
+    tab = np.empty((n_phi, n_s))
+    albedo_phi_nb(alb_coords, alb_ratio, alb_m, sb, phi_state[0:3], normals, cos_fov_s,
+                  horizon, n_phi, tab)
+    rel, sa, mix, margin, temper = prm[16], prm[19], prm[20], prm[21], prm[22]
+    lw = phi_state[7:7 + n_phi]
+    for k in range(n_s):
+        ck = normals[k, 0] * sb[0] + normals[k, 1] * sb[1] + normals[k, 2] * sb[2]
+        if ck >= cos_fov_s[k] - margin:
+            continue
+        for i in range(n_phi):
+            a = nd * tab[i, k]
+            v = sa * sa + (rel * a) ** 2
+            lw[i] += temper * (-0.5 * (y[k] - a) ** 2 / v - 0.5 * np.log(v))
+    mx = lw[0]
+    for i in range(1, n_phi):
+        if lw[i] > mx:
+            mx = lw[i]
+    w = np.empty(n_phi)
+    tot = 0.0
+    for i in range(n_phi):
+        w[i] = np.exp(lw[i] - mx)
+        tot += w[i]
+    for i in range(n_phi):
+        w[i] = (1.0 - mix) * w[i] / tot + mix / n_phi
+        lw[i] = np.log(w[i])
+    for k in range(n_s):
+        mu = 0.0
+        for i in range(n_phi):
+            mu += w[i] * tab[i, k]
+        v = 0.0
+        for i in range(n_phi):
+            v += w[i] * (tab[i, k] - mu) ** 2
+        a_mean[k] = mu
+        a_var[k] = v
+    return True
+
+
+@numba.njit(cache=True)
+def filter_step_albedo_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset,
+                          alb_coords, alb_ratio, alb_m, cos_fov_s, horizon,
+                          phi_state, e2_I, s_I):
+    """:func:`filter_step_nb` with the expected-albedo measurement model.
+
+    ``alb_coords``/``alb_ratio``/``alb_m``: the sunlit, in-view albedo cells of the filter's
+    albedo model in the Sun–nadir frame at this time
+    (:func:`~lightcurve.css.albedo.albedo_sun_frame_nb`, computed from the known position
+    and Sun); ``cos_fov_s`` (N,) and ``horizon`` (N,3): nominal FOV cosines and structure
+    horizons of the sensors.  When ``prm`` has ``albedo_model`` on and ``alb_m > 0``, the
+    expected albedo on each sensor given the *propagated* Sun direction (mean and variance
+    over the rotation φ about the Sun line: uniform, or the posterior of the φ grid filter
+    :func:`_phi_filter_nb` when ``albedo_phi`` is on and ``phi_state`` (length
+    :func:`phi_state_size`, zeros to start) with the inertial Sun–nadir axis ``e2_I`` and Sun
+    direction ``s_I`` are given; pass an empty ``phi_state`` otherwise) enters the update;
+    otherwise this is exactly :func:`filter_step_nb`.
+    """
     sigma, q, thr = prm[0], prm[1], prm[2]
     gate, infl_max, p_floor = prm[4], prm[5], prm[6]
     if reset:
@@ -417,12 +621,28 @@ def filter_step_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset=False):
     norm_sigma, use_pred, cos_fov = prm[11], prm[12] > 0.5, prm[13]
     if kind == 0:
         ekf_propagate_nb(d, P, omega, dt, q)
-        return ekf_update_nb(d, P, y, normals, sigma, thr, gate, infl_max, p_floor, norm_sigma,
-                             use_pred, cos_fov)
-    pcc = prm[7] * prm[7]
-    eckf_propagate_nb(d, P, Pxc, omega, dt, q, pcc, int(prm[8]))
-    return eckf_update_nb(d, P, Pxc, y, normals, sigma, thr, gate, infl_max, p_floor,
-                          norm_sigma, use_pred, cos_fov)
+    else:
+        eckf_propagate_nb(d, P, Pxc, omega, dt, q, prm[7] * prm[7], int(prm[8]))
+    a_mean = np.zeros(0)
+    a_var = np.zeros(0)
+    if prm[15] > 0.5:
+        n_s = normals.shape[0]
+        if prm[18] > 0.5 and phi_state.shape[0] == 7 + int(prm[17]):
+            am = np.zeros(n_s)
+            av = np.zeros(n_s)
+            if _phi_filter_nb(d, omega, dt, y, normals, prm, alb_coords, alb_ratio, alb_m,
+                              cos_fov_s, horizon, phi_state, e2_I, s_I, am, av):
+                a_mean = am
+                a_var = av
+        elif alb_m > 0:
+            nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+            if nd > 1e-9:
+                a_mean = np.zeros(n_s)
+                a_var = np.zeros(n_s)
+                expected_albedo_nb(alb_coords, alb_ratio, alb_m, d / nd, normals, cos_fov_s,
+                                   horizon, int(prm[17]), a_mean, a_var)
+    return _update_core(d, P, Pxc, y, normals, sigma, thr, gate, infl_max, p_floor, kind == 1,
+                        norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16])
 
 
 @numba.njit(cache=True)
@@ -447,6 +667,10 @@ def run_filter_nb(kind, t, Y, W, use_gyro, normals, prm):
     om_f = np.zeros(3)
     alpha, rmax = prm[9], prm[10]
     dark = 0.0
+    # no albedo model offline (recordings carry no positions); work arrays allocated once
+    e3 = np.zeros((0, 3))
+    e0 = np.zeros(0)
+    z3 = np.zeros(3)
     for k in range(K):
         if not started:
             d, P, Pxc, ok = filter_init_nb(Y[k], normals, prm)
@@ -466,7 +690,8 @@ def run_filter_nb(kind, t, Y, W, use_gyro, normals, prm):
             if Y[k, j] > prm[2]:
                 lit_now = True
         reset = lit_now and prm[14] > 0 and dark >= prm[14]
-        m, nis, infl = filter_step_nb(kind, d, P, Pxc, om, dt, Y[k], normals, prm, reset)
+        m, nis, infl = filter_step_albedo_nb(kind, d, P, Pxc, om, dt, Y[k], normals, prm,
+                                             reset, e3, e0, 0, e0, e3, e0, z3, z3)
         dark = 0.0 if lit_now else dark + dt
         if not use_gyro:
             om_f = successive_rate_nb(d, d_prev, dt, om_f, alpha, rmax)

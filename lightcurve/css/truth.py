@@ -32,12 +32,13 @@ import numpy as np
 from ..estimation.rng import as_generator
 from ..rotations import qmul_nb, qnormalize_nb, qrot_inv_nb, qrot_nb
 from ._linalg import inv_nb
-from .albedo import AlbedoMap, albedo_on_sensors_nb, builtin_albedo_map, earth_rotation_angle
+from .albedo import (AlbedoMap, albedo_on_sensors_nb, albedo_sun_frame_nb, builtin_albedo_map,
+                     earth_rotation_angle, sun_nadir_axis_nb)
 from .control import ControlParams, mrp_control_nb
 from .gyro import GyroSpec, draw_gyro_errors, gyro_grade, gyro_step_nb
 from .sensors import CSSArray
 from .single_point import lsmn_nb, wavg_nb
-from .sunline_ekf import FilterParams, filter_init_nb, filter_step_nb, successive_rate_nb
+from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
 
 __all__ = ["Spacecraft", "Dispersions", "Scenario", "SimResult", "simulate", "ESTIMATORS",
            "wheel_pyramid", "MU_EARTH", "R_EARTH_M"]
@@ -89,7 +90,9 @@ class Scenario:
 
     css: nominal sensor set; estimator: one of ESTIMATORS; gyro: grade name, a GyroSpec, or
     None (gyro-less); controlled: run the eq. 3.64 controller; albedo: an AlbedoMap, None for
-    the built-in 10° zonal model, or False to switch albedo off.
+    the built-in 10° zonal model, or False to switch albedo off (truth); filter_albedo: the
+    albedo model of the sun-line filters, same choices (used only when
+    ``filter_params.albedo_model`` is on).
     """
 
     css: CSSArray
@@ -106,6 +109,7 @@ class Scenario:
     filter_params: FilterParams = field(default_factory=FilterParams)
     control: ControlParams = field(default_factory=ControlParams)
     albedo: object = None
+    filter_albedo: object = None
     gravity_gradient: bool = True
     start_sunlit: bool = True
 
@@ -123,7 +127,9 @@ class SimResult:
     q (K,4) true attitude (inertial→body); omega (K,3) true rate rad/s; s_true (K,3) true
     unit Sun direction in body axes; s_hat (K,3) estimate (zeros when none); y (K,N) CSS
     outputs; lit (K,); n_active (K,); omega_used (K,3) rate fed to estimator/controller;
-    wheel_speed (K,4) rad/s; error_deg (K,) angle between s_hat and s_true (180 when none).
+    wheel_speed (K,4) rad/s; error_deg (K,) angle between s_hat and s_true (180 when none);
+    p_cov (K,3,3) and d_hat (K,3): the sun-line filter's covariance and scaled Sun vector
+    after each update (EKF/ECKF only, zeros before the filter starts; None otherwise).
     """
 
     t: np.ndarray
@@ -138,6 +144,8 @@ class SimResult:
     wheel_speed: np.ndarray
     error_deg: np.ndarray
     info: dict
+    p_cov: np.ndarray | None = None
+    d_hat: np.ndarray | None = None
 
 
 # ---------------------------------------------------------------------------------------
@@ -176,14 +184,17 @@ def _r3(theta, v):
 
 
 @numba.njit(cache=True)
-def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra,
+def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra, falb_c, falb_n, falb_ra,
                 n_true, cos_fov, gains, horizon, n_nom, css_noise,
                 use_gyro, gM, gbias0, arw, rrw, g_nu, g_nv,
                 I, G, Js, umax, om_max, mu_gg,
                 q0, w0, Om0,
                 est_kind, fprm, controlled, kK, kP, deadband, h_axis):
     """The whole closed loop (see module docstring); est_kind 0 EKF, 1 ECKF, 2 WAVG, 3 LSMN,
-    4 WLSMN.  Returns q, ω, s_true, s_hat, y, n_active, ω_used, Ω (wheel speeds)."""
+    4 WLSMN.  ``alb_*``: the truth albedo grid (empty: no albedo); ``falb_*``: the sun-line
+    filters' own albedo model grid (used when ``fprm`` switches the albedo model on; it sees
+    the known position and Sun, never the true attitude).
+    Returns q, ω, s_true, s_hat, y, n_active, ω_used, Ω (wheel speeds)."""
     K = t.shape[0]
     N = n_true.shape[0]
     nw = G.shape[1]
@@ -199,6 +210,8 @@ def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra,
     NA = np.zeros(K, dtype=np.int64)
     Wu = np.zeros((K, 3))
     OM = np.zeros((K, nw))
+    PC = np.zeros((K, 3, 3))
+    DH = np.zeros((K, 3))
     q = q0.copy()
     w = w0.copy()
     Om = Om0.copy()
@@ -216,6 +229,12 @@ def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra,
     n_nadir = np.zeros((N, 3))
     h_nadir = np.zeros((N, 3))
     have_alb = alb_c.shape[0] > 0
+    f_alb = est_kind <= 1 and fprm[15] > 0.5 and falb_c.shape[0] > 0
+    fa_coords = np.zeros((0, 3))
+    fa_ratio = np.zeros(0)
+    fa_m = 0
+    phi_state = np.zeros(7 + int(fprm[17])) if (f_alb and fprm[18] > 0.5) else np.zeros(0)
+    e2_I = np.zeros(3)
     for k in range(K):
         Q[k] = q
         Wt[k] = w
@@ -262,8 +281,16 @@ def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra,
                     if Y[k, j] > thr:
                         lit_now = True
                 reset = lit_now and fprm[14] > 0 and dark >= fprm[14]
-                m, nis, infl = filter_step_nb(est_kind, d, P, Pxc, om, dt, Y[k], n_nom, fprm,
-                                              reset)
+                if f_alb:
+                    # the filter's albedo model from the known position and Sun (Earth-fixed)
+                    th = theta_E[k]
+                    fa_coords, fa_ratio, fa_m = albedo_sun_frame_nb(
+                        falb_c, falb_n, falb_ra, _r3(th, r_I[k]), _r3(th, sun_I[k]))
+                    e2_I = sun_nadir_axis_nb(r_I[k], sun_I[k])
+                m, nis, infl = filter_step_albedo_nb(est_kind, d, P, Pxc, om, dt, Y[k], n_nom,
+                                                     fprm, reset, fa_coords, fa_ratio, fa_m,
+                                                     cos_fov, horizon, phi_state, e2_I,
+                                                     sun_I[k])
                 dark = 0.0 if lit_now else dark + dt
                 NA[k] = m
                 Wu[k] = om
@@ -294,6 +321,9 @@ def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra,
             if valid:
                 d_prev[:] = s_est
         Sh[k] = s_est
+        if est_kind <= 1 and started:
+            PC[k] = P
+            DH[k] = d
         if use_gyro:
             Wu[k] = w_meas
         w_meas_prev[:] = w_meas
@@ -317,7 +347,7 @@ def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra,
                 rn = np.sqrt(rb[0] ** 2 + rb[1] ** 2 + rb[2] ** 2)
                 Lext = 3.0 * mu_gg / rn ** 5 * np.cross(rb, I @ rb)
             q, w, Om = _rk4(q, w, Om, u, I, IRW_inv, G, Js, Lext, h)
-    return Q, Wt, St, Sh, Y, NA, Wu, OM
+    return Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH
 
 
 # ---------------------------------------------------------------------------------------
@@ -386,6 +416,7 @@ def simulate(sc: Scenario, rng) -> SimResult:
     sun_hat = sun_m / np.linalg.norm(sun_m, axis=1, keepdims=True)
     theta = earth_rotation_angle(sc.epoch_utc, t)
     alb_c, alb_n, alb_ra = _albedo_grid(sc.albedo)
+    falb_c, falb_n, falb_ra = _albedo_grid(sc.filter_albedo)
     # CSS dispersions
     css = sc.css
     N = css.n_sensors
@@ -419,7 +450,7 @@ def simulate(sc: Scenario, rng) -> SimResult:
     axis = np.asarray(sc.control.axis, dtype=float)
     axis = axis / np.linalg.norm(axis)
     out = sim_loop_nb(
-        t, r_I, sun_hat, lit, theta, alb_c, alb_n, alb_ra,
+        t, r_I, sun_hat, lit, theta, alb_c, alb_n, alb_ra, falb_c, falb_n, falb_ra,
         n_true, cos_fov, gains, horizon, css.normals.copy(), css_noise,
         spec is not None, gM, gb0, arw, rrw, g_nu, g_nv,
         I, G, float(scf.wheel_inertia), float(scf.wheel_max_torque),
@@ -427,7 +458,7 @@ def simulate(sc: Scenario, rng) -> SimResult:
         q0, w0, Om0,
         ESTIMATORS.index(sc.estimator), fparams.as_array(), bool(sc.controlled),
         float(sc.control.k_gain), float(sc.control.p_gain), float(sc.control.deadband_rad), axis)
-    Q, Wt, St, Sh, Y, NA, Wu, OM = out
+    Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH = out
     if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(Wt))):
         from ..errors import ConvergenceError
 
@@ -440,6 +471,9 @@ def simulate(sc: Scenario, rng) -> SimResult:
             "css_scale_common": true_css.scale_common,
             "css_scale_individual": true_css.scale_individual,
             "css_misalignment_rad": true_css.misalignment_rad,
+            "css_noise_sigma": disp.css_noise_sigma,
             "gyro": None if spec is None else spec.name, "r_I_m": r_I, "sun_I_hat": sun_hat,
             "pointing_axis": axis}
-    return SimResult(t, Q, Wt, St, Sh, Y, lit, NA, Wu, OM, err_deg, info)
+    is_filter = sc.estimator in ("ekf", "eckf")
+    return SimResult(t, Q, Wt, St, Sh, Y, lit, NA, Wu, OM, err_deg, info,
+                     PC if is_filter else None, DH if is_filter else None)

@@ -97,17 +97,24 @@ def test_settled_mask():
 def test_tumbling_monte_carlo_dual_pyramid():
     # Acceptance (issue 8): uncontrolled tumbling, dual pyramid, §2.4 dispersions as
     # implemented (Dispersions defaults), built-in zonal albedo, tactical-grade gyro, 30 runs,
-    # errors after the first 5 minutes in sunlight.  The thesis's bounds are 5 deg (EKF) and
-    # 6 deg (ECKF); our albedo-limited model gives 5.3 deg (EKF) and 5.4 deg (ECKF) over the
-    # 200-run set of benchmarks/css.py (5.3-5.8 / 5.4-6.1 over 100-run sets with other
-    # seeds), so the EKF bound here carries a 1 deg margin over the thesis value.  The
-    # single-point methods must be far worse (thesis: above 45 deg; ours ~35-40 deg because
-    # of the 0.5 activity threshold shared by all methods).
+    # errors after the first 5 minutes in sunlight.  The thesis's bounds: 5 deg (EKF) and
+    # 6 deg (ECKF).  With the filters' albedo model (phi grid filter, the default) the 200-run
+    # sets of benchmarks/css.py give EKF 1.73-1.92 / ECKF 1.75-1.91 deg over study seeds 1-3
+    # (without the albedo model 5.30 / 5.44 deg at seed 1, which missed the EKF bound), so
+    # the thesis bounds are asserted as published.  The single-point methods must be far worse (thesis: above 45 deg; ours
+    # ~35-40 deg because of the 0.5 activity threshold shared by all methods).
     spec = StudySpec(n_runs=30, duration_s=1200.0, seed=1)
     ekf = run_case(spec, "ekf", "tactical")
     eckf = run_case(spec, "eckf", "tactical")
     lsmn = run_case(spec, "lsmn", "tactical")
-    assert ekf.p99_settled_deg < 6.0
-    assert eckf.p99_settled_deg < 7.0
+    assert ekf.p99_settled_deg < 5.0
+    assert eckf.p99_settled_deg < 6.0
     assert lsmn.p99_settled_deg > 25.0
-    assert ekf.p50_settled_deg < 3.0
+    assert ekf.p50_settled_deg < 1.5
+    # consistency of the Sun direction (2-DOF NEES, chi-square: 95 % of samples below 5.99
+    # for a consistent filter).  Without the albedo model the EKF had only 41 % of the
+    # samples inside (mean NEES 13: over-confident); with it ~99 % (mean ~0.9: slightly
+    # conservative, the albedo-model variance is a bound).  Asserted: not over-confident.
+    for c in (ekf, eckf):
+        assert c.nees_frac_95 > 0.9
+        assert c.nees_mean < 3.0
