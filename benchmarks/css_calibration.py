@@ -89,7 +89,7 @@ def main(n=2000):
         def upd():
             x, P = x0.copy(), P0.copy()
             calibration_update_nb(x, P, y_use, prm.as_array(), az0, el0, cf, hor, s_N, 1.0,
-                                  theta, r_E, s_E, *args, nu, sv)
+                                  theta, r_E, s_E, *args, nu, sv, np.empty(N))
 
         def model():
             calibration_measurement_nb(x0, az0, el0, cf, hor, s_N, 1.0, theta, r_E, s_E, *args,

@@ -37,7 +37,11 @@ sunlit and in view — the cost is independent of the grid's global size (benchm
 Measurement noise (§4.2, our concrete form):
 ``R_κ = max(σ_css², σ_floor²) + (k_alb g_κ A_κ)² + (g_κ A_edge,κ)²`` (white noise with a floor,
 a relative albedo-model uncertainty, and the irradiance of the albedo cells lying within the
-FOV-edge margin, whose membership of the FOV is uncertain — large for coarse grids); sensors are used when
+FOV-edge margin, whose membership of the FOV is uncertain — large for coarse grids), plus,
+when the filter's albedo grid is coarser than the truth, the grid's representation error
+``(g_κ (k_grid A_κ + a_grid))²`` (:func:`albedo_grid_error`; CERES 10° vs 1° at 400 km:
+k ≈ 0.39, a ≈ 0.012; 5°: 0.075, 0.0035 — without it the 10° filter is over-confident);
+sensors are used when
 their *predicted* output exceeds ``threshold`` (selecting on the noisy measured output would
 bias weak-signal innovations) or their output exceeds 3 × ``threshold`` (so a badly predicted
 sensor cannot lock itself out), and the model predicts light on them, except near the FOV
@@ -71,7 +75,7 @@ from .sensors import CSSArray, normal_to_azel
 __all__ = ["AlbedoCells", "CalibrationParams", "CalibrationResult", "run_calibration",
            "calibration_measurement_nb", "calibration_update_nb", "albedo_vectors_nb",
            "CalibrationCase", "simulate_calibration_case", "state_layout", "acceptance_summary",
-           "r3_nb"]
+           "r3_nb", "albedo_grid_error"]
 
 
 # ---------------------------------------------------------------------------------------
@@ -295,12 +299,16 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
 @numba.njit(cache=True)
 def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E,
                           s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
-                          dlat_max, nu_out, s_out):
+                          dlat_max, nu_out, s_out, u_out):
     """CSS measurement update in place (see module docstring).
 
     prm: :meth:`CalibrationParams.as_array`.  nu_out, s_out (N,) receive every sensor's prior
     innovation y − h and its variance H P Hᵀ + R for sensors whose predicted output is above
     the threshold (NaN otherwise) — the per-sensor statistics of the fault detector.
+    u_out (N,) receives each sensor's *gain-free* predicted irradiance ``D_κ + A_κ`` (direct
+    plus modelled albedo, before the scale factor g_κ and the considered bias), NaN when the
+    Sun is within the FOV-edge margin — the input of the dark-sensor test of
+    :mod:`lightcurve.css.fault`, which must not depend on the estimated scale factor.
     Returns (m used, NIS of the used set (NaN if none), inflation factor).
     """
     N = az0.shape[0]
@@ -324,10 +332,16 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     for k in range(N):
         # albedo-model uncertainty: relative part + the cells whose FOV membership is uncertain
         Rk[k] = r0 + (kalb * x[6 + k] * A[k]) ** 2 + (x[6 + k] * Aedge[k]) ** 2
+        if A[k] > 0.0:
+            # albedo-grid representation error (coarse grid vs a fine one), see
+            # albedo_grid_error: 1σ = k_grid A + a_grid
+            Rk[k] += (x[6 + k] * (prm[15] * A[k] + prm[16])) ** 2
         nu_out[k] = np.nan
         s_out[k] = np.nan
+        u_out[k] = np.nan
         if lit > 0.0 and abs(cosd[k] - cos_fov[k]) < mk[k]:
             continue  # Sun at the FOV edge: the cut-off makes the model unreliable
+        u_out[k] = D[k] + A[k]
         pred = h[k] > thr
         # selection on the *prediction*: selecting on the noisy output (y > thr) would bias
         # the innovations of weakly lit sensors upwards; a clearly lit output (y > 3 thr)
@@ -401,7 +415,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
 
     A Python loop over the compiled per-step kernels (≈10 µs of call overhead per sample;
     no separate whole-loop kernel to compile).  Returns X (K,n), Pdiag (K,n), P_end (n,n),
-    nis (K,), m (K,), NU (K,N), S (K,N), nis_st (K,).
+    nis (K,), m (K,), NU (K,N), S (K,N), nis_st (K,), U (K,N) gain-free predicted irradiance.
     """
     K = t.shape[0]
     N = az0.shape[0]
@@ -413,6 +427,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     M = np.zeros(K, dtype=np.int64)
     NU = np.full((K, N), np.nan)
     SS = np.full((K, N), np.nan)
+    UU = np.full((K, N), np.nan)
     x = x0.copy()
     P = P0.copy()
     arw, rrw, qp = prm[7], prm[8], prm[9]
@@ -421,6 +436,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     cons[6 + 3 * N:] = True
     nu_k = np.empty(N)
     s_k = np.empty(N)
+    u_k = np.empty(N)
     iq = np.arange(6, 6 + 3 * N)
     for k in range(K):
         if k > 0:
@@ -435,14 +451,15 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
                 NISST[k] = nis_st
         m, nis, infl = calibration_update_nb(x, P, Y[k], prm, az0, el0, cos_fov, horizon_B,
                                              sun_N[k], lit[k], theta[k], r_E[k], s_E[k],
-                                             *cells_args, nu_k, s_k)
+                                             *cells_args, nu_k, s_k, u_k)
         M[k] = m
         NIS[k] = nis
         NU[k] = nu_k
         SS[k] = s_k
+        UU[k] = u_k
         X[k] = x
         Pd[k] = np.diagonal(P)
-    return X, Pd, P, NIS, M, NU, SS, NISST
+    return X, Pd, P, NIS, M, NU, SS, NISST, UU
 
 
 # ---------------------------------------------------------------------------------------
@@ -463,7 +480,10 @@ class CalibrationParams:
     uncertainty of the sensor normal, √(P_δαδα + P_δεδε)) of the FOV cut-off cos ψ are skipped (the step of
     the output at the edge, ≈ cos ψ, makes small attitude/misalignment errors look like huge
     innovations); use_albedo: full (True) or reduced (False)
-    filter; sigma_att0_rad, sigma_bias0, sigma_scale0, sigma_mis0_rad: initial 1σ.
+    filter; albedo_grid_frac, albedo_grid_floor: representation error of a coarse albedo
+    grid added to R as 1σ = g (albedo_grid_frac · A + albedo_grid_floor) for sensors with
+    modelled albedo A > 0 (0 when the filter's grid is the truth's; values for a CERES grid
+    against the 1° one from :func:`albedo_grid_error`); sigma_att0_rad, sigma_bias0, sigma_scale0, sigma_mis0_rad: initial 1σ.
     """
 
     sigma_css: float = 0.017
@@ -482,6 +502,8 @@ class CalibrationParams:
     fov_edge_margin: float = 0.03
     fov_edge_sigmas: float = 2.0
     use_albedo: bool = True
+    albedo_grid_frac: float = 0.0
+    albedo_grid_floor: float = 0.0
     sigma_att0_rad: float = float(np.radians(1.0))
     sigma_bias0: float = float(np.radians(0.05))
     sigma_scale0: float = 0.3
@@ -500,7 +522,8 @@ class CalibrationParams:
                          self.gate, self.inflate_max, self.gate_sensor, self.arw, self.rrw,
                          self.q_param, self.consider_tau_s, self.consider_sigma,
                          self.sigma_st_rad, self.fov_edge_margin,
-                         self.fov_edge_sigmas], dtype=float)
+                         self.fov_edge_sigmas, self.albedo_grid_frac,
+                         self.albedo_grid_floor], dtype=float)
 
     def for_gyro(self, spec) -> "CalibrationParams":
         """A copy with the ARW/RRW of a :class:`~lightcurve.css.gyro.GyroSpec`."""
@@ -539,7 +562,8 @@ class CalibrationResult:
     """Filter output. t (K,); x (K,n) state history; p_diag (K,n); P_end (n,n); nis (K,) NIS
     of the CSS update (NaN when none); n_used (K,); innov, innov_var (K,N) per-sensor prior
     innovations and variances (NaN when not evaluated); nis_st (K,) star-tracker NIS;
-    layout: :func:`state_layout`."""
+    layout: :func:`state_layout`; u_model (K,N) gain-free predicted irradiance D_κ + A_κ
+    (NaN at the FOV edge; see :func:`calibration_update_nb`)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -551,6 +575,7 @@ class CalibrationResult:
     innov_var: np.ndarray
     nis_st: np.ndarray
     layout: dict
+    u_model: np.ndarray | None = None
 
     def scale(self):
         """(K,N) estimated total scale factors g_κ."""
@@ -625,8 +650,64 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
                                params.as_array(), np.ascontiguousarray(az0),
                                np.ascontiguousarray(el0), np.cos(css.fov_half_angle_rad),
                                np.ascontiguousarray(css.horizon_normals), cells.args())
-    X, Pd, Pend, NIS, M, NU, SS, NISST = out
-    return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N))
+    X, Pd, Pend, NIS, M, NU, SS, NISST, UU = out
+    return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N), UU)
+
+
+def albedo_grid_error(coarse: AlbedoCells, fine: AlbedoCells, *, altitude_m=400e3,
+                      fov_half_angle_deg=70.0, n_geometries=300, n_sensors=8, seed=0):
+    """Representation error of a coarse albedo grid, as the 1σ model ``k A + a``.
+
+    The coarse grid's albedo irradiance A_c on a sensor (cell-centre geometry, cell-mean
+    reflectivity) differs from the fine grid's A_f because the cosine factors and the
+    reflectivity vary inside a cell (at 400 km a 10° cell is ≈ 1100 km wide while the visible
+    cap has a radius of ≈ 20°) and because whole cells enter or leave the FOV.  This error is
+    a *model* error of the filter; we represent it as extra measurement noise whose 1σ grows
+    with the modelled albedo.  Estimated empirically: random spacecraft positions (uniform on
+    the sphere at ``altitude_m``), Sun 0-90° from the local zenith, random sensor normals;
+    (k, a) fitted by least squares to d² = (A_c − A_f)² ≈ (k A_c + a)² over the samples
+    with A_c > 0, in bins of A_c (binned RMS, so that a few outliers do not dominate).
+    An assumption: the error is treated as white, although it is correlated over the time
+    the spacecraft needs to cross a coarse cell (≈ 140 s for 10°).
+
+    Returns (k, a) — dimensionless, irradiance in units of the solar one.
+    """
+    rng = np.random.default_rng(seed)
+    N = int(n_sensors)
+    cf = np.full(N, np.cos(np.radians(fov_half_angle_deg)))
+    hz = np.zeros((N, 3))
+    Ac, Af = [], []
+    for _ in range(int(n_geometries)):
+        lat = np.arcsin(rng.uniform(-1.0, 1.0))
+        lon = rng.uniform(-np.pi, np.pi)
+        up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+        east = np.array([-np.sin(lon), np.cos(lon), 0.0])
+        a = rng.uniform(0.0, 0.5 * np.pi)
+        s_E = np.cos(a) * up + np.sin(a) * east
+        r_E = (6378137.0 + altitude_m) * up
+        nE = rng.normal(size=(N, 3))
+        nE /= np.linalg.norm(nE, axis=1, keepdims=True)
+        for cells, acc in ((coarse, Ac), (fine, Af)):
+            V, _, _ = albedo_vectors_nb(*cells.args(), r_E, s_E, nE, cf, hz, np.zeros(N))
+            acc.append(np.sum(nE * V, axis=1))
+    Ac = np.concatenate(Ac)
+    Af = np.concatenate(Af)
+    m = Ac > 0.0
+    if m.sum() < 20:
+        return 0.0, 0.0
+    edges = np.quantile(Ac[m], np.linspace(0.0, 1.0, 11))
+    xb, yb = [], []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        b = m & (Ac >= lo) & (Ac <= hi)
+        if b.sum() >= 5:
+            xb.append(np.mean(Ac[b]))
+            yb.append(np.sqrt(np.mean((Ac[b] - Af[b]) ** 2)))
+    xb, yb = np.array(xb), np.array(yb)
+    # linear fit of the binned RMS: rms ≈ k A + a (non-negative coefficients)
+    from scipy.optimize import nnls
+
+    coef, _ = nnls(np.column_stack([xb, np.ones_like(xb)]), yb)
+    return float(coef[0]), float(coef[1])
 
 
 # ---------------------------------------------------------------------------------------

@@ -32,3 +32,15 @@ def test_cli_rejects_bad_probability(capsys):
         main(["css", "faults", "--prob", "1.5", "--runs", "1"])
     assert exc.value.code == 2
     assert "--prob" in capsys.readouterr().err
+
+
+def test_cli_faults_dark_test_switch(tmp_path, capsys):
+    """`css faults` reports the dark-sensor test's prior-derived bound g_min =
+    1 − Φ⁻¹(1 − 0.005/8)·0.3 ≈ 0.032, and `--no-dark` switches the test off."""
+    out = tmp_path / "f.json"
+    assert main(["css", "faults", "--runs", "1", "--out", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert abs(d["dark_detector"]["g_min"] - 0.0318) < 5e-4
+    assert set(d["modes"]) == {"off", "stuck", "random", "None"}
+    assert main(["css", "faults", "--runs", "1", "--no-dark", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["dark_detector"] is None

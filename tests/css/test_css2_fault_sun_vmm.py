@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from lightcurve.css.fault import (AveragedNISDetector, inject_fault, run_fault_case,
-                                  sensor_nis)
+from lightcurve.css.fault import (AveragedNISDetector, DarkSensorDetector, inject_fault,
+                                  run_fault_case, sensor_nis)
 from lightcurve.css.sun_models import compare_models, sun_direction, vallado_sun_eci
 
 
@@ -58,6 +58,50 @@ def test_end_to_end_off_failure_detected_and_clean_run_silent():
     assert r.exposed and r.detected and r.time_to_detect_s < 30.0
     assert not r.false_alarm and not r.wrong_sensor
     clean = run_fault_case(np.random.SeedSequence([0, 0, 6]), None)
+    assert not clean.false_alarm
+
+
+def test_dark_sensor_detector_statistics_and_decisions():
+    """Dark-sensor test: the windowed least-squares gain equals an independent brute-force
+    computation; g_min is the prior's Neyman-Pearson boundary 1 − Φ⁻¹(1 − α/N) σ_g0; a
+    healthy sensor at the truth model's smallest gain (0.05) is never flagged; an off sensor
+    is flagged at exactly the sample where 3σ_w first drops below g_min."""
+    det = DarkSensorDetector(t_start_s=0.0)
+    assert np.isclose(det.limit(), 1.0 - stats.norm.ppf(1.0 - 0.005 / 8) * 0.3)
+    rng = np.random.default_rng(4)
+    K = 3000
+    u = rng.uniform(0.0, 1.0, K)
+    u[rng.uniform(size=K) < 0.1] = np.nan  # FOV-edge samples
+    y = np.maximum(0.0, 0.05 * np.nan_to_num(u) + rng.normal(0, 0.017, K))
+    g, sg, cnt = det.gain_stats(y, u)
+    valid = np.flatnonzero(np.isfinite(u) & (u >= det.u_min))
+    for k in (valid[3], valid[59], valid[60], valid[500], K - 1):
+        w = valid[valid <= k][-det.window:]
+        assert cnt[k] == w.size
+        assert np.isclose(g[k], np.sum(u[w] * y[w]) / np.sum(u[w] ** 2), rtol=1e-10)
+        assert np.isclose(sg[k], 0.017 / np.sqrt(np.sum(u[w] ** 2)), rtol=1e-10)
+    t = np.arange(K, dtype=float)
+    assert not det.flags(t, y[:, None], u[:, None]).any()
+    # off: y = 0 → ĝ_w = 0, flagged once 3·0.017/√Σu² < g_min (and ≥ 10 samples)
+    y0 = np.zeros(K)
+    f = det.flags(t, y0[:, None], u[:, None])[:, 0]
+    suu = np.cumsum(np.where(np.isfinite(u) & (u >= 0.2), u, 0.0) ** 2)
+    n = np.cumsum(np.isfinite(u) & (u >= 0.2))
+    expect = np.flatnonzero((3 * 0.017 / np.sqrt(np.maximum(suu, 1e-300)) < det.limit())
+                            & (n >= 10) & np.isfinite(u) & (u >= 0.2))[0]
+    assert np.flatnonzero(f)[0] == expect
+
+
+def test_uncalibrated_off_failure_caught_by_dark_test():
+    """Seed (0, 0, 22): sensor 7 fails off at 1950 s before ever being lit (scale 3σ 0.9);
+    at its first lit sample the filter explains the zero output by a gain ≈ 0.05, so the
+    averaged NIS never fires (the previous session's miss); the dark-sensor test flags it
+    once it has been predicted lit for ~10 samples.  The fault-free twin stays silent."""
+    r = run_fault_case(np.random.SeedSequence([0, 0, 22]), "off")
+    assert not r.calibrated and r.observable
+    assert r.detected and r.detected_by == "dark" and r.info["ttd_nis_s"] is None
+    assert not r.false_alarm and not r.wrong_sensor
+    clean = run_fault_case(np.random.SeedSequence([0, 0, 22]), None)
     assert not clean.false_alarm
 
 
