@@ -8,7 +8,12 @@ Layout (root attributes ``format = "lightcurve-css"``, ``format_version = 1``,
 * ``normals`` (N,3) nominal sensor normals, body axes;  ``fov_half_angle_rad`` (N,);
 * ``gyro_rad_s`` (K,3) measured body rates (absent for gyro-less recordings);
 * ``truth/s_body`` (K,3), ``truth/q`` (K,4), ``truth/omega_rad_s`` (K,3), ``truth/lit`` (K,),
-  ``estimate/s_hat`` (K,3) for simulated data.
+  ``estimate/s_hat`` (K,3) for simulated data;
+* optional (written since the diagnosis path, issue 10; older files lack them and cannot be
+  diagnosed): ``geometry/r_eci_m`` (K,3) spacecraft GCRS position, m, and
+  ``geometry/sun_eci_unit`` (K,3) unit spacecraft→Sun direction, GCRS; ``horizon_normals``
+  (N,3) nominal structure-horizon normals (zero rows: none); root attributes ``noise_sigma``
+  (output noise 1σ, full scale 1) and ``outputs_clipped_at_zero`` (1: y = max(signal + noise, 0)).
 
 Writes go through :func:`lightcurve.io.atomic.atomic_path`.
 """
@@ -27,9 +32,18 @@ from .sensors import CSSArray
 __all__ = ["write_recording", "read_recording"]
 
 
-def write_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool) -> Path:
-    """Write a :class:`~lightcurve.css.truth.SimResult` of sensor set ``css`` to ``path``."""
+def write_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool, *,
+                    noise_sigma: float | None = None) -> Path:
+    """Write a :class:`~lightcurve.css.truth.SimResult` of sensor set ``css`` to ``path``.
+
+    ``noise_sigma``: the output noise 1σ to record (default: ``result.info["css_noise_sigma"]``
+    when present, else not recorded). The orbit position and Sun direction
+    (``result.info["r_I_m"]``, ``["sun_I_hat"]``) are stored under ``geometry/`` when present.
+    """
     path = Path(path)
+    info = getattr(result, "info", None) or {}
+    if noise_sigma is None:
+        noise_sigma = info.get("css_noise_sigma")
     with atomic_path(path, suffix=".h5") as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = "lightcurve-css"
@@ -48,6 +62,15 @@ def write_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool
             g["omega_rad_s"] = result.omega
             g["lit"] = result.lit
             f.create_group("estimate")["s_hat"] = result.s_hat
+            f.attrs["outputs_clipped_at_zero"] = 1
+            if noise_sigma is not None:
+                f.attrs["noise_sigma"] = float(noise_sigma)
+            if css.horizon_normals is not None:
+                f["horizon_normals"] = np.asarray(css.horizon_normals, float)
+            if info.get("r_I_m") is not None and info.get("sun_I_hat") is not None:
+                geo = f.create_group("geometry")
+                geo["r_eci_m"] = np.asarray(info["r_I_m"], float)
+                geo["sun_eci_unit"] = np.asarray(info["sun_I_hat"], float)
     return path
 
 
@@ -133,6 +156,40 @@ def _read_checked(f, path) -> dict:
                 raise InputError(f"truth/{k} must have {K} rows", file=path, field=f"truth/{k}",
                                  value=v.shape)
     out["truth"] = truth
+    geometry = None
+    if "geometry" in f:
+        if not isinstance(f["geometry"], h5py.Group):
+            raise InputError("expected a group", file=path, field="geometry")
+        geometry = {k: ds(f"geometry/{k}") for k in ("r_eci_m", "sun_eci_unit")}
+        for k, v in geometry.items():
+            if v.shape != (K, 3):
+                raise InputError("wrong shape", file=path, field=f"geometry/{k}", value=v.shape,
+                                 allowed=f"({K}, 3)")
+        if np.any(np.linalg.norm(geometry["r_eci_m"], axis=1) < 6.0e6):
+            raise InputError("spacecraft position inside the Earth", file=path,
+                             field="geometry/r_eci_m", allowed="|r| >= 6000 km")
+        if np.any(np.abs(np.linalg.norm(geometry["sun_eci_unit"], axis=1) - 1.0) > 1e-6):
+            raise InputError("Sun directions must be unit vectors", file=path,
+                             field="geometry/sun_eci_unit")
+    out["geometry"] = geometry
+    out["horizon_normals"] = None
+    if "horizon_normals" in f:
+        h = ds("horizon_normals")
+        if h.shape != (N, 3):
+            raise InputError("wrong shape", file=path, field="horizon_normals", value=h.shape,
+                             allowed=f"({N}, 3)")
+        out["horizon_normals"] = h
+    ns = f.attrs.get("noise_sigma")
+    if ns is not None:
+        try:
+            ns = float(ns)
+        except (TypeError, ValueError):
+            raise InputError("expected a number", file=path, field="noise_sigma", value=ns) from None
+        if not (np.isfinite(ns) and ns > 0):
+            raise InputError("noise_sigma must be positive", file=path, field="noise_sigma",
+                             value=ns, allowed="> 0")
+    out["noise_sigma"] = ns
+    out["clipped_at_zero"] = bool(int(f.attrs.get("outputs_clipped_at_zero", 0)))
     ep = f.attrs.get("epoch_utc", "")
     out["epoch_utc"] = ep.decode() if isinstance(ep, bytes) else str(ep)
     return out

@@ -35,7 +35,7 @@ from .candidates import params_to_json, score_candidates
 from .residuals import consistency, find_segments
 
 __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIMING_EFFECTS",
-           "load_model_scenario"]
+           "load_model_scenario", "diagnose_css_recording"]
 
 TIMING_EFFECTS = ("light_time", "clock_offset", "exposure_smearing")
 
@@ -249,7 +249,8 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
     """Diagnose a recording file against a model.
 
     ``recording``: our lightcurve HDF5 (model = the file's own scenario or ``scenario``;
-    attitude = the file's truth) or a CSV recording (needs ``scenario``; attitude = the
+    attitude = the file's truth), a CSS recording (HDF5 with ``format = "lightcurve-css"``,
+    detected from the file: :func:`diagnose_css_recording`) or a CSV recording (needs ``scenario``; attitude = the
     scenario's law or noise-free dynamics). ``free``: comma-separated words
     (:func:`~.problem.parse_free`); default ``none`` for files with a truth attitude,
     ``reflection`` for CSV recordings. Returns a :class:`Diagnosis`.
@@ -261,6 +262,12 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
     from .problem import magnitude_problem, parse_free
 
     recording = Path(recording)
+    from .css_recording import is_css_recording
+
+    if is_css_recording(recording):
+        return diagnose_css_recording(recording, scenario, free=free, exclude=exclude,
+                                      progress=progress, max_effects=max_effects,
+                                      min_delta_bic=min_delta_bic, seed=seed)
     opts = {}
     sc = None
     if scenario is not None:
@@ -293,7 +300,8 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
         from ..io.recording import read_recording
         from ..studies.evaluate import model_attitude
 
-        lc = read_recording(recording, sc)
+        # rows in the Earth's full shadow are kept (counted, warned) for shadow/clock effects
+        lc = read_recording(recording, sc, unlit="keep")
         q = model_attitude(sc, lc)
         omega = None
         default_free = "reflection"
@@ -318,4 +326,29 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
     d.notes.append(f"free baseline parameters: {', '.join(p.name for p in prob.free) or 'none'}")
     if opts.get("model_had_effects"):
         d.notes.append("the scenario's [effects] table was switched off for the model")
+    return d
+
+
+def diagnose_css_recording(recording, configuration=None, *, free=None, exclude=(), progress=None,
+                           max_effects=None, min_delta_bic=None, seed=0, max_epochs=400):
+    """Diagnose a CSS recording (:mod:`.css_recording`) against the sensors' direct-Sun model.
+
+    ``configuration``: optional CSS configuration TOML (the model's nominal sensors; the
+    file's are used otherwise). The baseline has no free parameters (``free`` must be None
+    or ``none``); the ``css_*`` effects are the candidates. No cross-validation (one pass).
+    """
+    from ..errors import InputError
+    from .css_recording import css_recording_problem
+
+    if free not in (None, "none"):
+        raise InputError("a CSS baseline has no free parameters", field="--free", value=free,
+                         allowed="none")
+    prob, notes = css_recording_problem(recording, configuration=configuration,
+                                        max_epochs=max_epochs)
+    skip = {name: "excluded by the user" for name in exclude}
+    d = diagnose(prob, progress=progress, cross_validation=False, skip_reasons=skip,
+                 max_effects=max_effects or 2, min_delta_bic=min_delta_bic or 10.0, seed=seed)
+    d.notes.extend(notes)
+    d.notes.append("model: nominal sensors, direct Sun only (no albedo, nominal scale factors "
+                   "and normals), attitude and orbit from the recording")
     return d

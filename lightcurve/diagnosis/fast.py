@@ -86,11 +86,15 @@ class CachedEarthshine(Earthshine):
 def diagnosis_effect(name: str, **options):
     """The registry effect ``name`` for diagnosis (Earthshine → :class:`CachedEarthshine`,
     penumbra → :class:`EclipsePenumbra`, identical to the registry's when the model does
-    not ignore the eclipse)."""
+    not ignore the eclipse; self-shadowing with 48×48 samples per triangle)."""
     from ..physics import get_effect
 
     if name == "earthshine":
         return CachedEarthshine(**options)
     if name == "penumbra":
         return EclipsePenumbra(**options)
+    if name == "self_shadowing":
+        # 48×48 samples per triangle: shadow-edge error < 0.02 mag on 6 m panels (the
+        # registry default 16 leaves up to 0.06 mag, too coarse against 1 % photometry)
+        return get_effect(name, **{"subdivisions": 48, **options})
     return get_effect(name, **options)

@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["FreeParam", "Problem", "Z_NONFINITE", "magnitude_problem", "css_problem",
-           "parse_free"]
+           "parse_free", "clipped_gaussian_mean", "clipped_gaussian_sd"]
 
 #: Standardised residual assigned to a non-finite prediction (e.g. an epoch put in umbra).
 Z_NONFINITE = 30.0
@@ -79,6 +79,10 @@ class Problem:
     #: names of effects the diagnosis must not propose (e.g. duplicates of free parameters)
     exclude: tuple = ()
     label: str = ""
+    #: CSS outputs recorded as max(signal + noise, 0) (the simulator's photodiode clipping):
+    #: predictions are then the mean of that clipped Gaussian, s Φ(s/σ) + σ φ(s/σ), so
+    #: residuals of dark sensors are unbiased (:meth:`predict`)
+    censored_at_zero: bool = False
 
     def __post_init__(self):
         self.y = np.asarray(self.y, float).ravel()
@@ -143,11 +147,18 @@ class Problem:
             y = ctx.evaluate()
         y = np.asarray(y, float)
         y = y.ravel() if self.kind == "css" else y[self.epoch_index]
+        if self.censored_at_zero:
+            y = clipped_gaussian_mean(y, self.sigma)
         return y + self.zero_point(theta)
 
     def standardized(self, pred) -> np.ndarray:
-        """z = (y − ŷ)/σ (M,), non-finite predictions mapped to ±:data:`Z_NONFINITE`."""
-        z = (self.y - pred) / self.sigma
+        """z = (y − ŷ)/σ (M,), non-finite predictions mapped to ±:data:`Z_NONFINITE`.
+
+        For outputs censored at zero, σ is the standard deviation of the clipped Gaussian
+        with mean ŷ (:func:`clipped_gaussian_sd`; 0.58 σ for a dark sensor).
+        """
+        sd = clipped_gaussian_sd(pred, self.sigma) if self.censored_at_zero else self.sigma
+        z = (self.y - pred) / sd
         return np.where(np.isfinite(z), z, Z_NONFINITE)
 
     def chi2(self, pred) -> float:
@@ -180,11 +191,57 @@ class Problem:
             return Problem(self.kind, ctx, self.y[m2], self.sigma[m2], self.t[m2], self.site[m2],
                            remap[self.epoch_index[m2]], self.site_names, list(self.free),
                            sel(self.elevation_rad), sel(self.phase_rad), sel(self.shadow_margin),
-                           sel(self.night), self.exclude, self.label)
+                           sel(self.night), self.exclude, self.label,
+                           censored_at_zero=self.censored_at_zero)
         return Problem(self.kind, ctx, self.y[mask], self.sigma[mask], self.t[mask], self.site[mask],
                        remap[self.epoch_index[mask]], self.site_names, list(self.free),
                        sel(self.elevation_rad), sel(self.phase_rad), sel(self.shadow_margin),
-                       sel(self.night), self.exclude, self.label)
+                       sel(self.night), self.exclude, self.label,
+                       censored_at_zero=self.censored_at_zero)
+
+
+def clipped_gaussian_mean(s, sigma):
+    """Mean of max(s + n, 0) for n ~ N(0, σ²): s Φ(s/σ) + σ φ(s/σ) (same unit as s).
+
+    Tends to s for s ≫ σ and to 0.399 σ at s = 0 (a dark photodiode still reads its positive
+    noise half).
+    """
+    from scipy.special import ndtr
+
+    s = np.asarray(s, float)
+    sig = np.broadcast_to(np.asarray(sigma, float), s.shape)
+    u = s / sig
+    return s * ndtr(u) + sig * np.exp(-0.5 * u * u) / np.sqrt(2.0 * np.pi)
+
+
+_U_TABLE = np.linspace(-8.0, 40.0, 9601)
+
+
+def _g(u):
+    from scipy.special import ndtr
+
+    return u * ndtr(u) + np.exp(-0.5 * u * u) / np.sqrt(2.0 * np.pi)
+
+
+_G_TABLE = _g(_U_TABLE)
+
+
+def clipped_gaussian_sd(mean, sigma):
+    """Standard deviation of max(s + n, 0), n ~ N(0, σ²), given its mean (same unit).
+
+    s/σ = u is found from mean/σ = g(u) = u Φ(u) + φ(u) (monotonic; tabulated on
+    u ∈ [−8, 40], u = mean/σ above), then Var/σ² = (u² + 1) Φ(u) + u φ(u) − g(u)².
+    Tends to σ for mean ≫ σ and to σ √(1/2 − 1/(2π)) = 0.584 σ at s = 0.
+    """
+    from scipy.special import ndtr
+
+    m = np.asarray(mean, float)
+    sig = np.broadcast_to(np.asarray(sigma, float), m.shape)
+    r = np.where(np.isfinite(m), m / sig, 0.0)
+    u = np.where(r > _G_TABLE[-1], r, np.interp(r, _G_TABLE, _U_TABLE))
+    g = _g(u)
+    var = (u * u + 1.0) * ndtr(u) + u * np.exp(-0.5 * u * u) / np.sqrt(2.0 * np.pi) - g * g
+    return sig * np.sqrt(np.clip(var, 1e-12, None))
 
 
 def _subset_context(ctx, ep):
@@ -328,9 +385,10 @@ def magnitude_problem(lc, shape, *, q=None, omega=None, attitude_fn=None, sun_ma
     return prob if np.all(keep) else prob.subset(keep)
 
 
-def css_problem(ctx, y, sigma, *, label="") -> Problem:
+def css_problem(ctx, y, sigma, *, label="", censored_at_zero=False) -> Problem:
     """A CSS :class:`Problem`: ``ctx`` a :class:`~lightcurve.physics.CSSContext` (the model
-    without effects), ``y`` (K,S) measured outputs, ``sigma`` scalar or (K,S) noise."""
+    without effects), ``y`` (K,S) measured outputs, ``sigma`` scalar or (K,S) noise;
+    ``censored_at_zero``: the outputs were recorded as max(signal + noise, 0)."""
     y = np.asarray(y, float)
     K, S = y.shape
     if K != len(ctx) or S != ctx.n_sensors:
@@ -338,4 +396,5 @@ def css_problem(ctx, y, sigma, *, label="") -> Problem:
     sig = np.broadcast_to(np.asarray(sigma, float), y.shape)
     ep = np.repeat(np.arange(K), S)
     return Problem("css", ctx, y.ravel(), sig.ravel(), np.asarray(ctx.t)[ep], np.tile(np.arange(S), K),
-                   ep, [f"css{k}" for k in range(S)], [], label=label)
+                   ep, [f"css{k}" for k in range(S)], [], label=label,
+                   censored_at_zero=bool(censored_at_zero))

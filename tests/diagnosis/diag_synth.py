@@ -6,10 +6,17 @@ diagnoses the lightcurve with the same scenario *without* the effect (attitude =
 truth, nothing free). Scenario choice per effect (where the effect is physically observable):
 
 * ``diag-leo-lit-2site``: lit two-site LEO pass, elevations 5–73°: extinction, zero_point,
-  unmodelled_facet, specular_glint, and the no-effect case. Earthshine is run here too but
-  is NOT observable in this geometry: seen from a dark site, the LEO object sees almost no
-  sunlit Earth (≤ 2 sunlit 10° cells in view, Δm < 1e-5 mag), so the data equal the
-  no-effect data; a dedicated Earthshine geometry is still to be found;
+  unmodelled_facet, specular_glint, and the no-effect case. (Earthshine is NOT observable
+  there: seen from a dark site, the LEO object sees almost no sunlit Earth, Δm < 1e-5 mag;
+  the case ``earthshine@lit`` keeps that negative result runnable.)
+* ``diag-meo-dusk-2site``: a box-wing at 12,000 km seen after dusk at solar phase 155° → 70°:
+  its observer-facing side faces a gibbous sunlit Earth and is barely sunlit: earthshine
+  (truth on a 5° grid of the built-in albedo map; the diagnosis model uses its default 10°
+  grid — the two differ by < 0.005 mag here), and the no-effect case ``none@meo``;
+* ``diag-leo-lit-2site-mesh``: the lit LEO pass with the box-wing as a mesh: self_shadowing
+  (truth ray-cast with 96×96 samples per triangle, the diagnosis model with 48×48 —
+  the effect has no fitted parameter, so seeds differ by noise and ACS jitter only), and the
+  no-effect case ``none@mesh``;
 * ``diag-leo-shadow-2site``: the pass ends with the object entering the Earth's shadow:
   penumbra;
 * ``diag-geo-fast-1site``: a fast-tumbling GEO box-wing (light time 0.12 s, flashes of
@@ -35,10 +42,28 @@ SCEN = {
     "lit": "diag-leo-lit-2site.toml",
     "shadow": "diag-leo-shadow-2site.toml",
     "geo": "diag-geo-fast-1site.toml",
+    "meo": "diag-meo-dusk-2site.toml",
+    "mesh": "diag-leo-lit-2site-mesh.toml",
 }
-CASE_SCENARIO = {"none": "lit", "extinction": "lit", "zero_point": "lit", "earthshine": "lit",
+#: case name → scenario key. A case is an effect name, "none", or "<effect>@<scenario key>"
+#: for an effect (or none) in another than its proof scenario.
+CASE_SCENARIO = {"none": "lit", "extinction": "lit", "zero_point": "lit",
                  "unmodelled_facet": "lit", "specular_glint": "lit", "penumbra": "shadow",
-                 "light_time": "geo", "clock_offset": "geo", "exposure_smearing": "geo"}
+                 "light_time": "geo", "clock_offset": "geo", "exposure_smearing": "geo",
+                 "earthshine": "meo", "none@meo": "meo", "self_shadowing": "mesh",
+                 "none@mesh": "mesh"}
+#: cases run by default (benchmarks/diagnosis_confusion.py without --effects)
+DEFAULT_CASES = list(CASE_SCENARIO)
+#: options of the TRUTH effect (the diagnosis proposes the registry defaults)
+TRUTH_OPTIONS = {"earthshine": {"resolution_deg": 5.0}, "self_shadowing": {"subdivisions": 96}}
+
+
+def case_effect(case):
+    """(effect name or "none", scenario key) of a case name."""
+    if "@" in case:
+        eff, key = case.split("@", 1)
+        return eff, key
+    return case, CASE_SCENARIO[case]
 
 _CACHE: dict = {}
 
@@ -77,7 +102,8 @@ def case_params(effect, seed):
     from lightcurve.physics import get_effect
     from lightcurve.studies.simulate import simulate
 
-    sc = scenario(CASE_SCENARIO[effect])
+    effect, key = case_effect(effect)
+    sc = scenario(key)
     if effect == "none":
         return sc, {}, {}
     rng = np.random.default_rng(1000 + seed)
@@ -89,6 +115,7 @@ def case_params(effect, seed):
             lc0 = simulate(sc, seed=seed)
         p["az_deg"], p["el_deg"] = _bisector_normal(lc0, rng)
     table = {k: ({s: float(x) for s, x in zip(names, v)} if np.ndim(v) else float(v)) for k, v in p.items()}
+    table.update(TRUTH_OPTIONS.get(effect, {}))
     return sc, {effect: table}, p
 
 
@@ -109,4 +136,5 @@ def run_case(effect, seed, **diag_kw):
     return {"effect": effect, "seed": seed, "n": js["n"], "verdict": js["verdict"],
             "top": ranked[0] if ranked else None, "chosen": js["chosen"],
             "baseline_chi2_dof": js["baseline"]["chi2_dof"], "final_chi2_dof": js["final"]["chi2_dof"],
-            "final_consistent": js["final"]["consistent"], "json": js}
+            "final_consistent": js["final"]["consistent"], "json": js,
+            "truth": {k: np.asarray(v).tolist() for k, v in p.items()}}
