@@ -9,9 +9,15 @@ worker caches its lightcurves); wall on W workers = total / W (runs are independ
 parallel-efficiency loss assumed). The 1-minute load average is printed: on a shared machine
 the numbers scale with it.
 ``--full DIR`` instead runs the whole study with the process pool and reports the measured
-wall time. Prints ONE JSON line.
+wall time. ``--grid-runs N`` runs EVERY cell N times inline in this process (one worker, so
+each lightcurve is simulated once) and extrapolates the measured CPU time (process time:
+what an idle machine would take, even when the machine is shared) to the study's run count:
+``cpu_total = cpu(N runs per cell) × runs/N``, wall on W workers ≈ cpu_total / W (not
+included: a worker may simulate a lightcurve another worker also simulated — at most
+``distinct_lightcurves`` × the default mode's ``mean_simulate_s`` extra). Prints ONE JSON line.
 
     python benchmarks/study_fig9_4.py [--sample 4] [--workers 2] [--cpu] [--full DIR]
+                                      [--grid-runs N]
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ def main():
     ap.add_argument("--sample", type=int, default=4)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--full", metavar="DIR", default=None)
+    ap.add_argument("--grid-runs", type=int, default=None, metavar="N",
+                    help="run every cell N times inline and extrapolate the CPU time")
     ap.add_argument("--cpu", action="store_true",
                     help="time with process CPU time instead of wall time (what an idle "
                     "machine would show; the study machine is often shared)")
@@ -48,6 +56,30 @@ def main():
         print(json.dumps({"benchmark": "study_fig9_4_full", "runs": n_total, "workers": a.workers,
                           "wall_s": round(wall, 1), "failures": sum(c["failures"] for c in s["cells"]),
                           "cpu_count": os.cpu_count()}))
+        return
+    if a.grid_runs:
+        import tempfile
+
+        limit_blas_threads()
+        with tempfile.TemporaryDirectory() as d:
+            c0 = time.process_time()
+            w0 = time.perf_counter()
+            s = run_study(study, d, runs=a.grid_runs, workers=1, progress=False,
+                          write_report=False)
+            cpu = time.process_time() - c0
+            wall = time.perf_counter() - w0
+        n_sims = len({(c.dynamics, c.sites, c.r_percent) for c in study.cells}) * study.runs
+        per_run = cpu / (len(study.cells) * a.grid_runs)
+        total = per_run * n_total
+        print(json.dumps({
+            "benchmark": "study_fig9_4_grid", "runs": n_total, "grid_runs_per_cell": a.grid_runs,
+            "measured_cpu_s": round(cpu, 2), "measured_wall_s": round(wall, 2),
+            "cpu_per_run_s": round(per_run, 4), "extrapolated_cpu_s": round(total, 1),
+            "extrapolated_wall_s_on_workers": round(total / a.workers, 1),
+            "distinct_lightcurves": n_sims,
+            "failures": sum(c["failures"] for c in s["cells"]),
+            "load_average_1min": round(os.getloadavg()[0], 2), "workers": a.workers,
+            "cpu_count": os.cpu_count()}))
         return
     limit_blas_threads()
     from lightcurve.studies import runner

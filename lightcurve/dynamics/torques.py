@@ -272,8 +272,22 @@ class GravityGradientTorque:
         self.mu = ck.finite_scalar(mu, "mu", positive=True)
 
     def torque(self, t, q, omega=None):
-        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``."""
-        return gravity_gradient_torque(self.position(t), q, self.J, self.mu)
+        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``.
+
+        One state (``q`` shape (4,), one position) goes through the numba kernel
+        :func:`gravity_gradient_torque_nb` (the truth integrators call this once per
+        right-hand-side evaluation; same formula, equal to rounding); stacks and invalid
+        inputs through the validating :func:`gravity_gradient_torque`.
+        """
+        r = self.position(t)
+        qa = np.asarray(q, dtype=float)
+        if qa.shape == (4,):
+            ra = np.asarray(r, dtype=float)
+            if (ra.shape == (3,) and np.isfinite(qa).all() and np.isfinite(ra).all()
+                    and ra @ ra > 0.0):
+                return gravity_gradient_torque_nb(np.ascontiguousarray(qa),
+                                                  np.ascontiguousarray(ra), self.J, self.mu)
+        return gravity_gradient_torque(r, q, self.J, self.mu)
 
     def dtheta(self, t, q, omega=None):
         """``∂T/∂δθ`` (N m/rad, 3×3) for ``q_true = δq(δθ) ⊗ q``."""
