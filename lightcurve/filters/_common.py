@@ -27,6 +27,11 @@ class FilterProblem:
     P0 : (6,6) initial error covariance of [δθ (rad), δω (rad/s)]
     truth_q, truth_omega : (N,4), (N,3) or None
     meta : dict of settings recorded in the Estimate
+    attitude_known : bool
+        "Attitude known" mode (Bernard §10.7 parameter-only runs): the Kalman filters hold
+        q, ω at the truth of every epoch (``truth_q``, ``truth_omega`` required) and estimate
+        only the extra states (site biases and/or Model 3 facet parameters); the attitude/rate
+        error states are dropped, so the Estimate's attitude covariance is zero.
     """
 
     model: object
@@ -37,6 +42,7 @@ class FilterProblem:
     truth_q: np.ndarray | None = None
     truth_omega: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    attitude_known: bool = False
 
     def __post_init__(self):
         self.q0 = np.asarray(self.q0, float).reshape(4)
@@ -50,6 +56,8 @@ class FilterProblem:
             np.linalg.cholesky(self.P0)
         except np.linalg.LinAlgError:
             raise ValueError("initial covariance P0 is not positive definite") from None
+        if self.attitude_known and (self.truth_q is None or self.truth_omega is None):
+            raise ValueError("attitude_known needs truth_q and truth_omega")
 
     @property
     def n(self) -> int:
@@ -200,26 +208,92 @@ class single_thread:
         return False
 
 
-def initial_state(p: "FilterProblem", bias=None):
-    """Initial global state and covariance of the Kalman filters, with optional site-bias states.
+class StateLayout:
+    """Index layout of the Kalman filters' error state ``[δθ, δω | b_1 … b_S | z_1 … z_D]``.
 
-    Returns ``(q, ω, n_bias, n_x, P, b, b_hist, b_sigma_hist)``: ``P`` is (6+n_bias)² with the
-    attitude/rate block ``p.P0`` and the bias block ``diag(bias.var0)``; the histories are
-    (N, n_bias) NaN arrays (None without bias states).
+    ``na`` = 6 (attitude and rate estimated) or 0 (attitude known, ``FilterProblem.
+    attitude_known``); ``nb`` site biases (:class:`~lightcurve.filters.reflection.SiteBias`);
+    ``nz`` Model 3 facet states (:class:`~lightcurve.filters.facet_states.FacetParameterStates`).
+    Slices ``ia``, ``ib``, ``iz``; total ``nx``.
     """
-    q = p.q0.copy()
-    w = p.omega0.copy()
-    nb = 0 if bias is None else bias.n_sites
-    nx = 6 + nb
-    P = np.zeros((nx, nx))
-    P[:6, :6] = p.P0
-    b = np.zeros(nb)
-    b_hist = bs_hist = None
-    if nb:
-        P[6:, 6:] = np.diag(bias.var0)
-        b_hist = np.full((p.n, nb), np.nan)
-        bs_hist = np.full((p.n, nb), np.nan)
-    return q, w, nb, nx, P, b, b_hist, bs_hist
+
+    def __init__(self, attitude: bool, bias=None, facets=None):
+        self.na = 6 if attitude else 0
+        self.nb = 0 if bias is None else bias.n_sites
+        self.nz = 0 if facets is None else facets.dim
+        self.nx = self.na + self.nb + self.nz
+        self.ia = slice(0, self.na)
+        self.ib = slice(self.na, self.na + self.nb)
+        self.iz = slice(self.na + self.nb, self.nx)
+
+
+def initial_state_ext(p: "FilterProblem", bias=None, facets=None):
+    """Initial state of the Kalman filters with optional bias and Model 3 states.
+
+    Returns ``(layout, q, ω, b, z, P)``: ``P`` block diagonal (``p.P0`` unless the attitude is
+    known, ``diag(bias.var0)``, ``facets.P0``), ``b`` zeros, ``z`` the prior centre
+    ``facets.z0``; with a known attitude ``q, ω`` are the truth at the first epoch.
+    """
+    L = StateLayout(not p.attitude_known, bias, facets)
+    if p.attitude_known:
+        q, w = truth_state(p, 0)
+    else:
+        q, w = p.q0.copy(), p.omega0.copy()
+    P = np.zeros((L.nx, L.nx))
+    if L.na:
+        P[:6, :6] = p.P0
+    if L.nb:
+        P[L.ib, L.ib] = np.diag(bias.var0)
+    if L.nz:
+        P[L.iz, L.iz] = facets.P0
+    b = np.zeros(L.nb)
+    z = facets.z0.copy() if L.nz else np.zeros(0)
+    return L, q, w, b, z, P
+
+
+def truth_state(p: "FilterProblem", k):
+    """The file's truth ``(q (4,), ω (3,))`` at epoch k (attitude-known mode)."""
+    q = np.asarray(p.truth_q[k], float)
+    return q / np.linalg.norm(q), np.asarray(p.truth_omega[k], float).copy()
+
+
+def layout_transition(dyn, L: StateLayout, bias, facets, w, dt):
+    """Error-state ``(Φ, Q_d, φ_b)`` over dt s for a :class:`StateLayout`: the attitude/rate
+    block from ``dyn.transition`` (absent when the attitude is known), the bias block
+    ``diag(φ_b), diag(q_b)``, the Model 3 block ``Φ = I`` and ``facets.transition(dt)``
+    (eq. 8.39)."""
+    Phi, Qd = np.zeros((L.nx, L.nx)), np.zeros((L.nx, L.nx))
+    if L.na:
+        Phi[:6, :6], Qd[:6, :6] = dyn.transition(w, dt)
+    phib = None
+    if L.nb:
+        phib, qb = bias.transition(dt, w)
+        Phi[L.ib, L.ib], Qd[L.ib, L.ib] = np.diag(phib), np.diag(qb)
+    if L.nz:
+        Phi[L.iz, L.iz], Qd[L.iz, L.iz] = facets.transition(dt)
+    return Phi, Qd, phib
+
+
+def attach_facets(est, facets, z_hist, z_cov_hist) -> None:
+    """Store the Model 3 history in an Estimate: ``refl_z`` / ``refl_z_sigma`` (N,D) in the
+    unconstrained coordinates, ``refl_p`` / ``refl_p_sigma`` (N,D) in physical units (1σ by
+    the first-order map ``|dp/dz| σ_z``), the state names, and the final values in
+    ``meta["reflection"]`` (merged with a bias model's entry when both are present)."""
+    zs = np.sqrt(np.clip(np.diagonal(z_cov_hist, axis1=1, axis2=2), 0.0, None))
+    est.refl_names = list(facets.names)
+    est.refl_z, est.refl_z_sigma = z_hist, zs
+    est.refl_p = facets.to_p(z_hist)
+    est.refl_p_sigma = facets.sigma_p(z_hist, z_cov_hist)
+    last = np.flatnonzero(np.all(np.isfinite(z_hist), axis=1))
+    k = int(last[-1]) if last.size else len(z_hist) - 1
+    d = dict(facets.describe(), p_final=est.refl_p[k].tolist(),
+             p_sigma_final=est.refl_p_sigma[k].tolist(), z_final=z_hist[k].tolist(),
+             z_sigma_final=zs[k].tolist())
+    prev = est.meta.get("reflection")
+    if isinstance(prev, dict) and prev.get("model") not in (None, "model3"):
+        d = dict(prev, facet_states=d)
+    est.meta["reflection"] = d
+    est.meta["reflection_names"] = list(facets.names)
 
 
 def attach_bias(est, bias, b_hist, bs_hist) -> None:
@@ -227,20 +301,3 @@ def attach_bias(est, bias, b_hist, bs_hist) -> None:
     est.bias, est.bias_sigma = b_hist, bs_hist
     est.meta["reflection"] = dict(bias.describe(), bias_final_mag=b_hist[-1].tolist(),
                                   bias_sigma_final_mag=bs_hist[-1].tolist())
-
-
-def augmented_transition(dyn, bias, w, dt, nx):
-    """Error-state transition Φ and discrete process noise Q_d over ``dt`` (s).
-
-    The attitude/rate block comes from ``dyn.transition(ω, dt)``; with site-bias states
-    (``bias`` not None) the bias block is ``diag(φ_b)``, ``diag(q_b)`` from
-    ``bias.transition(dt, ω)``. Returns ``(Φ, Q_d, φ_b)`` (``φ_b`` None without bias states).
-    """
-    Phi6, Qd6 = dyn.transition(w, dt)
-    if nx == 6:
-        return Phi6, Qd6, None
-    phib, qb = bias.transition(dt, w)
-    Phi, Qd = np.zeros((nx, nx)), np.zeros((nx, nx))
-    Phi[:6, :6], Qd[:6, :6] = Phi6, Qd6
-    Phi[6:, 6:], Qd[6:, 6:] = np.diag(phib), np.diag(qb)
-    return Phi, Qd, phib

@@ -25,6 +25,7 @@ from ..photometry.kernels import brdf_product_nb
 __all__ = [
     "const_rate_nb", "rk4_torque_free_nb", "apply_noise_nb", "perturb_rotvec_nb",
     "grp_rel_nb", "from_grp_rel_nb", "mag_kernel_nb", "bpf_predict_nb",
+    "facet_mag_particles_nb", "weighted_param_stats_nb",
 ]
 
 
@@ -481,3 +482,192 @@ def weighted_stats_nb(dp, W, w):
         for b in range(a):
             C[b, a] = C[a, b]
     return mean, C
+
+
+@nb.njit(cache=True, parallel=True)
+def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, areas0, ids,
+                           params0, offset, m_out):
+    """Apparent magnitudes with per-particle facet parameters (Model 3, Bernard ch. 8).
+
+    ``m_out[i] = offset − 2.5 log10 Σ_f A_if (n̂_f·ŝ)⁺(n̂_f·ô)⁺ f_r,f`` (DESIGN.md magnitude
+    equation) where particle i's facet arrays are the shape's ``areas0`` (F,) m² and packed
+    BRDF rows ``params0`` (F,P) with the estimated entries replaced by ``p(Z[i])``: state d
+    sets parameter ``kind_col[d]`` (0 ξ, 1 a = F0, 2 m (Beckmann slope) → ``params[f,kc]``;
+    3 → area A_f, m²) of facet ``facet[d]`` to ``1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``.
+
+    Q (N,4) inertial→body quaternions, or (1,4) shared by every particle (attitude known);
+    ``zeta`` (N,3) ACS jitter rotation vectors (rad) applied as ``exp(ζ_i) ⊗ q_i`` for the
+    prediction only, or (0,3); Z (N,D) unbounded states, or (1,D) shared; s, o (3,) unit
+    object→Sun / object→observer directions in ECI; normals (F,3) body axes; ids (F,) BRDF
+    model ids. The flux loop is the attitude-only kernel's (:func:`bpf_predict_nb`), so with
+    ``p(Z[i])`` equal to the shape's values the two agree to round-off. +inf where no light
+    reaches the observer. Parallel over chunks of particles; work buffers per chunk.
+    """
+    N = m_out.shape[0]
+    F = normals.shape[0]
+    P = params0.shape[1]
+    D = facet.shape[0]
+    qall = Q.shape[0] == N
+    zall = Z.shape[0] == N
+    use_zeta = zeta.shape[0] == N
+    nch = _nchunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        ar = np.empty(F)
+        pr = np.empty((F, P))
+        sb = np.empty(3)
+        ob = np.empty(3)
+        dq = np.empty(4)
+        qm = np.empty(4)
+        for i in range(lo, hi):
+            iq = i if qall else 0
+            iz = i if zall else 0
+            for f in range(F):
+                ar[f] = areas0[f]
+                for j in range(P):
+                    pr[f, j] = params0[f, j]
+            for d in range(D):
+                zz = Z[iz, d]
+                v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+                if kind_col[d] == 3:
+                    ar[facet[d]] = v
+                else:
+                    pr[facet[d], kind_col[d]] = v
+            if use_zeta:
+                _rotvec_q(zeta[i, 0], zeta[i, 1], zeta[i, 2], dq)
+                _qmul_into(dq, Q[iq], qm)
+            else:
+                for j in range(4):
+                    qm[j] = Q[iq, j]
+            fl = _flux(qm, s, o, normals, ar, ids, pr, sb, ob)
+            m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+
+
+@nb.njit(cache=True)
+def weighted_param_stats_nb(Z, w, logit):
+    """Weighted mean and variance of unbounded states Z (N,D) and of their physical values.
+
+    ``p = 1/(1+e^{−z})`` where ``logit[d]`` else ``e^{z}``; weights w (N,) sum to 1.
+    Returns ``(z_mean, z_var, p_mean, p_var)``, each (D,).
+    """
+    N, D = Z.shape
+    zm = np.zeros(D)
+    pm = np.zeros(D)
+    z2 = np.zeros(D)
+    p2 = np.zeros(D)
+    for i in range(N):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(D):
+            zz = Z[i, d]
+            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            zm[d] += wi * zz
+            pm[d] += wi * pp
+    for i in range(N):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(D):
+            zz = Z[i, d]
+            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            z2[d] += wi * (zz - zm[d]) ** 2
+            p2[d] += wi * (pp - pm[d]) ** 2
+    return zm, z2, pm, p2
+
+
+@nb.njit(cache=True, parallel=True)
+def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, kind_col, logit,
+                            normals, areas0, ids, params0, out):
+    """Log-likelihood of each particle's facet states over the measurement history.
+
+    ``out[i] = Σ_{j<kmax} ℓ_j(Z[i]) + φ_last ℓ_kmax(Z[i])`` with
+    ``ℓ_j = −½ ((y_j − m_j)/σ_j)²`` (m_j the magnitude of :func:`facet_mag_particles_nb` at the
+    known attitude ``Qs[j]``; ``ℓ_j = −inf`` when m_j = +inf; epochs with a non-finite
+    ``y_j`` are skipped). Qs (n,4) known inertial→body attitudes, S, O (n,3) unit ECI
+    object→Sun / object→observer, offs (n,) magnitude offsets, y, sig (n,) mag. Used by the
+    resample-move step of the BPF's attitude-known mode. Parallel over chunks of particles.
+    """
+    N = Z.shape[0]
+    F = normals.shape[0]
+    P = params0.shape[1]
+    D = facet.shape[0]
+    nch = _nchunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        ar = np.empty(F)
+        pr = np.empty((F, P))
+        sb = np.empty(3)
+        ob = np.empty(3)
+        for i in range(lo, hi):
+            for f in range(F):
+                ar[f] = areas0[f]
+                for j in range(P):
+                    pr[f, j] = params0[f, j]
+            for d in range(D):
+                zz = Z[i, d]
+                v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+                if kind_col[d] == 3:
+                    ar[facet[d]] = v
+                else:
+                    pr[facet[d], kind_col[d]] = v
+            acc = 0.0
+            for j in range(kmax + 1):
+                wj = 1.0 if j < kmax else phi_last
+                if wj == 0.0 or not np.isfinite(y[j]):
+                    continue
+                fl = _flux(Qs[j], S[j], O[j], normals, ar, ids, pr, sb, ob)
+                if not fl > 0.0:
+                    acc = -np.inf
+                    break
+                r = (y[j] - (offs[j] - 2.5 * math.log10(fl))) / sig[j]
+                acc += -0.5 * wj * r * r
+            out[i] = acc
+
+
+@nb.njit(cache=True)
+def mean_cov_nb(E):
+    """Equal-weight mean (D,) and covariance (D,D) (divisor N) of the rows of E (N,D).
+
+    Serial loops instead of BLAS: the clouds are thin (D ≤ a few tens) and multithreaded BLAS
+    on a busy machine costs far more than the arithmetic.
+    """
+    N, D = E.shape
+    mean = np.zeros(D)
+    for i in range(N):
+        for d in range(D):
+            mean[d] += E[i, d]
+    for d in range(D):
+        mean[d] /= N
+    C = np.zeros((D, D))
+    x = np.empty(D)
+    for i in range(N):
+        for d in range(D):
+            x[d] = E[i, d] - mean[d]
+        for a in range(D):
+            xa = x[a]
+            for b in range(a + 1):
+                C[a, b] += xa * x[b]
+    for a in range(D):
+        for b in range(a + 1):
+            C[a, b] /= N
+            C[b, a] = C[a, b]
+    return mean, C
+
+
+@nb.njit(cache=True)
+def affine_rows_nb(X, M, a, c, base, out):
+    """``out[i] = a · base[i] + c + X[i] @ Mᵀ`` for X (N,r), M (D,r), base (N,D), c (D,).
+
+    (Serial; the Liu–West jitter and the Metropolis proposal of the BPF's extra states.)
+    """
+    N, r = X.shape
+    D = M.shape[0]
+    for i in range(N):
+        for d in range(D):
+            acc = a * base[i, d] + c[d]
+            for j in range(r):
+                acc += M[d, j] * X[i, j]
+            out[i, d] = acc

@@ -10,7 +10,11 @@ Particles ``(q_i, ω_i)``: inertial→body quaternions (scalar first) and body r
    applied as ``q_i ← exp(ζ_i) ⊗ q_i`` at every new measurement time. For the "jitter" ACS
    model ζ_i perturbs only the attitude used to predict the measurement.
 3. Weights (table 7.10): ``log w_i += −½ ((y − m(q_i))/σ)²`` (m = +inf → −inf), normalised
-   with log-sum-exp; ``N_eff = 1/Σ w_i²``.
+   with log-sum-exp; ``N_eff = 1/Σ w_i²``. Before that (:mod:`lightcurve.filters.gating`):
+   epochs with the object unlit or below the horizon are skipped, and a magnitude far outside
+   the particles' predictive spread (``ν²/S`` with ``ν = y − Σ w m(q_i)``,
+   ``S = Σ w (m(q_i) − ŷ)² + σ²``, above the χ² gate) leaves the weights unchanged (or is used
+   with an inflated σ), flagged and counted.
 3b. Progressive correction (Oudjane & Musso 2000; an addition to the thesis's plain
    bootstrap filter, on by default, ``progressive=False`` switches it off): when the full
    likelihood would leave ``N_eff < ess_threshold · N`` — as at the first measurements from a
@@ -28,6 +32,44 @@ Particles ``(q_i, ω_i)``: inertial→body quaternions (scalar first) and body r
    then roughening (table 7.9): ``σ_j = 𝒢 E_j N^(−1/6)`` with E_j the range of component j of
    ``[δp, ω]`` over the cloud, jitter added in GRP about the mean attitude.
 
+Extra states (Bernard ch. 8; issue 6)
+-------------------------------------
+* Site biases (``bias=``, :class:`~lightcurve.filters.reflection.SiteBias`: random walk,
+  Model 1, Model 2): every particle carries ``b_s`` per site, drawn from ``N(0, var0)``,
+  propagated with the model's exact discrete transition ``b ← φ_b b + √q_b · N(0,1)`` (φ_b,
+  q_b from ``SiteBias.transition(Δt, ω̂)`` at the mean rate), and the likelihood uses
+  ``m(q_i) + b_i,site``. The Estimate carries ``bias`` / ``bias_sigma`` (weighted mean and
+  standard deviation, mag) like the Kalman filters.
+* Model 3 (``facets=``, :class:`~lightcurve.filters.facet_states.FacetParameterStates`):
+  every particle carries the D unbounded facet parameters z (logit ξ, logit a, ln m, ln A;
+  24 for a 6-facet cube) drawn from the shape file's prior, constant dynamics (eq. 8.39; the
+  optional process noise of ``FacetParameterStates``), and the magnitude is evaluated with
+  per-particle facet arrays by :func:`~lightcurve.filters._kernels.facet_mag_particles_nb`
+  (the attitude-only kernel path is unchanged). The Estimate carries ``refl_p`` /
+  ``refl_p_sigma`` (weighted mean / standard deviation of p(z)) and ``refl_z`` /
+  ``refl_z_sigma`` per epoch.
+* ``attitude="truth"``: q and ω are held at the file's truth at every epoch (Bernard §10.7
+  parameter-only runs) and only the extra states are filtered.
+* Roughening of the extra states: after every resampling they are jittered with the
+  Liu & West (2001) kernel shrinkage ``e ← a e + (1−a) ē + h L ε`` (``a = (3δ−1)/(2δ)``,
+  ``h² = 1 − a²``, L L^T the cloud's covariance, δ = ``param_discount``, 0.98 by default).
+  This is our choice, not the thesis's table 7.9: table 7.9's jitter ``𝒢 E_j N^(−1/d)`` with
+  d = 30 states is about one cloud standard deviation per resampling and would inflate a
+  constant parameter's spread at every step; the shrinkage keeps the cloud's mean and
+  covariance, with a jitter scaled by the cloud's own spread. The attitude/rate roughening is
+  unchanged (table 7.9).
+* Resample-move (attitude known, Model 3; ``mcmc_moves``): after every resampling each
+  particle's z takes Metropolis random-walk steps (Gilks & Berzuini 2001) whose target is the
+  exact posterior given the known attitude history, ``π(z) Π_{j<k} L_j(z) L_k(z)^φ`` (φ the
+  tempering exponent reached), proposal scale ``2.38/√D`` times the cloud's covariance
+  square root; this replaces the Liu–West jitter there. It costs a pass over the past
+  measurements per move (O(k N)) and is possible only because the attitude is known. With
+  the attitude estimated the past likelihood depends on each particle's attitude path, which
+  the filter does not keep, so the combined runs use the Liu–West jitter.
+* Random draws: the extra-state initial draw follows the attitude draw, the extra-state noise
+  follows the attitude noise at each step, the jitter follows the attitude roughening, so the
+  attitude-only filter is unchanged bit for bit and every run is deterministic per seed.
+
 Hot loops (propagation + predicted magnitudes fused, GRP charts) are ``numba.njit(parallel)``
 kernels over particles; all random numbers come from one ``numpy.random.Generator`` seeded by
 ``seed`` and are drawn in a fixed order, so a run is reproducible bit for bit for a given seed
@@ -42,9 +84,11 @@ import time
 import numpy as np
 
 from .. import rotations as rot
+from ..errors import InputError
 from ..estimation.particles import multinomial_resample, roughening_sigma, systematic_resample
 from . import _kernels as K
-from ._common import GRP_A, GRP_F, FilterProblem, Recorder, psd_sqrt
+from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
+from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
 __all__ = ["run_bpf", "run_bpf_numpy"]
@@ -174,7 +218,8 @@ def _mean_cov(ops, Q, W, w):
 
 def run_bpf(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
             resampling="systematic", ess_threshold=0.5, progressive=True,
-            max_stages=30, keep_clouds=(), cloud_size=2000) -> Estimate:
+            max_stages=30, keep_clouds=(), cloud_size=2000, bias=None, facets=None,
+            attitude="estimate", param_discount=0.98, mcmc_moves=None) -> Estimate:
     """Run the bootstrap particle filter with numba kernels (module docstring) → Estimate.
 
     Parameters
@@ -190,22 +235,41 @@ def run_bpf(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
     max_stages : int — most tempering stages per measurement.
     keep_clouds : sequence of int — epochs (negative from the end) at which to keep the error
         rotation vectors of ``cloud_size`` particles (needs truth; for fig. 9.6-style plots).
+    bias : :class:`lightcurve.filters.reflection.SiteBias` or None — per-site magnitude-bias
+        states (random walk, Model 1, Model 2); the Estimate then carries ``bias`` and
+        ``bias_sigma`` (N,S), mag.
+    facets : :class:`lightcurve.filters.facet_states.FacetParameterStates` or None — Model 3
+        facet-parameter states; the Estimate then carries ``refl_names`` and per epoch
+        ``refl_p`` / ``refl_p_sigma`` (physical; weighted particle mean and standard
+        deviation of p(z)) and ``refl_z`` / ``refl_z_sigma`` (unbounded), each (N,D).
+    attitude : {"estimate", "truth"} — "truth" (or ``problem.attitude_known``) holds q and ω
+        at the lightcurve's truth (§10.7 parameter-only runs; needs truth in the file) and
+        estimates only the extra states.
+    param_discount : float in (0, 1] — Liu–West discount δ of the extra states' roughening
+        (1 disables it); module docstring, "Extra states".
+    mcmc_moves : int ≥ 0 or None — attitude-known Model 3 runs only: Metropolis resample-move
+        steps per resampling instead of the Liu–West jitter (module docstring; 0: off, the
+        plain bootstrap filter). None (default): 1 for attitude-known Model 3 runs, where the
+        plain filter's posterior collapses (benchmarks/reflection_bpf.py --acceptance), else 0.
     """
     backend = "numba" if problem.model.kernel_ok else "numpy"
     return _run(problem, particles, seed, roughening, resampling, ess_threshold, backend,
-                progressive, max_stages, keep_clouds, cloud_size)
+                progressive, max_stages, keep_clouds, cloud_size, bias=bias, facets=facets,
+                attitude=attitude, param_discount=param_discount, mcmc_moves=mcmc_moves)
 
 
 def run_bpf_numpy(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
                   resampling="systematic", ess_threshold=0.5, progressive=True,
-                  max_stages=30) -> Estimate:
+                  max_stages=30, bias=None, facets=None, attitude="estimate",
+                  param_discount=0.98, mcmc_moves=None) -> Estimate:
     """The same bootstrap particle filter in plain vectorised NumPy (benchmark reference).
 
     Uses the same random draws in the same order as :func:`run_bpf`; results agree with it up
     to floating-point round-off (which can change a resampling decision late in a run).
     """
     return _run(problem, particles, seed, roughening, resampling, ess_threshold, "numpy",
-                progressive, max_stages)
+                progressive, max_stages, bias=bias, facets=facets, attitude=attitude,
+                param_discount=param_discount, mcmc_moves=mcmc_moves)
 
 
 def _propagate_np(dyn, Q, W, dt):
@@ -235,17 +299,20 @@ def _propagate_np(dyn, Q, W, dt):
     return q, w
 
 
-def _flux_numpy(shape, sb, ob):
+def _flux_numpy(shape, sb, ob, areas=None, prm=None):
     """Σ_i A_i (n̂·ŝ)⁺(n̂·ô)⁺ f_r,i in plain NumPy for Lambert / Cook–Torrance facets.
 
-    sb, ob (N,3) body-frame unit vectors. The same formulas as
+    sb, ob (N,3) body-frame unit vectors; ``areas`` (N,F) m² and ``prm`` (N,F,P) per-particle
+    kernel arrays (Model 3) replace the shape's when given. The same formulas as
     :mod:`lightcurve.photometry.kernels` (Cook–Torrance in the DESIGN.md form: Beckmann D,
     G = min(1, 2(n̂·ĥ)(n̂·ô)/(ô·ĥ), 2(n̂·ĥ)(n̂·ŝ)/(ô·ĥ)), standard Fresnel with n from F0);
     returns None when a facet uses another BRDF.
     """
     from ..photometry.kernels import COOK_TORRANCE, LAMBERT
 
-    n, areas, ids, prm = shape.kernel_arrays()
+    n, areas0, ids, prm0 = shape.kernel_arrays()
+    areas = areas0 if areas is None else areas
+    prm = prm0 if prm is None else prm
     if not np.all((ids == LAMBERT) | (ids == COOK_TORRANCE)):
         return None
     ns = sb @ n.T                                   # (N,F)
@@ -257,9 +324,9 @@ def _flux_numpy(shape, sb, ob):
     nh = hh @ n.T                                   # (N,F)
     c = np.sum(ob * hh, axis=1, keepdims=True)      # (N,1)
     lam = ids == LAMBERT
-    xi = np.where(lam, 1.0, prm[:, 0])
-    a = np.where(lam, prm[:, 0], prm[:, 1])
-    mm = np.where(lam, 1.0, prm[:, 2])
+    xi = np.where(lam, 1.0, prm[..., 0])
+    a = np.where(lam, prm[..., 0], prm[..., 1])
+    mm = np.where(lam, 1.0, prm[..., 2])
     diff = xi * a / np.pi * ns * no
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         nh2 = nh * nh
@@ -294,16 +361,228 @@ def _predict_np(model, Q, k):
     return mm + model.lit_offset[k]
 
 
+class _Extra:
+    """Per-particle extra states appended to ``(q, ω)`` (module docstring, "Extra states").
+
+    ``kind`` None (attitude only), ``"bias"`` (site biases ``b_s``, mag, (N,S)) or ``"facets"``
+    (Model 3 unbounded facet parameters z, (N,D)). ``E`` holds the cloud.
+    """
+
+    def __init__(self, p, bias, facets, N, rng, discount):
+        self.bias, self.facets = bias, facets
+        self.kind = None if bias is None and facets is None else ("bias" if bias is not None
+                                                                   else "facets")
+        d = float(discount)
+        if not (0.0 < d <= 1.0):
+            raise ValueError(f"param_discount must lie in (0, 1], got {discount}")
+        # Liu & West (2001) kernel shrinkage: a = (3δ − 1)/(2δ), h² = 1 − a²
+        self.a = (3.0 * d - 1.0) / (2.0 * d)
+        self.h = float(np.sqrt(max(0.0, 1.0 - self.a * self.a)))
+        self.site = np.asarray(p.model.site, np.int64)
+        if self.kind == "bias":
+            self.ne = bias.n_sites
+            self.E = rng.standard_normal((N, self.ne)) * np.sqrt(bias.var0)[None, :]
+        elif self.kind == "facets":
+            self.ne = facets.dim
+            L0 = np.linalg.cholesky(facets.P0)
+            self.E = facets.z0[None, :] + rng.standard_normal((N, self.ne)) @ L0.T
+            self.kc = np.ascontiguousarray(facets.kind_col, dtype=np.int64)
+            self.fc = np.ascontiguousarray(facets.facet, dtype=np.int64)
+            self.lg = np.ascontiguousarray(facets.logit, dtype=np.bool_)
+            self.areas0 = np.ascontiguousarray(facets._areas0)
+            self.params0 = np.ascontiguousarray(facets._params0)
+        else:
+            self.ne = 0
+            self.E = np.zeros((N, 0))
+        self.E = np.ascontiguousarray(self.E)
+        n = p.n
+        self.mean = np.full((n, self.ne), np.nan)
+        self.sd = np.full((n, self.ne), np.nan)
+        if self.kind == "facets":
+            self.pmean = np.full((n, self.ne), np.nan)
+            self.psd = np.full((n, self.ne), np.nan)
+
+    def propagate(self, dt, w_mean, rng):
+        """Exact discrete transition over dt s: ``b ← φ_b b + √q_b · N(0,1)`` (site biases,
+        :meth:`SiteBias.transition` at the mean rate) or ``z ← z + √(q_z Δt) · N(0,1)``
+        (Model 3, eq. 8.39; no draw when the process noise is 0)."""
+        if dt == 0.0 or self.kind is None:
+            return
+        if self.kind == "bias":
+            phi, qb = self.bias.transition(dt, w_mean)
+            if np.any(phi != 1.0):
+                self.E *= phi[None, :]
+            if np.any(qb > 0.0):
+                self.E += rng.standard_normal(self.E.shape) * np.sqrt(qb)[None, :]
+        else:
+            qz = self.facets.process_noise * abs(dt)
+            if qz > 0.0:
+                self.E += rng.standard_normal(self.E.shape) * np.sqrt(qz)
+
+    def add_bias(self, mpred, k):
+        """``m_i ← m_i + b_i,site(k)`` in place (site-bias model only)."""
+        if self.kind == "bias":
+            mpred += self.E[:, self.site[k]]
+
+    def take(self, idx):
+        if self.ne:
+            self.E = np.ascontiguousarray(self.E[idx])
+
+    def jitter(self, rng):
+        """Liu–West shrinkage roughening of the (resampled, equally weighted) extra states:
+        ``e_i ← a e_i + (1 − a) ē + h L ε_i`` with ``L Lᵀ`` the cloud covariance and
+        ``ε_i ~ N(0, I)`` — mean and covariance of the cloud are kept (in expectation), so a
+        constant parameter is not inflated at every resampling, while duplicated particles
+        are separated. The jitter scale is set by the cloud's own spread."""
+        if not self.ne or self.h == 0.0:
+            return
+        mean, V = K.mean_cov_nb(self.E)
+        L = psd_sqrt(V)
+        if not L.shape[1]:
+            return
+        eps = rng.standard_normal((self.E.shape[0], L.shape[1]))
+        out = np.empty_like(self.E)
+        K.affine_rows_nb(eps, np.ascontiguousarray(self.h * L), self.a, (1.0 - self.a) * mean,
+                         self.E, out)
+        self.E = out
+
+    def setup_moves(self, p, n_moves, tq):
+        """Resample-move (attitude known, Model 3): ``n_moves`` Metropolis steps per
+        resampling, targeting the exact posterior of z given the known attitude history."""
+        self.n_moves = int(n_moves)
+        if self.n_moves < 0:
+            raise ValueError(f"mcmc_moves must be >= 0, got {n_moves}")
+        self.n_prop = 0
+        self.n_acc = 0
+        if not self.n_moves:
+            return
+        if self.kind != "facets" or tq is None:
+            raise ValueError("mcmc_moves needs Model 3 facet states and attitude='truth'")
+        m = p.model
+        self._hist = (np.ascontiguousarray(tq), m.s_eci, m.o_eci,
+                      np.ascontiguousarray(m.offset, dtype=float),
+                      np.ascontiguousarray(m.y, dtype=float),
+                      np.ascontiguousarray(m.sigma, dtype=float), m._karrs[0], m._karrs[2])
+        self._Linv = np.linalg.inv(np.linalg.cholesky(self.facets.P0))
+
+    def _log_post(self, Z, k, phi):
+        Qs, S, O, offs, y, sig, n_arr, ids = self._hist
+        ll = np.empty(Z.shape[0])
+        K.facet_loglik_history_nb(Z, k, phi, Qs, S, O, offs, y, sig, self.fc, self.kc,
+                                  self.lg, n_arr, self.areas0, ids, self.params0, ll)
+        r = np.empty_like(Z)
+        K.affine_rows_nb(Z, self._Linv, 0.0, -(self._Linv @ self.facets.z0), Z, r)
+        return ll - 0.5 * np.sum(r * r, axis=1)
+
+    def move(self, k, phi, rng):
+        """Metropolis random-walk moves of every particle's z (Gilks & Berzuini 2001
+        resample-move) targeting ``π(z) Π_{j<k} L_j(z) L_k(z)^φ`` (the tempered posterior at
+        this stage; π the Gaussian prior in z): proposal ``z' = z + (2.38/√D) L ε`` with
+        ``L Lᵀ`` the cloud covariance, acceptance ``min(1, post(z')/post(z))``. Leaves the
+        target invariant, so it only rejuvenates the cloud (no artificial spread)."""
+        if not self.n_moves:
+            return
+        D = self.ne
+        L = psd_sqrt(K.mean_cov_nb(self.E)[1])
+        if not L.shape[1]:
+            return
+        cL = np.ascontiguousarray(2.38 / np.sqrt(D) * L)
+        zero = np.zeros(D)
+        lp0 = self._log_post(self.E, k, phi)
+        for _ in range(self.n_moves):
+            Zp = np.empty_like(self.E)
+            K.affine_rows_nb(rng.standard_normal((self.E.shape[0], L.shape[1])), cL, 1.0, zero,
+                             self.E, Zp)
+            lp1 = self._log_post(Zp, k, phi)
+            u = rng.random(self.E.shape[0])
+            with np.errstate(invalid="ignore"):
+                acc = np.log(u) < lp1 - lp0
+            acc &= np.isfinite(lp1)
+            self.E[acc] = Zp[acc]
+            lp0[acc] = lp1[acc]
+            self.n_prop += acc.size
+            self.n_acc += int(acc.sum())
+
+    def record(self, k, w):
+        """Weighted mean and 1σ of the extra states at epoch k (and of p(z) for Model 3)."""
+        if not self.ne:
+            return
+        if self.kind == "facets":
+            zm, zv, pm, pv = K.weighted_param_stats_nb(self.E, np.ascontiguousarray(w), self.lg)
+            self.mean[k], self.sd[k] = zm, np.sqrt(zv)
+            self.pmean[k], self.psd[k] = pm, np.sqrt(pv)
+        else:
+            m = w @ self.E
+            self.mean[k] = m
+            self.sd[k] = np.sqrt(np.clip(w @ (self.E - m) ** 2, 0.0, None))
+
+    def attach(self, est):
+        if self.kind == "bias":
+            attach_bias(est, self.bias, self.mean, self.sd)
+            est.meta["reflection"]["roughening"] = "liu-west"
+            est.meta["reflection"]["liu_west_a"] = self.a
+        elif self.kind == "facets":
+            fs = self.facets
+            est.refl_names = list(fs.names)
+            est.refl_z, est.refl_z_sigma = self.mean, self.sd
+            est.refl_p, est.refl_p_sigma = self.pmean, self.psd
+            est.meta["reflection_names"] = list(fs.names)
+            est.meta["reflection"] = dict(fs.describe(), p_final=self.pmean[-1].tolist(),
+                                          p_sigma_final=self.psd[-1].tolist(),
+                                          z_final=self.mean[-1].tolist(),
+                                          z_sigma_final=self.sd[-1].tolist(),
+                                          roughening=("resample-move" if self.n_moves
+                                                      else "liu-west"),
+                                          liu_west_a=self.a, mcmc_moves=self.n_moves,
+                                          mcmc_acceptance=(self.n_acc / self.n_prop
+                                                           if self.n_prop else None))
+
+
+def _predict_facets(backend, p, ext, k, Q, zeta, out):
+    """Predicted magnitudes (N,) with per-particle facet parameters (Model 3) at epoch k;
+    Q (N,4) or (1,4) (attitude known)."""
+    m = p.model
+    if backend == "numba":
+        n_arr, _, ids, _ = m._karrs
+        K.facet_mag_particles_nb(Q, zeta, ext.E, ext.fc, ext.kc, ext.lg, m.s_eci[k], m.o_eci[k],
+                                 n_arr, ext.areas0, ids, ext.params0, float(m.offset[k]), out)
+        return out
+    N = ext.E.shape[0]
+    Qm = np.broadcast_to(Q, (N, 4)) if Q.shape[0] == 1 else Q
+    if zeta.shape[0]:
+        Qm = rot.quat_mult(rot.rotvec_to_quat(zeta), Qm)
+    areas, prm = ext.facets.facet_arrays(ext.E)
+    sb = rot.quat_rotate(Qm, m.s_eci[k][None, :])
+    ob = rot.quat_rotate(Qm, m.o_eci[k][None, :])
+    fl = _flux_numpy(m.shape, sb, ob, areas=areas, prm=prm)
+    if fl is None:                       # BRDFs without a NumPy formula: per-particle shapes
+        out[:] = ext.facets.magnitudes(m, np.ascontiguousarray(Qm), ext.E, k)
+        return out
+    with np.errstate(divide="ignore"):
+        out[:] = np.where(fl > 0, m.offset[k] - 2.5 * np.log10(np.where(fl > 0, fl, 1.0)), np.inf)
+    return out
+
+
 def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshold, backend,
-         progressive=True, max_stages=30, keep_clouds=(), cloud_size=2000):
+         progressive=True, max_stages=30, keep_clouds=(), cloud_size=2000, bias=None,
+         facets=None, attitude="estimate", param_discount=0.98, mcmc_moves=None):
     N, G, ess_thr = _check(particles, roughening, resampling, ess_threshold)
+    if bias is not None and facets is not None:
+        raise ValueError("site biases and Model 3 facet states are alternatives; give one")
+    if attitude not in ("estimate", "truth"):
+        raise ValueError(f"attitude must be 'estimate' or 'truth', got {attitude!r}")
+    fixed = attitude == "truth" or bool(getattr(p, "attitude_known", False))
+    if fixed and (p.truth_q is None or p.truth_omega is None):
+        raise InputError("attitude='truth' needs the truth attitude and rate in the lightcurve",
+                         field="attitude", value=attitude)
     max_stages = int(max_stages)
-    keep = {int(k) % p.n for k in keep_clouds} if p.truth_q is not None else set()
+    keep = {int(k) % p.n for k in keep_clouds} if (p.truth_q is not None and not fixed) else set()
     clouds = {}
     t0 = time.perf_counter()
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "bpf")
+    gate = InnovationGate(p, auto="inflate")   # outlier gate + unlit/below-horizon screening
     rec.stages = np.zeros(p.n, dtype=np.int64)
     ops = _NumbaOps if backend == "numba" else _NumpyOps
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xB9F]))
@@ -314,22 +593,32 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
     n_arr, a_arr, ids, prm = m._karrs
     zc = dyn.zeta_cov
 
-    X0 = rng.standard_normal((N, 6)) @ psd_sqrt(p.P0).T
-    Q = np.ascontiguousarray(ops.from_grp(X0[:, :3], p.q0))
-    W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
+    if fixed:
+        tq = p.truth_q / np.linalg.norm(p.truth_q, axis=1, keepdims=True)
+        Q = np.ascontiguousarray(tq[:1])
+        W = np.ascontiguousarray(p.truth_omega[:1])
+    else:
+        X0 = rng.standard_normal((N, 6)) @ psd_sqrt(p.P0).T
+        Q = np.ascontiguousarray(ops.from_grp(X0[:, :3], p.q0))
+        W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
+    ext = _Extra(p, bias, facets, N, rng, param_discount)
+    if mcmc_moves is None:
+        mcmc_moves = 1 if (fixed and facets is not None) else 0
+    ext.setup_moves(p, mcmc_moves, tq if fixed else None)
     logw = np.full(N, -np.log(N))
-    w_mean = p.omega0.copy()
+    w_mean = p.omega0.copy() if not fixed else p.truth_omega[0].copy()
     empty6 = np.zeros((0, 6))
     empty3 = np.zeros((0, 3))
     nan3 = np.full(3, np.nan)
     mpred = np.empty(N)
     ll = np.zeros(N)
     w = np.full(N, 1.0 / N)
+    zero6 = np.zeros((6, 6))
     for k in range(p.n):
         dt = float(m.t[k] - m.t[k - 1]) if k > 0 else 0.0
         z = empty6
         L = np.zeros((6, 6))
-        if dt != 0.0:
+        if dt != 0.0 and not fixed:
             _, Qd = dyn.transition(w_mean, dt)
             if p.random_walk_zeta():
                 Qd = Qd.copy()
@@ -339,13 +628,25 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
                 z = rng.standard_normal((N, L.shape[1]))   # noise sample = z Lᵀ
         y = m.y[k]
         has_y = bool(np.isfinite(y))
+        skipped = has_y and gate.skip_epoch(k, rec)   # object unlit / below the horizon
+        has_y = has_y and not skipped
         zeta = empty3
-        if has_y and p.jitter_zeta():
+        if has_y and p.jitter_zeta() and not fixed:
             zeta = rng.standard_normal((N, 3)) * dyn.acs_sigma
-        if backend == "numba":
-            s = m.s_eci[k] if has_y else nan3
+        ext.propagate(dt, w_mean, rng)
+        if fixed:
+            Q = np.ascontiguousarray(tq[k:k + 1])
+            W = np.ascontiguousarray(p.truth_omega[k:k + 1])
+            if has_y:
+                mpred = _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, mpred)
+        elif backend == "numba":
+            s = m.s_eci[k] if (has_y and ext.kind != "facets") else nan3
             K.bpf_predict_nb(Q, W, dt, mode, J, Ji, dyn.nsub(dt) if mode else 1, z, L, zeta,
                              s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]), mpred)
+            if has_y and ext.kind == "facets":
+                _predict_facets(backend, p, ext, k, Q, zeta, mpred)
+            elif has_y:
+                ext.add_bias(mpred, k)
         else:
             Q, W = _propagate_np(dyn, Q, W, dt)
             if z.shape[0]:
@@ -354,18 +655,27 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
                 Q = Q / np.linalg.norm(Q, axis=1, keepdims=True)
                 W = W + noise[:, 3:]
             if has_y:
-                Qm = Q
-                if zeta.shape[0]:
-                    Qm = rot.quat_mult(rot.rotvec_to_quat(zeta), Q)
-                mpred = _predict_np(m, Qm, k)
-        if not has_y:
+                mpred = _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, mpred)
+        if skipped:
+            neff, _ = ops.addnorm(logw, ll, 0.0, w)
+        elif not has_y:
             rec.flags[k] |= FLAG_NAN
             rec.skipped_nan += 1
             neff, _ = ops.addnorm(logw, ll, 0.0, w)
         else:
             sig = float(m.sigma[k])
             yhat, var_m, any_fin = ops.innov(logw, mpred, float(y), sig, ll)
-            if any_fin:
+            # innovation gate: S = particle variance of the predictions + R (gating.py)
+            # (and no particle explains y: its own |y − m(q_i)| > √(γ R); gating docstring)
+            R = (gate.check(k, y - yhat, var_m + sig * sig, sig * sig, rec,
+                            nu_nearest=np.min(np.abs(y - mpred[np.isfinite(mpred)])))
+                 if any_fin else sig * sig)
+            if R is None:
+                ll[:] = 0.0   # outlier rejected: the weights are left unchanged
+            elif R != sig * sig:
+                sig = float(np.sqrt(R))   # gate mode "inflate": the inflated noise
+                ops.innov(logw, mpred, float(y), sig, ll)
+            if any_fin and R is not None:
                 rec.innovation(k, y - yhat, var_m + sig * sig)
             if progressive:
                 # progressive correction (module docstring, step 3b): temper the likelihood in
@@ -382,15 +692,22 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
                         break
                     rest -= phi
                     idx = resample(w, rng)
-                    Q = np.ascontiguousarray(Q[idx])
-                    W = np.ascontiguousarray(W[idx])
+                    if not fixed:
+                        Q = np.ascontiguousarray(Q[idx])
+                        W = np.ascontiguousarray(W[idx])
+                    ext.take(idx)
                     if zeta.shape[0]:
                         zeta = np.ascontiguousarray(zeta[idx])
                     logw = np.full(N, -np.log(N))
                     rec.flags[k] |= FLAG_RESAMPLED
-                    _, _, _, dps, qst = _mean_cov(ops, Q, W, np.full(N, 1.0 / N))
-                    Q, W = _roughen(ops, Q, W, qst, G, rng, attitude_only=True, dp=dps)
-                    mpred = _predict_only(backend, m, k, Q, W, zeta, n_arr, a_arr, ids, prm, J, Ji)
+                    if not fixed:
+                        _, _, _, dps, qst = _mean_cov(ops, Q, W, np.full(N, 1.0 / N))
+                        Q, W = _roughen(ops, Q, W, qst, G, rng, attitude_only=True, dp=dps)
+                    if ext.n_moves:
+                        ext.move(k, 1.0 - rest, rng)
+                    else:
+                        ext.jitter(rng)
+                    mpred = _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, mpred)
                     ops.innov(logw, mpred, float(y), sig, ll)
                     rec.stages[k] += 1
             else:
@@ -401,26 +718,55 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
                 logw = np.full(N, -np.log(N))
                 neff, _ = ops.addnorm(logw, ll, 0.0, w)
         rec.neff[k] = neff
-        qhat, what, C, dp, qref = _mean_cov(ops, Q, W, w)
+        if fixed:
+            qhat, what, C = tq[k], p.truth_omega[k].copy(), zero6
+        else:
+            qhat, what, C, dp, qref = _mean_cov(ops, Q, W, w)
+        ext.record(k, w)
         if k in keep:
             # weighted draw of cloud_size particles (separate stream: does not perturb the run)
             crng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xC10D, k]))
             sel = crng.choice(N, size=min(int(cloud_size), N), p=w)
-            tq = np.broadcast_to(p.truth_q[k] / np.linalg.norm(p.truth_q[k]), (sel.size, 4))
-            clouds[k] = np.degrees(rot.attitude_error_rotvec(tq, Q[sel]))
+            tqk = np.broadcast_to(p.truth_q[k] / np.linalg.norm(p.truth_q[k]), (sel.size, 4))
+            clouds[k] = np.degrees(rot.attitude_error_rotvec(tqk, Q[sel]))
         w_mean = what
         rec.store(k, qhat, what, C)
         if has_y and neff < ess_thr * N:
             idx = resample(w, rng)
-            Q = np.ascontiguousarray(Q[idx])
-            W = np.ascontiguousarray(W[idx])
             logw = np.full(N, -np.log(N))
             rec.flags[k] |= FLAG_RESAMPLED
-            Q, W = _roughen(ops, Q, W, qref, G, rng, dp=dp[idx])
-    est = rec.finish(time.perf_counter() - t0)
+            ext.take(idx)
+            if not fixed:
+                Q = np.ascontiguousarray(Q[idx])
+                W = np.ascontiguousarray(W[idx])
+                Q, W = _roughen(ops, Q, W, qref, G, rng, dp=dp[idx])
+            if ext.n_moves:
+                ext.move(k, 1.0, rng)
+            else:
+                ext.jitter(rng)
+    est = gate.finish(rec.finish(time.perf_counter() - t0))
     est.meta["tempering_stages"] = rec.stages.tolist()
+    if fixed:
+        est.meta["attitude"] = "truth"
+    ext.attach(est)
     est.clouds = clouds or None
     return est
+
+
+def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
+    """Predicted magnitudes (N,) of the current cloud at epoch k without moving it (attitude
+    only, + site bias, or with per-particle facet parameters)."""
+    if ext.kind == "facets":
+        return _predict_facets(backend, p, ext, k, Q, zeta, out)
+    m = p.model
+    if Q.shape[0] != out.shape[0]:       # attitude known, no per-particle state changes m(q)
+        Q = np.ascontiguousarray(np.broadcast_to(Q, (out.shape[0], 4)))
+        W = np.ascontiguousarray(np.broadcast_to(W, (out.shape[0], 3)))
+    n_arr, a_arr, ids, prm = m._karrs
+    mp = _predict_only(backend, m, k, Q, W, zeta, n_arr, a_arr, ids, prm, J, Ji)
+    out[:] = mp
+    ext.add_bias(out, k)
+    return out
 
 
 def _roughen(ops, Q, W, qref, G, rng, attitude_only=False, dp=None):

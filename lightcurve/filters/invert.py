@@ -7,6 +7,13 @@ and ``P₀ = diag(σθ² I₃, σω² I₃)``; a user-given ``initial_q`` / ``in
 perturbed truth (needed for recordings without truth). Dynamics come from the scenario stored in
 the file (controlled / uncontrolled, ACS σ, inertia) unless overridden; the shape from
 ``curve.attrs["shape"]`` unless given.
+
+``reflection`` adds states for uncertain reflection parameters (Bernard ch. 8): per-site
+magnitude biases (``"random-walk"``, ``"model1"``, ``"model2"``,
+:mod:`lightcurve.filters.reflection`) or Model 3, the facet parameters themselves
+(``"model3"``, :mod:`lightcurve.filters.facet_states`). ``attitude="truth"`` is the
+"attitude known" mode of §10.7: q, ω are held at the file's truth and only the reflection
+states are estimated.
 """
 
 from __future__ import annotations
@@ -20,9 +27,11 @@ from ._common import FilterProblem
 from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
 from .result import Estimate
 
-__all__ = ["invert", "build_problem", "METHODS"]
+__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES"]
 
 METHODS = ("mekf", "ukf", "bpf")
+#: ``invert(attitude=…)``: estimate attitude and rate, or hold them at the file's truth (§10.7)
+ATTITUDE_MODES = ("estimate", "truth")
 
 
 def _scenario_attitude(curve):
@@ -70,14 +79,22 @@ def _check_curve(curve):
 def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                   initial_q=None, initial_omega=None, shape=None, dynamics=None,
                   acs_sigma_deg=None, acs_mode="random_walk", pseudo_noise=0.0,
-                  eta_sigma_deg_s2=None, inertia_kg_m2=None, substep_s=0.5) -> FilterProblem:
+                  eta_sigma_deg_s2=None, inertia_kg_m2=None, substep_s=0.5,
+                  attitude="estimate") -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
     Parameters mirror :func:`invert`; ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` /
     ``dynamics`` default to the scenario stored in the lightcurve file (ACS 0 and
-    "controlled" when the file has none).
+    "controlled" when the file has none). ``attitude="truth"`` sets
+    ``FilterProblem.attitude_known`` (needs truth in the file).
     """
     _check_curve(curve)
+    if attitude not in ATTITUDE_MODES:
+        raise InputError("unknown attitude mode", field="attitude", value=attitude,
+                         allowed=", ".join(ATTITUDE_MODES))
+    if attitude == "truth" and not curve.has_truth:
+        raise InputError("attitude known (truth) needs a lightcurve with truth_q and "
+                         "truth_omega_rad_s", field="attitude", value=attitude)
     if shape is None:
         name = (curve.attrs or {}).get("shape", "")
         if not name:
@@ -145,8 +162,11 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     meta = {"seed": int(seed), "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
             "dynamics": dyn_kind, "acs_sigma_deg": float(np.degrees(dyn.acs_sigma)),
             "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", "")}
+    if attitude == "truth":
+        meta["attitude"] = "truth"
     return FilterProblem(model=model, dynamics=dyn, q0=q0, omega0=w0, P0=P0,
-                         truth_q=curve.truth_q, truth_omega=curve.truth_omega_rad_s, meta=meta)
+                         truth_q=curve.truth_q, truth_omega=curve.truth_omega_rad_s, meta=meta,
+                         attitude_known=attitude == "truth")
 
 
 def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
@@ -154,7 +174,9 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
            initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
            acs_mode="random_walk", pseudo_noise=0.0, eta_sigma_deg_s2=None, inertia_kg_m2=None,
            alpha=1.0, beta=2.0, kappa=0.0, error="grp", jacobian="analytic",
-           keep_clouds=(), reflection="none", reflection_frac=0.1) -> Estimate:
+           keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
+           reflection_process_noise=0.0, reflection_facets=None,
+           reflection_kinds=("xi", "a", "m", "A"), gate=None) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -181,11 +203,27 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     alpha, beta, kappa : UKF scaling parameters.
     error, jacobian : MEKF options (see :func:`lightcurve.filters.mekf.run_mekf`).
     keep_clouds : BPF epochs whose particle error clouds are kept (fig. 9.6-style plots).
-    reflection : {"none", "random-walk", "model1", "model2"}
-        Per-site magnitude-bias states for uncertain reflection parameters (Bernard ch. 8;
-        :mod:`lightcurve.filters.reflection`), MEKF and UKF only so far (the BPF raises
-        NotImplementedError); the estimate then carries ``bias`` and ``bias_sigma`` (N,S).
-    reflection_frac : float > 0 — relative 1σ of the reflection parameters behind eq. 8.10.
+    reflection : {"none", "random-walk", "model1", "model2", "model3"}
+        Extra states for uncertain reflection parameters (Bernard ch. 8): per-site magnitude
+        biases (:mod:`lightcurve.filters.reflection`; the estimate then carries ``bias`` and
+        ``bias_sigma`` (N,S)) or Model 3 facet-parameter states
+        (:mod:`lightcurve.filters.facet_states`; ``refl_z``, ``refl_p`` and 1σ (N,D), final
+        values in ``meta["reflection"]``). MEKF, UKF and — when
+        :func:`~lightcurve.filters.bpf.run_bpf` accepts ``bias=`` / ``facets=`` /
+        ``attitude=`` — the BPF (otherwise NotImplementedError).
+    reflection_frac : float > 0 — relative 1σ of the reflection parameters (eq. 8.10 for the
+        bias models; the Model 3 prior, §10.1).
+    attitude : {"estimate", "truth"} — "truth": attitude known (§10.7), only the reflection
+        states are estimated (needs ``reflection != "none"``).
+    reflection_process_noise : float ≥ 0 — Model 3 process-noise PSD in z-units²/s (default 0,
+        constant parameters, eq. 8.39).
+    reflection_facets, reflection_kinds : Model 3 facets (default every Cook–Torrance facet)
+        and parameters (default ξ, a, m, A).
+    gate : None, "auto", "reject", "inflate", "off", dict or GateConfig — the innovation
+        (outlier) gate and unlit/below-horizon screening of :mod:`lightcurve.filters.gating`;
+        None = its defaults (NIS > 15.14, false-alarm rate 1e-4; reject in the UKF, inflate
+        in the MEKF and the BPF). Counts land in
+        ``est.meta["gate"]`` and :meth:`Estimate.summary`.
 
     Returns
     -------
@@ -199,33 +237,67 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
                             initial_omega=initial_omega, shape=shape, dynamics=dynamics,
                             acs_sigma_deg=acs_sigma_deg, acs_mode=acs_mode,
                             pseudo_noise=pseudo_noise, eta_sigma_deg_s2=eta_sigma_deg_s2,
-                            inertia_kg_m2=inertia_kg_m2)
+                            inertia_kg_m2=inertia_kg_m2, attitude=attitude)
     problem.meta["method"] = method
-    bias = None
-    if reflection != "none":
-        from .reflection import REFLECTION_CHOICES, SiteBias
+    if gate is not None:   # innovation gate / epoch screening settings (filters.gating)
+        from .gating import set_gate
 
-        if reflection not in REFLECTION_CHOICES:
-            raise InputError("unknown reflection model", field="reflection", value=reflection,
-                             allowed=", ".join(REFLECTION_CHOICES))
+        set_gate(problem, gate)
+    bias = facets = None
+    from .reflection import REFLECTION_CHOICES
+
+    if reflection not in REFLECTION_CHOICES:
+        raise InputError("unknown reflection model", field="reflection", value=reflection,
+                         allowed=", ".join(REFLECTION_CHOICES))
+    if attitude == "truth" and reflection == "none":
+        raise InputError("attitude known (truth) leaves nothing to estimate without "
+                         "reflection states", field="reflection", value=reflection,
+                         allowed="random-walk, model1, model2, model3")
+    if reflection != "none":
+        from .reflection import SiteBias
+
         fr = float(reflection_frac)
         if not (fr > 0 and np.isfinite(fr)):
             raise InputError("must be > 0", field="reflection_frac", value=reflection_frac)
-        if method == "bpf":
-            raise NotImplementedError("reflection-bias states are implemented in the MEKF and "
-                                      "the UKF only; the BPF (and Model 3) are not done yet")
-        bias = SiteBias.from_problem(reflection, problem, frac=fr)
+        if reflection == "model3":
+            from .facet_states import FacetParameterStates
+
+            facets = FacetParameterStates(problem.model.shape, facets=reflection_facets,
+                                          kinds=reflection_kinds, prior_frac=fr,
+                                          process_noise=reflection_process_noise)
+        else:
+            bias = SiteBias.from_problem(reflection, problem, frac=fr)
     if method == "mekf":
         from .mekf import run_mekf
 
-        return run_mekf(problem, error=error, jacobian=jacobian, bias=bias)
+        return run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
     if method == "ukf":
         from .ukf import run_ukf
 
-        return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias)
+        return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
     from .bpf import run_bpf
 
+    extra = {}
+    if bias is not None or facets is not None or attitude == "truth":
+        import inspect
+
+        accepted = inspect.signature(run_bpf).parameters
+        need = (["bias"] if bias is not None else []) + (["facets"] if facets is not None else [])
+        missing = [n for n in need if n not in accepted]
+        if missing:
+            raise NotImplementedError(
+                "the BPF does not accept reflection states (" + ", ".join(missing or need)
+                + ") yet; use the MEKF or the UKF")
+        if bias is not None:
+            extra["bias"] = bias
+        if facets is not None:
+            extra["facets"] = facets
+        if attitude == "truth":
+            if "attitude" not in accepted:
+                raise NotImplementedError("the BPF does not support the attitude-known mode yet")
+            extra["attitude"] = "truth"
     problem.meta.update({"particles": int(particles), "roughening": float(roughening),
                          "resampling": resampling, "ess_threshold": float(ess_threshold)})
     return run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
-                   resampling=resampling, ess_threshold=ess_threshold, keep_clouds=keep_clouds)
+                   resampling=resampling, ess_threshold=ess_threshold, keep_clouds=keep_clouds,
+                   **extra)

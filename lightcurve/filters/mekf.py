@@ -19,9 +19,18 @@ Per epoch k (times sorted as in the lightcurve; two sites may share a time, Δt 
    state is ``[δθ, δω, b_1 … b_S]``: ``ŷ = m(q̂) + b̂_site``, ``H = [∂m/∂δθ, 0, e_site]``, the
    bias block propagates with its own diagonal ``Φ_b, Q_b``; the Estimate's covariance keeps
    the 6×6 attitude/rate block and ``est.bias`` / ``est.bias_sigma`` (N,S) hold the biases.
+   Model 3 (``facets``, :mod:`lightcurve.filters.facet_states`): the facet parameters'
+   unconstrained coordinates z are appended, ``[δθ, δω, b…, z]``; ``ŷ = m(q̂, p(ẑ))``,
+   ``H_z = ∂m/∂p · dp/dz`` (analytic partials), constant dynamics (``Φ_z = I``, eq. 8.39);
+   ``est.refl_z``/``refl_p`` (N,D) with 1σ hold the history. With
+   ``problem.attitude_known`` (§10.7) q̂, ω̂ are the truth of every epoch and only b, z are
+   estimated.
    A refused update (S not positive definite, non-finite values) keeps the prior and sets
    :data:`~lightcurve.filters.result.FLAG_REFUSED`; an estimate that predicts no reflected
    light (m = +inf) skips the update with :data:`~lightcurve.filters.result.FLAG_INVISIBLE`.
+   Screening (:mod:`lightcurve.filters.gating`): epochs with the object unlit or below the
+   horizon are skipped, and a magnitude whose ``ν²/S`` (``S = H P⁻ Hᵀ + R``) exceeds the χ²
+   gate is rejected (or used with inflated R), flagged and counted.
 """
 
 from __future__ import annotations
@@ -32,8 +41,10 @@ import numpy as np
 
 from .. import rotations as rot
 from ..estimation.kalman import joseph_update
-from ._common import (FilterProblem, Recorder, attach_bias, augmented_transition, grp_to_dq,
-                      initial_state, single_thread)
+from . import _kernels as K
+from ._common import (FilterProblem, Recorder, attach_bias, attach_facets, grp_to_dq,
+                      initial_state_ext, layout_transition, single_thread, truth_state)
+from .gating import InnovationGate
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
 __all__ = ["run_mekf"]
@@ -49,7 +60,8 @@ def _reset(q, dth, error):
     return qn / np.linalg.norm(qn)
 
 
-def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=None) -> Estimate:
+def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=None,
+             facets=None) -> Estimate:
     """Run the MEKF over every epoch of ``problem`` (module docstring) → :class:`Estimate`.
 
     Parameters
@@ -61,69 +73,116 @@ def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=N
         ``∂m/∂δθ`` from :func:`lightcurve.photometry.magnitude_partials` or central differences.
     bias : :class:`lightcurve.filters.reflection.SiteBias` or None
         Per-site reflection-bias states (module docstring); None = attitude and rate only.
+    facets : :class:`lightcurve.filters.facet_states.FacetParameterStates` or None
+        Model 3 facet-parameter states z appended after the biases (module docstring).
     """
     if error not in ("grp", "small_angle"):
         raise ValueError(f"error must be 'grp' or 'small_angle', got {error!r}")
     if jacobian not in ("analytic", "numeric"):
         raise ValueError(f"jacobian must be 'analytic' or 'numeric', got {jacobian!r}")
     with single_thread():
-        return _run(problem, error, jacobian, bias)
+        return _run(problem, error, jacobian, bias, facets)
 
 
-def _run(problem, error, jacobian, bias=None):
+def _run(problem, error, jacobian, bias=None, facets=None):
     t0 = time.perf_counter()
     p = problem
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "mekf")
-    q, w, nb, nx, P, b, b_hist, bs_hist = initial_state(p, bias)
+    gate = InnovationGate(p, auto="inflate")   # outlier gate, unlit/below-horizon screening
+    L, q, w, b, z, P = initial_state_ext(p, bias, facets)
+    na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
+    b_hist = np.full((p.n, nb), np.nan) if nb else None
+    bs_hist = np.full((p.n, nb), np.nan) if nb else None
+    z_hist = np.full((p.n, nz), np.nan) if nz else None
+    zc_hist = np.full((p.n, nz, nz), np.nan) if nz else None
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
             dt = float(m.t[k] - m.t[k - 1])
             if dt != 0.0:
-                Phi, Qd, phib = augmented_transition(dyn, bias, w, dt, nx)
+                Phi, Qd, phib = layout_transition(dyn, L, bias, facets, w, dt)
                 if nb:
                     b = phib * b
-                Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
-                q, w = Qn[0], Wn[0]
+                if na:
+                    Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
+                    q, w = Qn[0], Wn[0]
                 P = Phi @ P @ Phi.T + Qd
-                if p.random_walk_zeta():
+                if na and p.random_walk_zeta():
                     P[:3, :3] += zc
                 P = 0.5 * (P + P.T)
+        if not na:
+            q, w = truth_state(p, k)
         y = m.y[k]
         if not np.isfinite(y):
             rec.flags[k] |= FLAG_NAN
             rec.skipped_nan += 1
+        elif gate.skip_epoch(k, rec):
+            pass  # object unlit or below the horizon: flagged and counted, not used
         else:
-            yhat = float(m.predict_q(q[None, :], k)[0])
-            Hth = m.jacobian_theta(q, k, method=jacobian) if np.isfinite(yhat) else None
-            if not np.isfinite(yhat) or not np.all(np.isfinite(Hth)):
+            yhat, Hth, Hz = _predict(m, facets, q, z, k, jacobian)
+            if not np.isfinite(yhat) or not np.all(np.isfinite(Hth)) \
+                    or not np.all(np.isfinite(Hz)):
                 rec.flags[k] |= FLAG_INVISIBLE
             else:
                 H = np.zeros((1, nx))
-                H[0, :3] = Hth
+                if na:
+                    H[0, :3] = Hth
                 if nb:
                     s = int(bias.site[k])
-                    H[0, 6 + s] = 1.0
+                    H[0, na + s] = 1.0
                     yhat += float(b[s])
+                if nz:
+                    H[0, L.iz] = Hz
                 R = m.sigma[k] ** 2
-                if p.jitter_zeta():
+                if na and p.jitter_zeta():
                     R = R + float(Hth @ zc @ Hth)
-                dx, Pn, info = joseph_update(np.zeros(nx), P, y, H, R, h=yhat)
-                rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
-                if info.ok:
-                    q = _reset(q, dx[:3], error)
-                    w = w + dx[3:6]
-                    b = b + dx[6:]
-                    P = Pn
-                else:
-                    rec.flags[k] |= FLAG_REFUSED
-        rec.store(k, q, w, P[:6, :6])
+                # innovation gate: None = outlier rejected (flagged; prior kept)
+                R = gate.check(k, y - yhat, float(H[0] @ P @ H[0]) + R, R, rec)
+                if R is not None:
+                    dx, Pn, info = joseph_update(np.zeros(nx), P, y, H, R, h=yhat)
+                    rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
+                    if info.ok:
+                        if na:
+                            q = _reset(q, dx[:3], error)
+                            w = w + dx[3:6]
+                        b = b + dx[L.ib]
+                        z = z + dx[L.iz]
+                        P = Pn
+                    else:
+                        rec.flags[k] |= FLAG_REFUSED
+        rec.store(k, q, w, P[:6, :6] if na else np.zeros((6, 6)))
         if nb:
             b_hist[k] = b
-            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[6:], 0.0, None))
-    est = rec.finish(time.perf_counter() - t0)
+            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[L.ib], 0.0, None))
+        if nz:
+            z_hist[k] = z
+            zc_hist[k] = P[L.iz, L.iz]
+    est = gate.finish(rec.finish(time.perf_counter() - t0))
     if nb:
         attach_bias(est, bias, b_hist, bs_hist)
+    if nz:
+        attach_facets(est, facets, z_hist, zc_hist)
+    if not na:
+        est.meta["attitude"] = "truth"
     return est
+
+
+def _predict(m, facets, q, z, k, jacobian, h=1e-6):
+    """``(ŷ, ∂m/∂δθ (3,), ∂m/∂z (D,))`` at the attitude q and Model 3 state z (D = 0 without
+    facet states). Analytic partials, or central differences (step h rad / h in z)."""
+    if facets is None:
+        yhat = float(m.predict_q(q[None, :], k)[0])
+        Hth = m.jacobian_theta(q, k, method=jacobian) if np.isfinite(yhat) else np.full(3, np.nan)
+        return yhat, Hth, np.zeros(0)
+    if jacobian == "analytic":
+        return facets.partials(m, q, z, k)
+    yhat = float(facets.magnitudes(m, q[None, :], z, k)[0])
+    d = np.concatenate([h * np.eye(3), -h * np.eye(3)])
+    Qp = K.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
+    mq = facets.magnitudes(m, Qp, z, k)
+    E = h * np.eye(facets.dim)
+    Zp = np.concatenate([z + E, z - E])
+    mz = facets.magnitudes(m, np.tile(q, (2 * facets.dim, 1)), Zp, k)
+    return yhat, (mq[:3] - mq[3:]) / (2 * h), (mz[:facets.dim] - mz[facets.dim:]) / (2 * h)

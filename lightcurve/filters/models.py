@@ -36,7 +36,10 @@ Measurement model
 epoch (DESIGN.md equation, Bernard eq. 5.2–5.6 consistent form), vectorised over particles or
 sigma points with a numba kernel (numpy photometry for BRDFs without a kernel), noise σ from
 the lightcurve's ``mag_sigma``, the partial ``∂m/∂δθ`` analytic
-(:func:`lightcurve.photometry.magnitude_partials`) or by central differences.
+(:func:`lightcurve.photometry.magnitude_partials`) or by central differences. With Model 3
+facet-parameter states the same measurement is evaluated with per-state facet arrays and
+partials ``∂m/∂z`` by :class:`lightcurve.filters.facet_states.FacetParameterStates`
+(``magnitudes``, ``partials``), using this model's geometry and offsets.
 """
 
 from __future__ import annotations
@@ -48,6 +51,17 @@ from .. import rotations as rot
 from ..errors import InputError
 from ..photometry.magnitude import AU_M, SUN_MAG_V, apparent_magnitude
 from . import _kernels as K
+from . import _transition_kernels as TK
+
+_EYE3 = np.eye(3)  # placeholder inertia for the controlled error_F kernel (not used there)
+
+
+def _finite_rate(omega):
+    """``omega`` as a contiguous (3,) float array; ValueError for NaN/inf (as the NumPy path)."""
+    w = np.ascontiguousarray(omega, dtype=float).reshape(3)
+    if not np.isfinite(w).all():
+        raise ValueError("omega: contains NaN or infinite values")
+    return w
 
 __all__ = ["MagnitudeModel", "ControlledDynamics", "UncontrolledDynamics", "error_F",
            "discretize"]
@@ -137,7 +151,23 @@ class ControlledDynamics:
         Without pseudo-noise Φ is the closed form of ``exp(F Δt)`` for eq. 7.24:
         ``Φθθ = exp(−[ω×]Δt)``, ``Φθω = I Δt − (1 − cos φ)/|ω|² [ω×]
         + (Δt − sin φ/|ω|)/|ω|² [ω×]²`` (φ = |ω| Δt), ``Φωω = I``; otherwise Van Loan.
+        Numba kernels (:mod:`lightcurve.filters._transition_kernels`); :meth:`transition_numpy`
+        is the NumPy reference of the same computation (equal to rounding, tested to 1e-12).
         """
+        dt = float(dt)
+        w = _finite_rate(omega)
+        if self.pseudo_noise == 0.0:
+            return TK.controlled_transition_nb(w, dt), np.zeros((6, 6))
+        Qc = np.zeros((6, 6))
+        Qc[3:, 3:] = self.pseudo_noise * np.eye(3)
+        F = np.empty((6, 6))
+        TK.error_F_nb(w, _EYE3, _EYE3, False, F)
+        Phi, Qd = np.empty((6, 6)), np.empty((6, 6))
+        TK.van_loan_nb(F, Qc, dt, Phi, Qd)
+        return Phi, Qd
+
+    def transition_numpy(self, omega, dt):
+        """NumPy reference of :meth:`transition` (the test oracle; slower, same numbers)."""
         dt = float(dt)
         w = np.asarray(omega, float).reshape(3)
         if self.pseudo_noise == 0.0:
@@ -212,8 +242,17 @@ class UncontrolledDynamics:
         Φ is the product of ``exp(F(ω_j) h)`` over the RK4 sub-steps with ``ω_j`` the rate at
         each sub-step's midpoint (Euler's equations, torque free), so it follows the rate's
         evolution; ``Q_d`` accumulates the Van Loan discretisation of the white η (PSD on the
-        rate block) over the same sub-steps.
+        rate block) over the same sub-steps. Numba kernel
+        (:func:`lightcurve.filters._transition_kernels.uncontrolled_transition_nb`);
+        :meth:`transition_numpy` is the NumPy reference (equal to rounding, tested to 1e-12).
         """
+        dt = float(dt)
+        w = _finite_rate(omega)
+        return TK.uncontrolled_transition_nb(w, self.J, self.J_inv, self.eta_psd, dt,
+                                             self.nsub(dt))
+
+    def transition_numpy(self, omega, dt):
+        """NumPy reference of :meth:`transition` (the test oracle; slower, same numbers)."""
         dt = float(dt)
         if dt == 0.0:
             return np.eye(6), np.zeros((6, 6))
@@ -290,6 +329,8 @@ class MagnitudeModel:
         self.o_eci = np.ascontiguousarray(curve.obj_to_obs_unit)
         self.range_obs = np.asarray(curve.range_obs_m, float)
         self.range_sun = np.asarray(curve.range_sun_m, float)
+        el = getattr(curve, "elevation_rad", None)   # rad or None; screened in filters.gating
+        self.elevation_rad = None if el is None else np.asarray(el, float)
         self.offset = (self.sun_mag + 5.0 * np.log10(self.range_obs)
                        + 5.0 * np.log10(self.range_sun / AU_M))
         self.lit_offset = np.zeros(N)

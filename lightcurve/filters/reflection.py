@@ -23,8 +23,10 @@ error into a magnitude bias ``b_s`` per observing site s, appended to the filter
   tends to Model 1; τ is capped at ``tau_max_s`` (default: the lightcurve's duration, at
   least 1 s), which keeps Φ and Q_d finite and well conditioned.
 
-Model 3 (direct estimation of the facet parameters) is *not* implemented in the filters yet;
-the batch posterior of the same parameters is :mod:`lightcurve.studies.fit_reflection`.
+Model 3 (direct estimation of the facet parameters ξ, a, m, A in unconstrained coordinates,
+eq. 8.39–8.44) is :class:`lightcurve.filters.facet_states.FacetParameterStates`, appended to
+the same filter state after the biases; the batch posterior of the same parameters is
+:mod:`lightcurve.studies.fit_reflection`.
 """
 
 from __future__ import annotations
@@ -35,9 +37,11 @@ from ..errors import InputError
 
 __all__ = ["BIAS_MODELS", "REFLECTION_CHOICES", "SiteBias", "reflection_prior_variance"]
 
+#: per-site magnitude-bias models (:class:`SiteBias`)
 BIAS_MODELS = ("random-walk", "model1", "model2")
-#: values of ``lightcurve invert --reflection`` (model3 not yet implemented in the filters)
-REFLECTION_CHOICES = ("none",) + BIAS_MODELS
+#: values of ``lightcurve invert --reflection``: no extra state, a bias model, or Model 3
+#: (facet-parameter states, :mod:`lightcurve.filters.facet_states`)
+REFLECTION_CHOICES = ("none",) + BIAS_MODELS + ("model3",)
 
 
 def reflection_prior_variance(shape, q, model, frac=0.1, epochs=None):

@@ -26,10 +26,19 @@ Reflection biases (``bias``, :mod:`lightcurve.filters.reflection`): the error st
 diagonal linear ``Φ_b`` (plus ``Q_b``) and add to the predicted magnitude of their site,
 ``Y_i = m(q_i) + b̂_site + δb_i,site``; ``est.bias`` / ``est.bias_sigma`` (N,S) hold them.
 
+Model 3 (``facets``, :mod:`lightcurve.filters.facet_states`): the unconstrained facet
+parameters z are appended, ``[δp, δω, b…, z]``; each sigma point carries its own facet arrays
+``p(ẑ + δz_i)`` (so the points never leave the parameter ranges), constant dynamics
+(eq. 8.39, ``+ Q_z``); ``est.refl_z``/``refl_p`` (N,D) with 1σ (physical 1σ by the first-order
+map ``|dp/dz| σ_z``). With ``problem.attitude_known`` (§10.7) the points share the true q, ω
+of the epoch and only b, z are estimated (their propagation is then linear, ``Φ P Φᵀ + Q_d``).
+
 Failures: a covariance whose Cholesky factor does not exist (at propagation or update)
 restores the prior for that step and sets :data:`~lightcurve.filters.result.FLAG_REFUSED` (at
 propagation the covariance is then propagated linearly, ``Φ P Φᵀ + Q_d``, so the filter goes
 on); a sigma point predicting no reflected light skips the update
+(:mod:`lightcurve.filters.gating` first skips unlit / below-horizon epochs and gates the
+innovation with ``S = P_yy``, including R, over the sigma points)
 (:data:`~lightcurve.filters.result.FLAG_INVISIBLE`). Never a silent NaN.
 
 Deviation from a fully augmented USQUE: the process noise enters additively (``+ Q_d``) rather
@@ -45,88 +54,128 @@ import numpy as np
 
 from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
 from . import _kernels as K
-from ._common import (FilterProblem, Recorder, apply_grp, attach_bias, augmented_transition,
-                      grp_rel, initial_state, single_thread)
+from ._common import (FilterProblem, Recorder, StateLayout, apply_grp, attach_bias,
+                      attach_facets, grp_rel, initial_state_ext, layout_transition,
+                      single_thread, truth_state)
+from .gating import InnovationGate
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
 __all__ = ["run_ukf"]
 
 
-def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0, bias=None) -> Estimate:
+def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0, bias=None,
+            facets=None) -> Estimate:
     """Run the USQUE/GRP UKF over every epoch (module docstring) → :class:`Estimate`.
 
     ``alpha``, ``beta``, ``kappa``: scaled-unscented parameters (λ = α²(n+κ) − n, with n = 6,
-    or 9 when the ACS jitter is augmented at the update; + S with ``bias``).
+    or 9 when the ACS jitter is augmented at the update; + S with ``bias``, + D with
+    ``facets``; − 6 when ``problem.attitude_known``).
     ``bias``: :class:`lightcurve.filters.reflection.SiteBias` or None.
+    ``facets``: :class:`lightcurve.filters.facet_states.FacetParameterStates` or None (Model 3).
     """
-    nx = 6 + (0 if bias is None else bias.n_sites)
-    w6 = unscented_weights(nx, alpha, beta, kappa)
-    w9 = unscented_weights(nx + 3, alpha, beta, kappa) if problem.jitter_zeta() else None
+    L = StateLayout(not problem.attitude_known, bias, facets)
+    if L.nx == 0:
+        raise ValueError("attitude known and no extra state: nothing to estimate")
+    w6 = unscented_weights(L.nx, alpha, beta, kappa)
+    w9 = (unscented_weights(L.nx + 3, alpha, beta, kappa)
+          if problem.jitter_zeta() and L.na else None)
     with single_thread():
-        return _run(problem, w6, w9, bias)
+        return _run(problem, w6, w9, bias, facets)
 
 
-def _sigma_states(q, w, off6):
-    """Quaternions and rates of the sigma points: centre + offsets (2n, 6)."""
+def _sigma_states(q, w, off6, na):
+    """Quaternions and rates of the sigma points: centre + offsets (2n, nx) (the attitude
+    columns when ``na`` = 6; all points share q, ω when the attitude is known)."""
     chi = np.vstack([np.zeros((1, off6.shape[1])), off6])
-    Q = apply_grp(chi[:, :3], q)
-    W = w[None, :] + chi[:, 3:6]
+    if na:
+        Q = apply_grp(chi[:, :3], q)
+        W = w[None, :] + chi[:, 3:6]
+    else:
+        Q = np.repeat(q[None, :], chi.shape[0], axis=0)
+        W = np.repeat(w[None, :], chi.shape[0], axis=0)
     return chi, Q, np.ascontiguousarray(W)
 
 
-def _run(p: FilterProblem, w6, w9, bias=None) -> Estimate:
+def _run(p: FilterProblem, w6, w9, bias=None, facets=None) -> Estimate:
     t0 = time.perf_counter()
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "ukf")
-    q, w, nb, nx, P, b, b_hist, bs_hist = initial_state(p, bias)
+    rec.gate = InnovationGate(p)   # outlier gate + unlit/below-horizon screening (gating.py)
+    L, q, w, b, z, P = initial_state_ext(p, bias, facets)
+    na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
+    b_hist = np.full((p.n, nb), np.nan) if nb else None
+    bs_hist = np.full((p.n, nb), np.nan) if nb else None
+    z_hist = np.full((p.n, nz), np.nan) if nz else None
+    zc_hist = np.full((p.n, nz, nz), np.nan) if nz else None
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
             dt = float(m.t[k] - m.t[k - 1])
             if dt != 0.0:
-                Phi, Qd, phib = augmented_transition(dyn, bias, w, dt, nx)
-                off, ok = sigma_offsets(P, w6)
+                Phi, Qd, phib = layout_transition(dyn, L, bias, facets, w, dt)
+                off, ok = sigma_offsets(P, w6) if na else (None, False)
                 if ok:
-                    chi, Qs, Ws = _sigma_states(q, w, off)
+                    chi, Qs, Ws = _sigma_states(q, w, off, na)
                     Qp, Wp = dyn.propagate(Qs, Ws, dt)
                     dp = grp_rel(Qp, Qp[0])
-                    X = np.hstack([dp, Wp] + ([(b + chi[:, 6:]) * phib] if nb else []))
+                    cols = [dp, Wp]
+                    if nb:
+                        cols.append((b + chi[:, L.ib]) * phib)
+                    if nz:
+                        cols.append(z + chi[:, L.iz])
+                    X = np.hstack(cols)
                     xm = w6.wm @ X
                     D = X - xm
                     Pn = (D * w6.wc[:, None]).T @ D + Qd
                     q = apply_grp(xm[None, :3], Qp[0])[0]
                     w = xm[3:6].copy()
-                    b = xm[6:].copy()
+                    b = xm[L.ib].copy()
+                    z = xm[L.iz].copy()
                 else:
-                    rec.flags[k] |= FLAG_REFUSED
-                    Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
-                    q, w = Qn[0], Wn[0]
+                    # attitude known (the extra states are linear: exact Φ P Φᵀ + Q_d), or a
+                    # refused factorisation (flagged; linear propagation so the filter goes on)
+                    if na:
+                        rec.flags[k] |= FLAG_REFUSED
+                        Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
+                        q, w = Qn[0], Wn[0]
                     if nb:
                         b = phib * b
                     Pn = Phi @ P @ Phi.T + Qd
-                if p.random_walk_zeta():
+                if na and p.random_walk_zeta():
                     Pn[:3, :3] += zc
                 P = 0.5 * (Pn + Pn.T)
-        q, w, b, P = _epoch(p, k, q, w, b, P, nx, nb, w6, w9, zc, rec, bias)
-        rec.store(k, q, w, P[:6, :6])
+        if not na:
+            q, w = truth_state(p, k)
+        q, w, b, z, P = _epoch(p, k, q, w, b, z, P, L, w6, w9, zc, rec, bias, facets)
+        rec.store(k, q, w, P[:6, :6] if na else np.zeros((6, 6)))
         if nb:
             b_hist[k] = b
-            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[6:], 0.0, None))
-    est = rec.finish(time.perf_counter() - t0)
+            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[L.ib], 0.0, None))
+        if nz:
+            z_hist[k] = z
+            zc_hist[k] = P[L.iz, L.iz]
+    est = rec.gate.finish(rec.finish(time.perf_counter() - t0))
     if nb:
         attach_bias(est, bias, b_hist, bs_hist)
+    if nz:
+        attach_facets(est, facets, z_hist, zc_hist)
+    if not na:
+        est.meta["attitude"] = "truth"
     return est
 
 
-def _epoch(p, k, q, w, b, P, nx, nb, w6, w9, zc, rec, bias):
-    """Measurement update of epoch k → the new (q, w, b, P) (the prior when skipped)."""
+def _epoch(p, k, q, w, b, z, P, L, w6, w9, zc, rec, bias, facets):
+    """Measurement update of epoch k → the new (q, w, b, z, P) (the prior when skipped)."""
     m = p.model
-    prior = (q, w, b, P)
+    nx, na, nb, nz = L.nx, L.na, L.nb, L.nz
+    prior = (q, w, b, z, P)
     y = m.y[k]
     if not np.isfinite(y):
         rec.flags[k] |= FLAG_NAN
         rec.skipped_nan += 1
+        return prior
+    if rec.gate.skip_epoch(k, rec):   # object unlit or below the horizon: flagged, counted
         return prior
     wts = w9 if w9 is not None else w6
     Pa = P
@@ -138,20 +187,31 @@ def _epoch(p, k, q, w, b, P, nx, nb, w6, w9, zc, rec, bias):
     if not ok:
         rec.flags[k] |= FLAG_REFUSED
         return prior
-    chi, Qs, Ws = _sigma_states(q, w, off)
+    chi, Qs, Ws = _sigma_states(q, w, off, na)
     if w9 is not None:
         Qs = K.perturb_rotvec_nb(np.ascontiguousarray(Qs), np.ascontiguousarray(chi[:, nx:nx + 3]))
-    Y = m.predict_q(Qs, k)
+    if nz:
+        Y = facets.magnitudes(m, Qs, z + chi[:, L.iz], k)
+    else:
+        Y = m.predict_q(Qs, k)
     if not np.all(np.isfinite(Y)):
         rec.flags[k] |= FLAG_INVISIBLE
         return prior
     if nb:
         s = int(bias.site[k])
-        Y = Y + b[s] + chi[:, 6 + s]
+        Y = Y + b[s] + chi[:, na + s]
+    # innovation gate on ν = y − Σ Wᵐ Y with S = Σ Wᶜ (Y − ŷ)² + R; None = outlier rejected
+    ym = float(wts.wm @ Y)
+    R = rec.gate.check(k, y - ym, float(wts.wc @ (Y - ym) ** 2) + m.sigma[k] ** 2,
+                       m.sigma[k] ** 2, rec)
+    if R is None:
+        return prior
     dx, Pn, info = unscented_update(np.zeros(nx), P, chi[:, :nx], Y[:, None], np.array([y]),
-                                    wts, R=m.sigma[k] ** 2)
+                                    wts, R=R)
     rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
     if info.ok:
-        return apply_grp(dx[None, :3], q)[0], w + dx[3:6], b + dx[6:], Pn
+        if na:
+            q, w = apply_grp(dx[None, :3], q)[0], w + dx[3:6]
+        return q, w, b + dx[L.ib], z + dx[L.iz], Pn
     rec.flags[k] |= FLAG_REFUSED
     return prior

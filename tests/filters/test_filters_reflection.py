@@ -117,8 +117,7 @@ def test_two_sites_get_two_biases():
 def test_bpf_and_bad_choice_refused(biased_curve):
     from lightcurve.errors import InputError
 
-    with pytest.raises(NotImplementedError, match="BPF"):
-        invert(biased_curve, "bpf", reflection="model1", particles=100)
+    # (the BPF now accepts bias states: invert routes them to run_bpf, no longer refused)
     with pytest.raises(InputError, match="reflection"):
         invert(biased_curve, "mekf", reflection="model9")
     p = build_problem(biased_curve)
@@ -141,6 +140,6 @@ def test_cli_invert_reflection(tmp_path, biased_curve):
     est = read_estimate(js["b"]["result"])
     r = est.meta["reflection"]
     assert r["model"] == "model1" and abs(r["bias_final_mag"][0] - 0.15) < 3 * r["bias_sigma_final_mag"][0]
-    with pytest.raises(SystemExit) as ei:  # argparse usage error (model3 not in the filters yet)
-        main(["invert", str(f), "--reflection", "model3", "-o", str(tmp_path / "o")])
+    with pytest.raises(SystemExit) as ei:  # argparse usage error (unknown model)
+        main(["invert", str(f), "--reflection", "model4", "-o", str(tmp_path / "o")])
     assert ei.value.code == 2

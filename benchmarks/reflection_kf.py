@@ -1,0 +1,203 @@
+"""Acceptance runs of the reflection models in the Kalman filters (Bernard 2021 §10.2–10.8).
+
+Prints ONE JSON line. Three parts (all truth shapes perturbed by 10 % per parameter, §10.1,
+the filters using the nominal shape):
+
+1. ``geo_model1`` — nadir GEO IC2 (pipelines/thesis/geo-ic2-nadir-controlled-1site.toml, our
+   ASSUMED GEO case) with Model 1 site biases (fig. 10.3): innovation χ²/dof w.r.t. the
+   measurement noise alone (ν²/σ²), NIS (ν²/S), and post-fit residuals
+   ``y − m(q̂) − b̂`` RMS / σ, attitude known and attitude estimated.
+2. ``sec10_7`` — LEO IC1 fast spin, controlled, 1 site (eclipse ignored as in the thesis),
+   Model 3 with the attitude known, MEKF and UKF: per parameter the fraction of seeds whose
+   physical 1σ shrinks ≥ 2× (prior/final) and whose final error is inside 3σ.
+3. ``sec10_8`` — combined attitude + parameter runs: Models 1 and 2 (and no model) on the GEO
+   case at σθ = 3°, Model 3 (and no model) on the LEO fast-spin case at σθ = 3° and 10°, MEKF
+   and UKF, ``--seeds`` seeds each. Success = final attitude error inside 3σ on every axis,
+   RSS below 5°, and not flagged diverged.
+
+Usage: ``python benchmarks/reflection_kf.py [--seeds 10]`` (nice -n 10 on a shared machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from lightcurve._paths import data_dir  # noqa: E402
+from lightcurve.filters.invert import invert  # noqa: E402
+from lightcurve.filters.models import MagnitudeModel  # noqa: E402
+from lightcurve.studies.scenario import load_scenario  # noqa: E402
+from lightcurve.studies.simulate import simulate  # noqa: E402
+
+THESIS = data_dir("pipelines") / "thesis"
+GEO = THESIS / "geo-ic2-nadir-controlled-1site.toml"
+LEO = THESIS / "leo-ic1-fast-spin-controlled-1site.toml"
+REFL = '\n[reflection]\nperturb = true\nsigma_frac = 0.1\nparams = ["xi", "a", "m", "A"]\n'
+
+
+def _scenario(path, add_reflection):
+    txt = Path(path).read_text()
+    if not add_reflection:
+        return load_scenario(path)
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / Path(path).name
+        # [effects] is the last table of the thesis files: append [reflection] before it
+        txt = txt.replace("\n[effects]", REFL + "\n[effects]") if "[effects]" in txt \
+            else txt + REFL
+        p.write_text(txt)
+        return load_scenario(p)
+
+
+def _sim(sc, seed):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return simulate(sc, seed=seed)
+
+
+def truth_vector(curve, names):
+    """Truth of the Model 3 states (names "kind[facet]") from attrs["reflection_truth"]."""
+    tr = json.loads(curve.attrs["reflection_truth"])
+    out = []
+    for n in names:
+        kind, f = n[:-1].split("[")
+        out.append(tr[kind][int(f)])
+    return np.array(out, float)
+
+
+def postfit(curve, est):
+    """Post-fit residuals y − m(q̂_k) − b̂_site (mag) with the nominal shape."""
+    from lightcurve.photometry import load_shape
+
+    m = MagnitudeModel(load_shape(curve.attrs["shape"]), curve)
+    yh = np.array([m.predict_q(est.q[k][None, :], k)[0] for k in range(len(curve))])
+    if est.bias is not None:
+        yh = yh + est.bias[np.arange(len(curve)), m.site]
+    return curve.mag - yh
+
+
+def success(est, max_deg=5.0):
+    s = est.summary()
+    return bool(s.get("inside_3sigma", False) and s["final_att_error_rss_deg"] < max_deg
+                and not est.diverged)
+
+
+def part_geo_model1(seeds):
+    sc = _scenario(GEO, False)
+    rows = {}
+    for method in ("mekf", "ukf"):
+        for att in ("truth", "estimate"):
+            chi, nis, rms_post, bias_err, ok = [], [], [], [], []
+            for seed in seeds:
+                c = _sim(sc, seed)
+                e = invert(c, method, seed=seed, reflection="model1", attitude=att,
+                           sigma_theta_deg=3.0)
+                sig = c.mag_sigma
+                v = np.isfinite(e.innovations)
+                chi.append(float(np.mean(e.innovations[v] ** 2 / sig[v] ** 2)))
+                nis.append(float(np.mean(e.innovations[v] ** 2 / e.innovation_var[v])))
+                r = postfit(c, e)
+                rms_post.append(float(np.sqrt(np.mean(r ** 2)) / np.mean(sig)))
+                # the "true" bias: mean truth-shape minus nominal-shape magnitude along the truth
+                from lightcurve.photometry import load_shape
+
+                mm = MagnitudeModel(load_shape(c.attrs["shape"]), c)
+                mnom = np.array([mm.predict_q(c.truth_q[k][None, :], k)[0] for k in range(len(c))])
+                db = float(np.mean(c.truth_mag - mnom))
+                bias_err.append((float(e.bias[-1, 0]) - db, float(e.bias_sigma[-1, 0])))
+                if att == "estimate":
+                    ok.append(success(e))
+            rows[f"{method}_{att}"] = {
+                "innovation_chi2_dof_vs_R": [round(x, 3) for x in chi],
+                "nis_mean": [round(x, 3) for x in nis],
+                "postfit_rms_over_sigma": [round(x, 3) for x in rms_post],
+                "bias_minus_mean_true_offset_mag": [round(a, 4) for a, _ in bias_err],
+                "bias_sigma_mag": [round(b, 4) for _, b in bias_err],
+                **({"attitude_success": int(sum(ok)), "runs": len(ok)} if ok else {}),
+            }
+    return rows
+
+
+def part_sec10_7(seeds):
+    sc = _scenario(LEO, True)
+    out = {}
+    for method in ("ukf", "mekf"):
+        shrink, inside, err_sig = [], [], []
+        names = None
+        for seed in seeds:
+            c = _sim(sc, seed)
+            e = invert(c, method, seed=seed, reflection="model3", attitude="truth")
+            names = e.refl_names
+            tv = truth_vector(c, names)
+            prior = np.array(e.meta["reflection"]["prior_sigma_p"])
+            shrink.append(prior / e.refl_p_sigma[-1])
+            z = (e.refl_p[-1] - tv) / e.refl_p_sigma[-1]
+            err_sig.append(z)
+            inside.append(np.abs(z) <= 3.0)
+        shrink, inside, err_sig = np.array(shrink), np.array(inside), np.array(err_sig)
+        out[method] = {n: {"shrink_median": round(float(np.median(shrink[:, d])), 2),
+                           "frac_shrink_ge2": round(float(np.mean(shrink[:, d] >= 2)), 2),
+                           "frac_inside_3sigma": round(float(np.mean(inside[:, d])), 2),
+                           "rms_err_over_sigma": round(float(np.sqrt(np.mean(err_sig[:, d] ** 2))), 2)}
+                       for d, n in enumerate(names)}
+        out[method + "_observable"] = [n for d, n in enumerate(names)
+                                       if np.mean(shrink[:, d] >= 2) >= 0.5]
+    return out
+
+
+def part_sec10_8(seeds):
+    out = {}
+    geo = _scenario(GEO, False)
+    leo = _scenario(LEO, True)
+    cases = [("geo", geo, 3.0, m) for m in ("none", "model1", "model2")]
+    cases += [("leo_fast", leo, st, m) for st in (3.0, 10.0) for m in ("none", "model3")]
+    for name, sc, st, model in cases:
+        curves = [_sim(sc, s) for s in seeds]
+        for method in ("mekf", "ukf"):
+            ok, rss, inside, div = [], [], [], []
+            for seed, c in zip(seeds, curves):
+                e = invert(c, method, seed=seed, reflection=model, sigma_theta_deg=st)
+                s = e.summary()
+                ok.append(success(e))
+                rss.append(round(s["final_att_error_rss_deg"], 3))
+                inside.append(bool(s["inside_3sigma"]))
+                div.append(bool(e.diverged))
+            out[f"{name}_sth{int(st)}_{model}_{method}"] = {
+                "success": int(sum(ok)), "runs": len(ok), "inside_3sigma": int(sum(inside)),
+                "diverged": int(sum(div)), "final_rss_deg": rss}
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--parts", default="geo,107,108")
+    a = ap.parse_args(argv)
+    seeds = list(range(1, a.seeds + 1))
+    parts = a.parts.split(",")
+    t0 = time.perf_counter()
+    res = {"benchmark": "reflection_kf", "cpu_count": os.cpu_count(), "seeds": seeds,
+           "load_avg_start": os.getloadavg()[0]}
+    if "geo" in parts:
+        res["geo_model1"] = part_geo_model1(seeds[:3])
+    if "107" in parts:
+        res["sec10_7"] = part_sec10_7(seeds)
+    if "108" in parts:
+        res["sec10_8"] = part_sec10_8(seeds)
+    res["wall_s"] = round(time.perf_counter() - t0, 1)
+    res["load_avg_end"] = os.getloadavg()[0]
+    print(json.dumps(res))
+
+
+if __name__ == "__main__":
+    main()

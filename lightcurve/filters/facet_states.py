@@ -1,0 +1,347 @@
+"""Model 3 of Bernard (2021) ch. 8: the facet reflection parameters as filter states.
+
+Instead of absorbing uncertain reflection parameters into a magnitude bias (Models 1–2,
+:mod:`lightcurve.filters.reflection`), Model 3 estimates them directly: for every chosen
+Cook–Torrance facet i the diffuse fraction ξ_i ∈ (0,1), the albedo / normal-incidence
+reflectance a_i = F0 ∈ (0,1), the Beckmann rms slope m_i > 0 and the area A_i > 0 (m²).
+
+Unconstrained coordinates (eq. 8.41–8.44 style; the thesis text is not available here, so the
+exact form is an ASSUMPTION shared with :mod:`lightcurve.studies.fit_reflection`)::
+
+    z_ξ = logit ξ,   z_a = logit a,   z_m = ln m,   z_A = ln A,
+
+so every filter state, sigma point or particle maps to physical values in range. The inverse
+and the (diagonal) Jacobian are ``ξ = 1/(1+e^{−z})``, ``dξ/dz = ξ(1−ξ)``; ``m = e^z``,
+``dm/dz = m``. (The shape files bound m ≤ 1; the log map lets m exceed 1, where the Beckmann
+formula is still defined — stated, not hidden.)
+
+Prior (§10.1): the truth perturbation is ``p ~ N(p₀, (frac·p₀)²)``, p₀ the shape file's value,
+frac = 10 % by default. The filters' initial state is ``z₀ = z(p₀)`` with covariance
+``diag(σ_z²)``, ``σ_z = frac · p₀ · dz/dp(p₀)``, i.e. ``frac/(1−p₀)`` for the logits and
+``frac`` for the logs (first-order mapping of σ_p by the transform's derivative).
+
+Dynamics (eq. 8.39): constant parameters, ``ż = w``, ``Φ = I``; the optional process noise w
+is white with PSD ``process_noise`` (z-units²/s, default 0), so ``Q_d = process_noise·|Δt|·I``.
+
+State ordering: ``names[d]`` = ``"<kind>[<facet>]"`` with kind-major order — all ξ first (in
+facet order), then all a, m, A — e.g. 24 states ``xi[0] … xi[5], a[0] … A[5]`` for a 6-facet
+cube. ``kind_col[d]`` ∈ {0: ξ, 1: a, 2: m, 3: A} and ``facet[d]`` (index into the shape's
+facets) describe each state.
+
+Use from a particle filter (per-particle facet arrays)::
+
+    fs = FacetParameterStates(shape)                  # 24 states for cube_1u
+    Z = fs.z0 + rng.standard_normal((N, fs.dim)) * fs.prior_sd_z
+    areas, params = fs.facet_arrays(Z)                # (N,F), (N,F,7): kernel arrays per particle
+    mags = fs.magnitudes(model, Q, Z, k)              # (N,) apparent magnitudes at epoch k
+    # or directly: mag_states_nb(Q, s_eci, o_eci, normals, areas, ids, params, offset)
+
+``areas``/``params`` are the shape's ``kernel_arrays()`` with the estimated entries replaced,
+so facets that are not estimated (or have other BRDFs) keep their nominal values.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..errors import InputError
+from ..photometry.kernels import COOK_TORRANCE, brdf_product_nb
+
+__all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
+           "dp_dz", "mag_states_nb"]
+
+#: the four Cook–Torrance facet parameters Model 3 can estimate
+KINDS = ("xi", "a", "m", "A")
+#: parameters in (0,1) (logit map); the others are > 0 (log map)
+LOGIT_KINDS = ("xi", "a")
+_KIND_COL = {"xi": 0, "a": 1, "m": 2, "A": 3}
+
+
+# --------------------------------------------------------------------------------------------
+# transforms (the one implementation; fit_reflection uses these)
+# --------------------------------------------------------------------------------------------
+
+def to_unbounded(p, logit):
+    """Physical (..., D) → unbounded z (..., D): logit where ``logit`` (D,) is True, else ln."""
+    p = np.asarray(p, float)
+    lg = np.broadcast_to(np.asarray(logit, bool), p.shape[-1:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lg, np.log(p / (1.0 - p)), np.log(p))
+
+
+def from_unbounded(z, logit):
+    """Unbounded z (..., D) → physical (..., D): logistic where ``logit`` (D,), else exp."""
+    z = np.asarray(z, float)
+    lg = np.broadcast_to(np.asarray(logit, bool), z.shape[-1:])
+    with np.errstate(over="ignore"):
+        return np.where(lg, 1.0 / (1.0 + np.exp(-z)), np.exp(z))
+
+
+def dp_dz(z, logit):
+    """Diagonal Jacobian dp/dz (..., D) at z: p(1−p) (logit) or p (log)."""
+    p = from_unbounded(z, logit)
+    lg = np.broadcast_to(np.asarray(logit, bool), p.shape[-1:])
+    return np.where(lg, p * (1.0 - p), p)
+
+
+# --------------------------------------------------------------------------------------------
+# numba kernel: magnitudes with per-state facet arrays
+# --------------------------------------------------------------------------------------------
+
+@nb.njit(cache=True)
+def mag_states_nb(Q, s, o, normals, areas, ids, params, offset):
+    """Apparent magnitudes (S,) of S states at one epoch, each with its own facet arrays.
+
+    Q (S,4) inertial→body quaternions (scalar first); s, o (3,) unit object→Sun and
+    object→observer directions (ECI); normals (F,3) body axes; areas (S,F) m²; ids (F,) BRDF
+    model ids; params (S,F,P) packed BRDF rows; offset (mag) = m_sun + 5 log10|r_obs|
+    + 5 log10(|r_sun|/au) (+ eclipse term). ``m = offset − 2.5 log10 Σ_i A_i (n̂·ŝ)⁺(n̂·ô)⁺ f_r,i``
+    (DESIGN.md magnitude equation); +inf where no light reaches the observer. Serial (the
+    Kalman filters call it with ≤ 2n+1 states; a particle filter may wrap it in its own
+    parallel loop).
+    """
+    S = Q.shape[0]
+    F = normals.shape[0]
+    out = np.empty(S)
+    for i in range(S):
+        q0, q1, q2, q3 = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
+        # A(q) v for the passive inertial→body rotation (as lightcurve.rotations.qrot_nb)
+        tx = 2.0 * (q2 * s[2] - q3 * s[1])
+        ty = 2.0 * (q3 * s[0] - q1 * s[2])
+        tz = 2.0 * (q1 * s[1] - q2 * s[0])
+        sx = s[0] - q0 * tx + (q2 * tz - q3 * ty)
+        sy = s[1] - q0 * ty + (q3 * tx - q1 * tz)
+        sz = s[2] - q0 * tz + (q1 * ty - q2 * tx)
+        tx = 2.0 * (q2 * o[2] - q3 * o[1])
+        ty = 2.0 * (q3 * o[0] - q1 * o[2])
+        tz = 2.0 * (q1 * o[1] - q2 * o[0])
+        ox = o[0] - q0 * tx + (q2 * tz - q3 * ty)
+        oy = o[1] - q0 * ty + (q3 * tx - q1 * tz)
+        oz = o[2] - q0 * tz + (q1 * ty - q2 * tx)
+        acc = 0.0
+        for f in range(F):
+            mid = ids[f]
+            if mid < 0:
+                continue
+            nx, ny, nz = normals[f, 0], normals[f, 1], normals[f, 2]
+            if nx * sx + ny * sy + nz * sz <= 0.0 or nx * ox + ny * oy + nz * oz <= 0.0:
+                continue
+            acc += areas[i, f] * brdf_product_nb(mid, params[i, f], nx, ny, nz, sx, sy, sz,
+                                                 ox, oy, oz)
+        out[i] = offset - 2.5 * math.log10(acc) if acc > 0.0 else np.inf
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# the state description
+# --------------------------------------------------------------------------------------------
+
+class FacetParameterStates:
+    """Model 3 facet-parameter states (module docstring): layout, transforms, prior, dynamics.
+
+    Parameters
+    ----------
+    shape : lightcurve.photometry.Shape
+        Nominal parameters (prior centres p₀) and geometry.
+    facets : sequence of int or None
+        Facets to estimate (default: every Cook–Torrance facet with area > 0).
+    kinds : subset of ("xi", "a", "m", "A")
+        Parameters estimated per facet (default all four).
+    prior_frac : float > 0
+        σ_p / p₀ of the prior (§10.1: 0.1).
+    process_noise : float ≥ 0
+        PSD of the white z noise, z-units²/s (eq. 8.39 with optional noise; default 0).
+
+    Attributes
+    ----------
+    dim : int — number of states D; names : list[str]; kind_col (D,) int; facet (D,) int;
+    logit (D,) bool; p_nominal, z0 (D,); prior_sd_p, prior_sd_z (D,); P0 (D,D) = diag(σ_z²);
+    fidx (K,) estimated facet indices.
+    """
+
+    def __init__(self, shape, *, facets=None, kinds=KINDS, prior_frac=0.1, process_noise=0.0):
+        kinds = tuple(kinds)
+        bad = [k for k in kinds if k not in KINDS]
+        if bad or not kinds or len(set(kinds)) != len(kinds):
+            raise InputError("unknown or repeated reflection parameter", field="params",
+                             value=",".join(map(str, kinds)), allowed=", ".join(KINDS))
+        self.kinds = tuple(k for k in KINDS if k in kinds)      # canonical order
+        self.prior_frac = float(prior_frac)
+        if not (self.prior_frac > 0 and np.isfinite(self.prior_frac)):
+            raise InputError("prior fraction must be > 0", field="reflection_frac",
+                             value=prior_frac)
+        self.process_noise = float(process_noise)
+        if not (self.process_noise >= 0 and np.isfinite(self.process_noise)):
+            raise InputError("process noise must be >= 0", field="process_noise",
+                             value=process_noise)
+        F = shape.n_facets
+        ct = np.flatnonzero((shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0))
+        if facets is None:
+            fidx = ct
+        else:
+            fidx = np.asarray(sorted(set(int(i) for i in facets)), dtype=np.int64)
+            for i in fidx:
+                if not (0 <= i < F) or i not in ct:
+                    raise InputError("facet is not a Cook-Torrance facet with area > 0 of the "
+                                     "shape", field="facets", value=int(i),
+                                     allowed=",".join(str(x) for x in ct))
+        if fidx.size == 0:
+            raise InputError("the shape has no Cook-Torrance facet whose parameters could be "
+                             "estimated (Model 3)", field="reflection", value=shape.name)
+        self.shape = shape
+        self.fidx = np.ascontiguousarray(fidx, dtype=np.int64)
+        names, kc, fc = [], [], []
+        for kind in self.kinds:
+            for i in self.fidx:
+                names.append(f"{kind}[{int(i)}]")
+                kc.append(_KIND_COL[kind])
+                fc.append(int(i))
+        self.names = names
+        self.dim = len(names)
+        self.kind_col = np.asarray(kc, np.int64)
+        self.facet = np.asarray(fc, np.int64)
+        self.logit = self.kind_col < 2
+        _, areas, _, params = shape.kernel_arrays()
+        self._areas0 = np.ascontiguousarray(areas, dtype=float)
+        self._params0 = np.ascontiguousarray(params, dtype=float)
+        self.p_nominal = np.where(self.kind_col == 3, self._areas0[self.facet],
+                                  self._params0[self.facet, np.minimum(self.kind_col, 2)])
+        for d in range(self.dim):
+            p = self.p_nominal[d]
+            ok = np.isfinite(p) and p > 0 and (p < 1 or not self.logit[d])
+            if not ok:
+                raise InputError("nominal parameter outside the open range its transform needs",
+                                 field=self.names[d], value=float(p),
+                                 allowed="(0, 1)" if self.logit[d] else "> 0")
+        self.z0 = self.to_z(self.p_nominal)
+        self.prior_sd_p = self.prior_frac * self.p_nominal
+        self.prior_sd_z = self.prior_sd_p / dp_dz(self.z0, self.logit)
+        self.P0 = np.diag(self.prior_sd_z ** 2)
+
+    # -- transforms -------------------------------------------------------------------------
+    def to_z(self, p):
+        """Physical (..., D) → unbounded (..., D)."""
+        return to_unbounded(p, self.logit)
+
+    def to_p(self, z):
+        """Unbounded (..., D) → physical (..., D) (ξ, a, m dimensionless; A m²)."""
+        return from_unbounded(z, self.logit)
+
+    def jacobian(self, z):
+        """Diagonal dp/dz (..., D) at z (the full Jacobian is ``np.diag`` of it)."""
+        return dp_dz(z, self.logit)
+
+    def sigma_p(self, z, cov_z):
+        """1σ in physical units (..., D) from the z covariance (..., D, D), first order:
+        ``σ_p = |dp/dz| σ_z``."""
+        var = np.clip(np.diagonal(np.asarray(cov_z, float), axis1=-2, axis2=-1), 0.0, None)
+        return np.abs(self.jacobian(z)) * np.sqrt(var)
+
+    # -- dynamics (eq. 8.39) ------------------------------------------------------------------
+    def transition(self, dt):
+        """``(Φ (D,D) = I, Q_d (D,D) = process_noise·|Δt|·I)`` over dt s."""
+        return np.eye(self.dim), self.process_noise * abs(float(dt)) * np.eye(self.dim)
+
+    # -- shape arrays ---------------------------------------------------------------------
+    def facet_arrays(self, z):
+        """Kernel arrays per state: z (S,D) or (D,) → ``areas (S,F)``, ``params (S,F,P)``
+        (the shape's ``kernel_arrays()`` with the estimated entries set to p(z))."""
+        Z = np.atleast_2d(np.asarray(z, float))
+        S = Z.shape[0]
+        p = self.to_p(Z)
+        areas = np.repeat(self._areas0[None, :], S, axis=0)
+        params = np.repeat(self._params0[None, :, :], S, axis=0)
+        for d in range(self.dim):
+            f, c = self.facet[d], self.kind_col[d]
+            if c == 3:
+                areas[:, f] = p[:, d]
+            else:
+                params[:, f, c] = p[:, d]
+        return np.ascontiguousarray(areas), np.ascontiguousarray(params)
+
+    def physical(self, z):
+        """``{"xi", "a", "m", "A"}`` → (S,K) physical values of every estimated facet (z (S,D));
+        kinds not estimated keep the nominal values."""
+        areas, params = self.facet_arrays(z)
+        f = self.fidx
+        return {"xi": params[:, f, 0], "a": params[:, f, 1], "m": params[:, f, 2],
+                "A": areas[:, f]}
+
+    def shape_at(self, z):
+        """A copy of the shape with the parameters p(z) (z (D,)); ranges not re-checked."""
+        p = self.to_p(np.asarray(z, float).reshape(self.dim))
+        areas = self._areas0.copy()
+        kw = {}
+        for d in range(self.dim):
+            f, c = self.facet[d], self.kind_col[d]
+            if c == 3:
+                areas[f] = p[d]
+            else:
+                name = KINDS[c]
+                if name not in kw:
+                    kw[name] = np.where(self.shape.model_ids == COOK_TORRANCE,
+                                        self.shape.params[:, c], np.nan)
+                kw[name][f] = p[d]
+        return self.shape.copy_with(areas_m2=areas, check=False, **kw)
+
+    # -- measurement ------------------------------------------------------------------------
+    def magnitudes(self, model, Q, Z, k):
+        """Predicted magnitudes (S,) at epoch k of ``model`` (a
+        :class:`~lightcurve.filters.models.MagnitudeModel`) for attitudes Q (S,4) and states
+        Z (S,D) (or one z (D,) shared by all attitudes); +inf where no light is reflected."""
+        Q = np.ascontiguousarray(np.asarray(Q, float).reshape(-1, 4))
+        Z = np.atleast_2d(np.asarray(Z, float))
+        if Z.shape[0] == 1 and Q.shape[0] > 1:
+            Z = np.repeat(Z, Q.shape[0], axis=0)
+        if Z.shape != (Q.shape[0], self.dim):
+            raise ValueError(f"Z must be ({Q.shape[0]}, {self.dim}), got {Z.shape}")
+        if getattr(model, "kernel_ok", False):
+            areas, params = self.facet_arrays(Z)
+            n = np.ascontiguousarray(self.shape.normals_body, dtype=float)
+            ids = np.ascontiguousarray(self.shape.model_ids, dtype=np.int64)
+            return mag_states_nb(Q, model.s_eci[k], model.o_eci[k], n, areas, ids, params,
+                                 float(model.offset[k]))
+        from ..photometry.magnitude import apparent_magnitude
+
+        out = np.empty(Q.shape[0])
+        with np.errstate(divide="ignore"):
+            for i in range(Q.shape[0]):
+                out[i] = apparent_magnitude(
+                    self.shape_at(Z[i]), Q[i][None, None, :], model.s_eci[k:k + 1],
+                    model.o_eci[k:k + 1], model.range_obs[k:k + 1], model.range_sun[k:k + 1],
+                    sun_mag=model.sun_mag)[0, 0] + model.lit_offset[k]
+        return out
+
+    def partials(self, model, q, z, k):
+        """Analytic ``(m, ∂m/∂δθ (3,), ∂m/∂z (D,))`` at attitude q (4,) and state z (D,), epoch k.
+
+        ``∂m/∂z_d = ∂m/∂p_d · dp_d/dz_d`` with ∂m/∂ξ, ∂m/∂a, ∂m/∂m, ∂m/∂A from
+        :func:`lightcurve.photometry.magnitude_partials` evaluated on the shape with p(z);
+        δθ is the body-frame error rotation of ``q = δq(δθ) ⊗ q̂``. NaN where m = +inf.
+        """
+        from ..photometry.partials import magnitude_partials
+
+        z = np.asarray(z, float).reshape(self.dim)
+        q = np.asarray(q, float).reshape(4)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mp = magnitude_partials(self.shape_at(z), q[None, :], model.s_eci[k:k + 1],
+                                    model.o_eci[k:k + 1], model.range_obs[k:k + 1],
+                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag)
+        cols = (mp.dm_dxi[0], mp.dm_da[0], mp.dm_dm[0], mp.dm_dA[0])
+        dm_dp = np.array([cols[c][f] for c, f in zip(self.kind_col, self.facet)])
+        m = float(mp.m[0]) + float(model.lit_offset[k])
+        return m, np.asarray(mp.dm_dtheta[0], float), dm_dp * self.jacobian(z)
+
+    # -- metadata ---------------------------------------------------------------------------
+    def describe(self) -> dict:
+        """JSON-ready description of the states."""
+        return {"model": "model3", "names": list(self.names),
+                "facets": [int(i) for i in self.fidx], "kinds": list(self.kinds),
+                "transform": {k: ("logit" if k in LOGIT_KINDS else "log") for k in self.kinds},
+                "prior_frac": self.prior_frac, "p_nominal": self.p_nominal.tolist(),
+                "prior_sigma_p": self.prior_sd_p.tolist(),
+                "prior_sigma_z": self.prior_sd_z.tolist(),
+                "process_noise_z2_per_s": self.process_noise}
