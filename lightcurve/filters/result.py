@@ -12,7 +12,12 @@ Flags (bit mask per epoch): :data:`FLAG_NAN` measurement NaN (skipped), :data:`F
 update refused (Cholesky or non-finite; prior kept), :data:`FLAG_INVISIBLE` the estimate
 predicts no reflected light (update skipped), :data:`FLAG_COLLAPSE` all particle weights zero
 (weights reset), :data:`FLAG_RESAMPLED` the PF resampled, :data:`FLAG_NIS` the sliding-window
-NIS test exceeded its 99.9 % bound.
+NIS test exceeded its 99.9 % bound, :data:`FLAG_OUTLIER` the innovation gate rejected the
+measurement (not used; :mod:`lightcurve.filters.gating`), :data:`FLAG_INFLATED` the gate used it
+with an inflated noise variance, :data:`FLAG_GATE_RELEASED` the gate would have rejected it but
+had already rejected its limit of measurements in a row (used), :data:`FLAG_UNLIT` the object is
+in the Earth's full shadow (skipped), :data:`FLAG_BELOW_HORIZON` the object is below the site's
+horizon (skipped).
 """
 
 from __future__ import annotations
@@ -26,7 +31,8 @@ from .. import rotations as rot
 from ..io.atomic import atomic_path
 
 __all__ = ["Estimate", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
-           "FLAG_RESAMPLED", "FLAG_NIS", "read_estimate"]
+           "FLAG_RESAMPLED", "FLAG_NIS", "FLAG_OUTLIER", "FLAG_INFLATED", "FLAG_GATE_RELEASED",
+           "FLAG_UNLIT", "FLAG_BELOW_HORIZON", "read_estimate"]
 
 FLAG_NAN = 1
 FLAG_REFUSED = 2
@@ -34,6 +40,11 @@ FLAG_INVISIBLE = 4
 FLAG_COLLAPSE = 8
 FLAG_RESAMPLED = 16
 FLAG_NIS = 32
+FLAG_OUTLIER = 64
+FLAG_INFLATED = 128
+FLAG_GATE_RELEASED = 256
+FLAG_UNLIT = 512
+FLAG_BELOW_HORIZON = 1024
 
 _FAIL = FLAG_REFUSED | FLAG_COLLAPSE
 
@@ -63,6 +74,10 @@ class Estimate:
     meta : dict of settings (seed, sigmas, particles …)
     clouds : dict epoch index → (M,3) particle error rotation vectors ``q_true ⊗ q_i⁻¹`` in deg
         (body axes; BPF with ``keep_clouds`` and truth) or None
+    bias, bias_sigma : (N,S) per-site reflection biases and 1σ, mag (Models 1–2) or None
+    refl_names : list of Model 3 state names (``"xi[5]"`` …) or None
+    refl_z, refl_z_sigma : (N,D) Model 3 states in unconstrained coordinates (logit/ln) and 1σ
+    refl_p, refl_p_sigma : (N,D) the same in physical units (ξ, a, m dimensionless; A m²)
     """
 
     method: str
@@ -85,6 +100,13 @@ class Estimate:
     nees: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     clouds: dict | None = None
+    bias: np.ndarray | None = None
+    bias_sigma: np.ndarray | None = None
+    refl_names: list | None = None
+    refl_z: np.ndarray | None = None
+    refl_z_sigma: np.ndarray | None = None
+    refl_p: np.ndarray | None = None
+    refl_p_sigma: np.ndarray | None = None
 
     def __len__(self):
         return int(self.t.shape[0])
@@ -135,12 +157,29 @@ class Estimate:
             "skipped_nan": int(self.skipped_nan),
             "refused_updates": int(np.sum((self.flags & FLAG_REFUSED) > 0)),
             "invisible_predictions": int(np.sum((self.flags & FLAG_INVISIBLE) > 0)),
+            # innovation gate and epoch screening (lightcurve.filters.gating)
+            "rejected_outliers": int(np.sum((self.flags & FLAG_OUTLIER) > 0)),
+            "inflated_outliers": int(np.sum((self.flags & FLAG_INFLATED) > 0)),
+            "gate_released": int(np.sum((self.flags & FLAG_GATE_RELEASED) > 0)),
+            "skipped_unlit": int(np.sum((self.flags & FLAG_UNLIT) > 0)),
+            "skipped_below_horizon": int(np.sum((self.flags & FLAG_BELOW_HORIZON) > 0)),
             "final_3sigma_att_deg": [float(x) for x in 3.0 * self.att_sigma_deg[-1]],
             "final_3sigma_omega_deg_s": [float(x) for x in
                                          np.degrees(3.0 * self.omega_sigma_rad_s[-1])],
         }
         if np.any(np.isfinite(self.n_eff)):
             out["final_n_eff"] = float(self.n_eff[-1])
+        if self.bias is not None and self.bias_sigma is not None:
+            out["final_bias_mag"] = [float(x) for x in self.bias[-1]]
+            out["final_bias_sigma_mag"] = [float(x) for x in self.bias_sigma[-1]]
+        if self.refl_names is not None and self.refl_p is not None:
+            r = self.meta.get("reflection") or {}
+            r = r.get("facet_states", r)
+            s0 = r.get("prior_sigma_p") or [float("nan")] * len(self.refl_names)
+            out["final_reflection"] = {
+                n: {"value": float(v), "sigma": float(sd), "prior_sigma": float(p0)}
+                for n, v, sd, p0 in zip(self.refl_names, self.refl_p[-1], self.refl_p_sigma[-1],
+                                        s0)}
         if self.att_error_deg is not None:
             ea = self.att_error_deg[-1]
             ew = np.degrees(self.omega_error_rad_s[-1])
@@ -181,12 +220,19 @@ class Estimate:
                                     ("innovations", "mag"), ("innovation_var", "mag^2"),
                                     ("n_eff", "particles"), ("flags", "bit mask"),
                                     ("att_error_deg", "deg body axes"),
-                                    ("omega_error_rad_s", "rad/s"), ("nees", "")):
+                                    ("omega_error_rad_s", "rad/s"), ("nees", ""),
+                                    ("bias", "mag"), ("bias_sigma", "mag"),
+                                    ("refl_z", "logit/ln of the facet parameters"),
+                                    ("refl_z_sigma", "logit/ln units"),
+                                    ("refl_p", "xi, a, m dimensionless; A m^2"),
+                                    ("refl_p_sigma", "xi, a, m dimensionless; A m^2")):
                     v = getattr(self, name)
                     if v is None:
                         continue
                     d = h.create_dataset(name, data=np.asarray(v))
                     d.attrs["units"] = units
+                if self.refl_names is not None:
+                    h.attrs["refl_names_json"] = json.dumps(list(self.refl_names))
                 if self.clouds:
                     g = h.create_group("clouds")
                     g.attrs["units"] = "deg, particle error rotation vectors, body axes"
@@ -214,7 +260,10 @@ def read_estimate(path) -> Estimate:
                              value=h.attrs.get("format"), allowed="lightcurve-estimate")
         kw = {n: (np.asarray(h[n]) if n in h else None) for n in (
             "t", "q", "omega_rad_s", "cov", "att_sigma_deg", "omega_sigma_rad_s", "innovations",
-            "innovation_var", "n_eff", "flags", "att_error_deg", "omega_error_rad_s", "nees")}
+            "innovation_var", "n_eff", "flags", "att_error_deg", "omega_error_rad_s", "nees",
+            "bias", "bias_sigma", "refl_z", "refl_z_sigma", "refl_p", "refl_p_sigma")}
+        if "refl_names_json" in h.attrs:
+            kw["refl_names"] = json.loads(str(h.attrs["refl_names_json"]))
         clouds = None
         if "clouds" in h:
             clouds = {int(n.split("_")[1]): np.asarray(h["clouds"][n]) for n in h["clouds"]}

@@ -1,7 +1,14 @@
-"""Atomic file writes: write to a temporary file in the same folder, then rename.
+"""Atomic, durable file writes: write to a temporary file in the same folder, flush it to
+disk, rename it onto the final name, then flush the folder.
 
 A crash or an exception in the middle of a write never leaves a half-written file under the
-final name, and never destroys a previous version of it.
+final name, and never destroys a previous version of it. Durability: the temporary file is
+``fsync``-ed before the rename (so the name never points at data still in the page cache), and
+the folder is ``fsync``-ed after it (so the rename itself survives a power loss) where the OS
+allows it — POSIX folders can be opened read-only and synced; on Windows (no ``O_DIRECTORY``,
+folders cannot be opened) and on file systems that refuse ``fsync`` on a folder (``EINVAL``,
+``ENOTSUP``, ``EBADF``, ``EACCES``) that last step is skipped: the rename is still atomic, only
+its durability across a crash is up to the OS.
 """
 
 from __future__ import annotations
@@ -11,12 +18,32 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes"]
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "fsync_dir"]
+
+
+def fsync_dir(folder) -> bool:
+    """Flush a folder's entries (a rename into it) to disk; True if done, False where the OS
+    or the file system does not allow it (module docstring)."""
+    flags = getattr(os, "O_DIRECTORY", None)
+    if flags is None:                     # Windows: folders cannot be opened and synced
+        return False
+    try:
+        fd = os.open(folder, os.O_RDONLY | flags)
+    except OSError:
+        return False
+    try:
+        os.fsync(fd)
+        return True
+    except OSError:                       # EINVAL/ENOTSUP/EBADF on some file systems
+        return False
+    finally:
+        os.close(fd)
 
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):
-    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+    """Yield a temporary path beside ``path``; on success fsync it, rename it onto ``path`` and
+    fsync the folder (:func:`fsync_dir`).
 
     On an exception the temporary file is removed and ``path`` is left as it was.
     """
@@ -34,6 +61,7 @@ def atomic_path(path, suffix: str | None = None):
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
         raise
+    fsync_dir(path.parent)
 
 
 def atomic_write_bytes(path, data: bytes) -> None:

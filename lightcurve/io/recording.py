@@ -22,8 +22,16 @@ Row handling (documented, counted in ``Lightcurve.attrs``):
   (``attrs["skipped_duplicate"]``); two different values at the same time and site are an
   error naming both lines;
 * rows with the object below the site's geometric horizon are skipped
-  (``attrs["skipped_below_horizon"]``); rows with it in the Earth's full shadow are kept,
-  counted (``attrs["n_unlit"]``) and announced with an ``UnlitPassWarning``;
+  (``attrs["skipped_below_horizon"]``);
+* rows with the object in the Earth's full shadow (lit fraction 0: it reflects no sunlight,
+  so the model cannot have produced the measurement) are skipped by default and counted
+  (``attrs["skipped_unlit"]``). ``unlit="keep"`` keeps them — counted in ``attrs["n_unlit"]``
+  and announced with an ``UnlitPassWarning`` — for diagnosing shadow effects (an object
+  measured where the model puts it in the umbra points at a mis-modelled shadow or clock) and
+  for scenarios with ``measurement.ignore_eclipse = true`` (Bernard's published cases model
+  umbral passes as if sunlit; that is the default when such a scenario is given). Partly lit
+  rows (penumbra, 0 < lit fraction < 1) are always kept. The attitude filters skip, flag and
+  count any unlit row that reaches them (:mod:`lightcurve.filters.gating`);
 * every other bad value (wrong number of fields, unparsable time or number, altitude out of
   [-90, 90] / below 0 with a height, azimuth not finite, negative sigma/range, a height below
   the site, an unknown site) raises :class:`~lightcurve.errors.InputError` naming the file, the
@@ -254,7 +262,8 @@ def _parse_time(text: str, fmt: str) -> datetime:
     return _MJD0 + timedelta(days=x)
 
 
-def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=None) -> Lightcurve:
+def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=None,
+                   unlit=None) -> Lightcurve:
     """Read a CSV recording into a :class:`Lightcurve` (no truth).
 
     Parameters
@@ -268,6 +277,10 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
         default layout (docs/formats.md).
     site_dirs : optional
         Extra observatory catalog folders.
+    unlit : {"skip", "keep"} or None
+        Rows with the object in the Earth's full shadow (module docstring): skipped and counted
+        in ``attrs["skipped_unlit"]``, or kept, counted in ``attrs["n_unlit"]`` and warned.
+        None: "keep" for a scenario with ``measurement.ignore_eclipse = true``, else "skip".
 
     Returns
     -------
@@ -276,7 +289,8 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
         sorted; ``mag``, ``mag_sigma``; GCRS geometry (m); ``elevation_rad`` and
         ``lit_fraction``; ``attrs`` with ``source = "recording"``, ``file``, ``n_rows``,
         ``skipped_nan_mag``, ``sorted_by_time``, ``n_out_of_order``, ``geometry_source``
-        (``"topocentric"`` or ``"orbit"``).
+        (``"topocentric"`` or ``"orbit"``), ``skipped_below_horizon``, ``unlit_policy``,
+        ``skipped_unlit`` and ``n_unlit`` (unlit rows kept).
 
     Raises
     ------
@@ -286,6 +300,9 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
     from ..geometry.sites import get_site
 
     path = Path(csv_path)
+    if unlit not in (None, "skip", "keep"):
+        raise InputError("unknown policy for rows in the Earth's shadow", file=path, field="unlit",
+                         value=unlit, allowed="skip, keep")
     scenario = None
     spec = scenario_or_recording_section
     if spec is not None and hasattr(spec, "attitude") and hasattr(spec, "measurement"):
@@ -577,23 +594,32 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
                          allowed=exc.allowed) from None
     # rows the model cannot have produced. Below the site's geometric horizon there is no line
     # of sight: skipped and counted. In the Earth's full shadow the object reflects no sunlight:
-    # kept (Bernard's published cases model umbral passes as if sunlit), counted in
-    # attrs["n_unlit"] and announced with a warning -- never silently used.
+    # skipped and counted by default; kept on request (diagnosis, ignore_eclipse scenarios),
+    # counted in attrs["n_unlit"] and announced with a warning -- never silently used.
+    if unlit is None:
+        ms = getattr(scenario, "measurement", None)
+        unlit = "keep" if bool(getattr(ms, "ignore_eclipse", False)) else "skip"
     below = ~(lc.elevation_rad >= 0.0)
-    unlit = ~(lc.lit_fraction > 0.0) & ~below
+    dark = ~(lc.lit_fraction > 0.0) & ~below
+    drop = below | dark if unlit == "skip" else below
     lc.attrs["skipped_below_horizon"] = int(below.sum()) + skipped_below
-    lc.attrs["n_unlit"] = int(unlit.sum())
-    if np.any(below):
-        if np.all(below):
-            raise InputError(f"no usable row: the object is below the horizon in all {below.size}",
-                             file=path, field="alt_deg / time", allowed="altitude >= 0 deg")
-        lc = lc.subset(~below)
-    if np.any(unlit):
+    lc.attrs["unlit_policy"] = unlit
+    lc.attrs["skipped_unlit"] = int(dark.sum()) if unlit == "skip" else 0
+    lc.attrs["n_unlit"] = 0 if unlit == "skip" else int(dark.sum())
+    if np.all(drop):
+        why = "below the horizon" if np.all(below) else "below the horizon or in the Earth's shadow"
+        raise InputError(f"no usable row: the object is {why} in all {drop.size}",
+                         file=path, field="alt_deg / time",
+                         allowed="altitude >= 0 deg" + (" and a sunlit object (or unlit='keep')"
+                                                        if np.any(dark) else ""))
+    if np.any(drop):
+        lc = lc.subset(~drop)
+    if unlit == "keep" and np.any(dark):
         import warnings
 
         from ..geometry.visibility import UnlitPassWarning
 
-        warnings.warn(f"{path}: the object is in the Earth's shadow at {int(unlit.sum())} of "
-                      f"{unlit.size} measurement epochs (kept; counted in attrs['n_unlit'])",
+        warnings.warn(f"{path}: the object is in the Earth's shadow at {int(dark.sum())} of "
+                      f"{dark.size} measurement epochs (kept; counted in attrs['n_unlit'])",
                       UnlitPassWarning, stacklevel=2)
     return lc

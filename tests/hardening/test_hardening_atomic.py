@@ -125,3 +125,75 @@ def test_no_code_or_pickle_loading_from_data():
             if UNSAFE.search(code):
                 hits.append(f"{f.relative_to(PKG)}:{i + 1}: {line.strip()}")
     assert not hits, "unsafe loading:\n" + "\n".join(hits)
+
+
+def test_atomic_write_fsyncs_file_then_folder(tmp_path, monkeypatch):
+    """Durability (issue 11, "every write is atomic"): the data is fsync-ed before the rename,
+    the folder after it (POSIX); the rename semantics are unchanged — the final name holds the
+    new bytes, a previous version is replaced whole, no temporary file is left."""
+    import os
+    import stat
+
+    from lightcurve.io import atomic
+
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        mode = os.fstat(fd).st_mode
+        events.append(("fsync", "dir" if stat.S_ISDIR(mode) else "file"))
+        return real_fsync(fd)
+
+    def replace(a, b):
+        events.append(("rename", Path(b).name))
+        return real_replace(a, b)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+    path = tmp_path / "out" / "a.txt"
+    atomic.atomic_write_text(path, "first\n")
+    atomic.atomic_write_text(path, "second\n")
+    assert path.read_text() == "second\n"
+    assert sorted(p.name for p in path.parent.iterdir()) == ["a.txt"]
+    one = [("fsync", "file"), ("rename", "a.txt")]
+    if hasattr(os, "O_DIRECTORY"):
+        one.append(("fsync", "dir"))
+    assert events == one + one
+
+
+def test_atomic_write_exception_cleans_up_and_skips_fsync(tmp_path, monkeypatch):
+    """An exception inside the block: no rename, no fsync of the folder, the temporary file is
+    removed and the previous file is untouched. A folder that cannot be synced (EINVAL on
+    some file systems) does not fail the write."""
+    import errno
+    import os
+
+    from lightcurve.io import atomic
+
+    path = tmp_path / "b.bin"
+    atomic.atomic_write_bytes(path, b"old")
+    calls = []
+    monkeypatch.setattr(os, "fsync", lambda fd: calls.append(fd))
+    with pytest.raises(KeyboardInterrupt):
+        with atomic.atomic_path(path) as tmp:
+            tmp.write_bytes(b"half")
+            raise KeyboardInterrupt
+    assert path.read_bytes() == b"old" and calls == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.bin"]
+
+    def refuse(fd):
+        raise OSError(errno.EINVAL, "fsync not supported on this folder")
+
+    real_fsync = os.fsync
+
+    def fsync(fd):
+        import stat
+
+        if stat.S_ISDIR(os.fstat(fd).st_mode):
+            refuse(fd)
+        return real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    atomic.atomic_write_bytes(path, b"new")
+    assert path.read_bytes() == b"new"
+    assert atomic.fsync_dir(tmp_path) is False or not hasattr(os, "O_DIRECTORY")

@@ -161,13 +161,38 @@ def test_rows_below_the_horizon_skipped_and_counted():
     assert np.all(lc.elevation_rad >= 0)
 
 
-def test_unlit_rows_counted_and_warned():
-    """2022-03-03 03:00 UTC: a 800 km-range object at 25.5 deg altitude towards the NE from
-    Mount Lemmon is in the Earth's shadow (geometry cross-checked in tests/io)."""
-    p = _write((HEADER + "\n2022-03-03T11:00:00Z,6.0,0.05,mount_lemmon,40,300,8e5\n").encode())
+UNLIT_ROW = "2022-03-03T11:00:00Z,6.0,0.05,mount_lemmon,40,300,8e5"
+
+
+def test_unlit_rows_kept_on_request_counted_and_warned():
+    """2022-03-03 11:00 UTC: an object 800 km away at 40 deg altitude towards az 300 deg from
+    Mount Lemmon is in the Earth's full shadow (conical lit fraction 0; the geometry code is
+    cross-checked against skyfield in tests/geometry). ``unlit="keep"`` keeps it, counted and
+    warned (for diagnosing shadow effects)."""
+    p = _write((HEADER + "\n" + UNLIT_ROW + "\n").encode())
     with pytest.warns(UserWarning, match="shadow"):
-        lc = read_recording(p)
+        lc = read_recording(p, unlit="keep")
     assert lc.attrs["n_unlit"] == 1 and lc.lit_fraction[0] == 0.0
+    assert lc.attrs["unlit_policy"] == "keep" and lc.attrs["skipped_unlit"] == 0
+
+
+def test_unlit_rows_skipped_and_counted_by_default():
+    """The same shadowed row among sunlit ones is skipped by default and counted; a file of
+    shadowed rows only is an InputError; a bad policy is an InputError."""
+    rows = list(GOOD_ROWS) + [UNLIT_ROW]
+    p = _write((HEADER + "\n" + "\n".join(rows) + "\n").encode())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")     # nothing kept, so no shadow warning
+        lc = read_recording(p)
+    ref = _read(_write((HEADER + "\n" + "\n".join(GOOD_ROWS) + "\n").encode()))
+    assert lc.attrs["skipped_unlit"] == 1 and lc.attrs["n_unlit"] == 0
+    assert lc.attrs["unlit_policy"] == "skip"
+    assert len(lc) == len(ref) and np.all(lc.lit_fraction > 0.0)
+    np.testing.assert_array_equal(lc.mag, ref.mag)
+    with pytest.raises(InputError, match="shadow"):
+        read_recording(_write((HEADER + "\n" + UNLIT_ROW + "\n").encode()))
+    with pytest.raises(InputError, match="unlit"):
+        read_recording(p, unlit="drop")
 
 
 def test_unknown_site_rejected_naming_line_and_known_ids():
