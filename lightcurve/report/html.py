@@ -130,8 +130,9 @@ def _envelope_figures(envelopes) -> list:
             continue
         panels = []
         for c, _ in sub:
-            if (c["dynamics"], c["sites"]) not in panels:
-                panels.append((c["dynamics"], c["sites"]))
+            if (c["dynamics"], c["sites"], c.get("reflection", "none")) not in panels:
+                panels.append((c["dynamics"], c["sites"], c.get("reflection", "none")))
+        several_refl = len({p[2] for p in panels}) > 1
         thetas = sorted({c["sigma_theta_deg"] for c, _ in sub})
         cmap = plt.get_cmap("viridis")
         colours = {th: cmap(i / max(1, len(thetas) - 1) * 0.85) for i, th in enumerate(thetas)}
@@ -139,14 +140,15 @@ def _envelope_figures(envelopes) -> list:
         nrow = int(np.ceil(len(panels) / ncol))
         fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 3.4 * nrow), squeeze=False,
                                  sharey=True, layout="constrained")
-        for ax, (dyn, ns) in zip(axes.ravel(), panels):
+        for ax, (dyn, ns, refl) in zip(axes.ravel(), panels):
             for c, (t, p50, p95, _p5) in sub:
-                if (c["dynamics"], c["sites"]) != (dyn, ns):
+                if (c["dynamics"], c["sites"], c.get("reflection", "none")) != (dyn, ns, refl):
                     continue
                 col = colours[c["sigma_theta_deg"]]
                 ax.semilogy(t, p50, color=col, lw=1.4)
                 ax.semilogy(t, p95, color=col, lw=0.9, ls="--")
-            ax.set_title(f"{_FILTER_NAME.get(flt, flt)} — {dyn}, {_fmt('sites', ns)}", fontsize=9)
+            ax.set_title(f"{_FILTER_NAME.get(flt, flt)} — {dyn}, {_fmt('sites', ns)}"
+                         + (f", reflection {refl}" if several_refl else ""), fontsize=9)
             ax.set_xlabel("t (s)")
             ax.grid(True, which="both", alpha=0.3)
         for ax in axes[:, 0]:

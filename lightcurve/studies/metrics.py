@@ -43,7 +43,9 @@ def run_metrics(estimate) -> dict:
 
     Returns a dict of plain floats/lists: ``rss_att_deg``, ``rss_omega_deg_s``,
     ``outside`` (six 0/1), ``final_att_error_deg`` (3), ``final_omega_error_deg_s`` (3),
-    ``final_att_sigma_deg`` (3), ``final_omega_sigma_deg_s`` (3), ``diverged``, ``runtime_s``.
+    ``final_att_sigma_deg`` (3), ``final_omega_sigma_deg_s`` (3), ``diverged``, ``runtime_s``;
+    with per-site reflection-bias states also ``final_bias_mag`` and ``final_bias_sigma_mag``
+    (S each, mag).
     """
     if estimate.att_error_deg is None:
         raise ValueError("run_metrics needs an estimate with truth (att_error_deg)")
@@ -62,7 +64,18 @@ def run_metrics(estimate) -> dict:
         "final_omega_sigma_deg_s": [float(x) for x in np.degrees(sw)],
         "diverged": bool(estimate.diverged),
         "runtime_s": float(estimate.runtime_s),
+        **_reflection_metrics(estimate),
     }
+
+
+def _reflection_metrics(estimate) -> dict:
+    """Final per-site reflection biases and 1σ (mag; Models 1–2 and random walk), if any."""
+    b = getattr(estimate, "bias", None)
+    bs = getattr(estimate, "bias_sigma", None)
+    if b is None or bs is None:
+        return {}
+    return {"final_bias_mag": [float(x) for x in np.asarray(b)[-1]],
+            "final_bias_sigma_mag": [float(x) for x in np.asarray(bs)[-1]]}
 
 
 def traffic_light(outside_counts) -> str:

@@ -3,9 +3,10 @@
 Output folder ``DIR`` (formats in docs/formats.md, "Studies"):
 
 ``DIR/study.json``
-    the study's hash (:func:`lightcurve.studies.study.study_hash`), name, text and cells; a
-    rerun with a changed study (or changed scenario files) is refused unless ``force`` (which
-    discards the stored runs).
+    the study's hash (:func:`lightcurve.studies.study.study_hash`: study and scenario texts,
+    package version and a hash of the package's source files), name, text and cells; a rerun
+    with a changed study (or changed scenario files, or changed code) is refused unless
+    ``force`` (which discards the stored runs).
 ``DIR/runs/<cell tag>_r<run>.h5``
     one small HDF5 per finished run, written atomically (temporary file, then rename) by the
     main process as soon as the run's result arrives; failures are stored too (``status =
@@ -40,7 +41,7 @@ from .metrics import cell_summary, run_metrics
 from .study import GRID_KEYS, RunTask, Study
 
 __all__ = ["limit_blas_threads", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
-           "prepare_output", "RUN_FORMAT"]
+           "prepare_output", "iter_results", "progress_bar", "RUN_FORMAT"]
 
 RUN_FORMAT = "lightcurve-study-run"
 _SUMMARY_FORMAT = "lightcurve-study-summary"
@@ -139,6 +140,8 @@ def execute_task(task: RunTask) -> dict:
             kw["particles"] = int(opts["particles"])
         if "acs_mode" in opts:
             kw["acs_mode"] = opts["acs_mode"]
+        if c.reflection != "none":
+            kw["reflection"] = c.reflection
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             est = invert(lc, c.filter, seed=int(task.filter_seed),
@@ -227,16 +230,32 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
     With ``force`` and a different stored study, the stored runs, summary and report are
     deleted first.
     """
+    from .study import code_fingerprint
+
     out = Path(out_dir)
     meta = out / "study.json"
     h = study.hash
+    fp = code_fingerprint()
     if meta.exists():
         try:
-            old = json.loads(meta.read_text(encoding="utf-8")).get("study_hash")
+            olddoc = json.loads(meta.read_text(encoding="utf-8"))
         except (OSError, ValueError):
-            old = None
+            olddoc = {}
+        old = olddoc.get("study_hash")
         if old != h:
             if not force:
+                # same inputs (study.json files written before the code fingerprint existed
+                # store the input-only hash as study_hash) → the code changed
+                if olddoc.get("input_hash", old) == study.input_hash:
+                    raise InputError(
+                        "the lightcurve code changed since the stored runs were made (package "
+                        f"version {olddoc.get('package_version', '?')} -> "
+                        f"{fp['package_version']}, source hash "
+                        f"{str(olddoc.get('source_sha256', '?'))[:12]} -> "
+                        f"{fp['source_sha256'][:12]}); new runs would not be comparable. Use "
+                        "--force to discard the stored runs and rerun, or another -o",
+                        file=study.source, field="study_hash", value=h[:16],
+                        allowed=f"{str(old)[:16]} (stored in {meta})")
                 raise InputError(
                     "the output folder holds runs of a different study (the study file or one "
                     "of its scenario files changed); use --force to discard them, or another -o",
@@ -250,7 +269,8 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
         stale.unlink(missing_ok=True)
     if not meta.exists() or force:
         doc = {"format": "lightcurve-study", "format_version": 1, "study_hash": h,
-               "name": study.name, "seed": study.seed, "source": study.source,
+               "input_hash": study.input_hash, "package_version": fp["package_version"],
+               "source_sha256": fp["source_sha256"], "name": study.name, "seed": study.seed, "source": study.source,
                "study_toml": study.text, "cells": [c.as_dict() for c in study.cells]}
         atomic_write_text(meta, json.dumps(doc, indent=1) + "\n")
 
@@ -258,15 +278,17 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
 # ----------------------------------------------------------------------------------------
 # executors: generators of results in completion order
 # ----------------------------------------------------------------------------------------
-def _iter_inline(tasks):
+def _iter_inline(tasks, fn=None):
+    fn = execute_task if fn is None else fn
     for t in tasks:
-        yield execute_task(t)
+        yield fn(t)
 
 
-def _iter_pool(tasks, workers):
+def _iter_pool(tasks, workers, fn=None):
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
+    fn = execute_task if fn is None else fn
     # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
     # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
     if "forkserver" in mp.get_all_start_methods():
@@ -280,7 +302,7 @@ def _iter_pool(tasks, workers):
         it = iter(tasks)
         # bounded in-flight queue: the results come back as they complete
         for t in it:
-            pending.add(ex.submit(execute_task, t))
+            pending.add(ex.submit(fn, t))
             if len(pending) >= 4 * workers:
                 break
         while pending:
@@ -289,7 +311,7 @@ def _iter_pool(tasks, workers):
                 yield f.result()
                 nxt = next(it, None)
                 if nxt is not None:
-                    pending.add(ex.submit(execute_task, nxt))
+                    pending.add(ex.submit(fn, nxt))
 
 
 def _import_distributed():
@@ -302,8 +324,10 @@ def _import_distributed():
     return distributed
 
 
-def _iter_dask(tasks, *, address=None, n_workers=None):
+def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
     distributed = _import_distributed()
+    fn = execute_task if fn is None else fn
+    key = (lambda t: f"lightcurve-run-{t.run_id}-{t.filter_seed}") if key is None else key
     cluster = None
     if address is None:
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
@@ -316,8 +340,7 @@ def _iter_dask(tasks, *, address=None, n_workers=None):
             raise InputError(f"cannot connect to the Dask scheduler: {exc}", field="--scheduler",
                              value=address) from None
     try:
-        futs = [client.submit(execute_task, t, key=f"lightcurve-run-{t.run_id}-{t.filter_seed}",
-                              pure=False) for t in tasks]
+        futs = [client.submit(fn, t, key=key(t), pure=False) for t in tasks]
         for fut in distributed.as_completed(futs):
             res = fut.result()
             fut.release()
@@ -326,6 +349,44 @@ def _iter_dask(tasks, *, address=None, n_workers=None):
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def iter_results(tasks, fn=None, *, workers: int | None = None, scheduler: str | None = None,
+                 dask_local: int | None = None, key=None):
+    """Run ``fn(task)`` for every task on the chosen executor; yield results as they complete.
+
+    The executors of :func:`run_study`, shared with the batch inversion
+    (:mod:`lightcurve.studies.batch`): an existing Dask cluster (``scheduler`` address), a Dask
+    ``LocalCluster`` with ``dask_local`` worker processes, or a local process pool of
+    ``workers`` processes (forkserver; default ``os.cpu_count()``; 1 runs inline, in this
+    process). ``fn`` must be a module-level function (pickled by reference) and never raise
+    for a failing task (return the failure instead); default :func:`execute_task`. ``key``
+    maps a task to a unique Dask key (default: the study run id). At most one of
+    ``workers``, ``scheduler``, ``dask_local``.
+    """
+    if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
+        raise InputError("choose one executor: --workers, --scheduler or --dask-local",
+                         field="executor")
+    tasks = list(tasks)
+    if not tasks:
+        return iter(())
+    if scheduler is not None:
+        return _iter_dask(tasks, address=scheduler, fn=fn, key=key)
+    if dask_local is not None:
+        return _iter_dask(tasks, n_workers=int(dask_local), fn=fn, key=key)
+    w = int(workers or os.cpu_count() or 1)
+    return _iter_inline(tasks, fn) if w == 1 else _iter_pool(tasks, w, fn)
+
+
+def progress_bar(total: int, *, initial: int = 0, desc: str = "", progress: bool = True):
+    """The tqdm bar of studies and batch inversions (stderr; runs done, rate, time left).
+
+    Callers add the failure count with ``bar.set_postfix(failures=n)``.
+    """
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, disable=not progress, unit="run", desc=desc,
+                mininterval=0.5, dynamic_ncols=True)
 
 
 # ----------------------------------------------------------------------------------------
@@ -366,17 +427,10 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
     limit_blas_threads()  # before any worker starts (inherited) and for inline runs
     failures = 0
     if todo:
-        if scheduler is not None:
-            it = _iter_dask(todo, address=scheduler)
-        elif dask_local is not None:
-            it = _iter_dask(todo, n_workers=int(dask_local))
-        else:
-            w = int(workers or os.cpu_count() or 1)
-            it = _iter_inline(todo) if w == 1 else _iter_pool(todo, w)
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), disable=not progress,
-                   unit="run", desc=study.name, mininterval=0.5, dynamic_ncols=True)
+        it = iter_results(todo, execute_task, workers=workers, scheduler=scheduler,
+                          dask_local=dask_local)
+        bar = progress_bar(len(tasks), initial=len(tasks) - len(todo), desc=study.name,
+                           progress=progress)
         h = study.hash
         try:
             for res in it:
@@ -388,6 +442,13 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         finally:
             bar.close()
     return summarize(study, out, runs=n, write_report=write_report)
+
+
+def _code_fields() -> dict:
+    from .study import code_fingerprint
+
+    fp = code_fingerprint()
+    return {"package_version": fp["package_version"], "source_sha256": fp["source_sha256"]}
 
 
 def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: bool = True) -> dict:
@@ -430,7 +491,8 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
         g[2].extend(rss)
     envelopes = [(g[0], rss_envelope(g[1], g[2])) for g in groups.values()]
     summary = {"format": _SUMMARY_FORMAT, "format_version": 1, "study": study.name,
-               "study_hash": study.hash, "seed": study.seed, "runs_per_cell": n,
+               "study_hash": study.hash, **_code_fields(), "seed": study.seed,
+               "runs_per_cell": n,
                "grid_keys": list(GRID_KEYS), "cells": cells}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
     if write_report:

@@ -20,8 +20,10 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     sigma_omega_deg_s = [0.02, 0.2]       # 1σ initial rate error per axis, deg/s
     r_percent = [1.0, 10.0]               # measurement noise r (Bernard eq. 9.3), overrides
                                           # the scenario's measurement.r_percent
-    reflection = ["none"]                 # reflection-parameter model estimated with the
-                                          # attitude; only "none" exists yet
+    reflection = ["none", "model1"]       # reflection-parameter states estimated with the
+                                          # attitude (lightcurve.filters.reflection.
+                                          # REFLECTION_CHOICES); the truth perturbation is the
+                                          # base scenario's [reflection] table (Bernard §10.1)
 
     [options]                             # optional filter settings shared by every cell
     particles = 1000                      # BPF particles
@@ -45,18 +47,19 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..filters.reflection import REFLECTION_CHOICES as _FILTER_REFLECTION_CHOICES
 from ..io.tomlio import Section, load_toml
 
 __all__ = ["Study", "Cell", "RunTask", "load_study", "GRID_KEYS", "REFLECTION_MODELS",
-           "cell_key", "run_seeds", "study_hash"]
+           "cell_key", "run_seeds", "study_hash", "input_hash", "code_fingerprint"]
 
 #: grid axes in table order (also the order of the cell key)
 GRID_KEYS = ("filter", "dynamics", "sites", "sigma_theta_deg", "sigma_omega_deg_s", "r_percent",
              "reflection")
-#: reflection models accepted in the grid (the reflection-parameter filters of Bernard ch. 8
-#: are not implemented yet; only attitude-and-rate estimation, "none", runs)
-REFLECTION_MODELS = ("none",)
-_KNOWN_REFLECTION = ("none", "model1", "model2", "model3")
+#: reflection models accepted in the grid: the filters' choices (read from
+#: :data:`lightcurve.filters.reflection.REFLECTION_CHOICES` at import time, so a model added
+#: to the filters is accepted here without an edit)
+REFLECTION_MODELS = tuple(_FILTER_REFLECTION_CHOICES)
 _DYNAMICS = ("controlled", "uncontrolled")
 _MAX_RUNS = 1_000_000
 
@@ -151,8 +154,13 @@ class Study:
 
     @property
     def hash(self) -> str:
-        """SHA-256 of the study text and every scenario text it uses (:func:`study_hash`)."""
+        """SHA-256 of the inputs and the code (:func:`study_hash`)."""
         return study_hash(self)
+
+    @property
+    def input_hash(self) -> str:
+        """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
+        return input_hash(self)
 
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
@@ -168,7 +176,7 @@ class Study:
         return out
 
 
-def study_hash(study: Study) -> str:
+def input_hash(study: Study) -> str:
     """Hex SHA-256 over the study file text and the scenario texts (sorted by key).
 
     ``--runs`` is not part of it: adding runs to a finished study reuses the stored ones.
@@ -177,6 +185,69 @@ def study_hash(study: Study) -> str:
     for k in sorted(study.scenario_texts):
         h.update(f"\0{k[0]}|{k[1]}\0".encode())
         h.update(study.scenario_texts[k].encode())
+    return h.hexdigest()
+
+
+def source_tree_hash(root) -> tuple:
+    """``(hex SHA-256, file count)`` over every ``*.py`` below ``root`` (relative path and
+    bytes of each, sorted by path; ``__pycache__`` skipped)."""
+    root = Path(root)
+    h = hashlib.sha256()
+    n = 0
+    for f in sorted(root.rglob("*.py")):
+        if "__pycache__" in f.relative_to(root).parts:
+            continue
+        h.update(f.relative_to(root).as_posix().encode() + b"\0")
+        h.update(f.read_bytes())
+        h.update(b"\0")
+        n += 1
+    return h.hexdigest(), n
+
+
+_FP_CACHE: dict = {}
+
+
+def _source_fingerprint() -> tuple:
+    """``(version, source hash, n files)`` of the package's files on disk now (re-hashed when
+    any file's size or modification time changed since the last call)."""
+    from .. import __version__
+
+    root = Path(__file__).resolve().parents[1]  # the lightcurve package folder
+    sig = []
+    for f in sorted(root.rglob("*.py")):
+        if "__pycache__" not in f.relative_to(root).parts:
+            st = f.stat()
+            sig.append((str(f), st.st_size, st.st_mtime_ns))
+    sig = tuple(sig)
+    if _FP_CACHE.get("sig") != sig:
+        _FP_CACHE["sig"] = sig
+        _FP_CACHE["value"] = source_tree_hash(root)
+    h, n = _FP_CACHE["value"]
+    return str(__version__), h, n
+
+
+def code_fingerprint() -> dict:
+    """The code that produces a study's numbers: ``package_version`` and ``source_sha256``.
+
+    ``source_sha256`` hashes every ``lightcurve/**/*.py`` file of the imported package (path
+    and bytes, sorted by path; ``n_source_files`` of them) as they are on disk at the call
+    (so a process and the workers or later processes it is compared with agree). Part of
+    :func:`study_hash`, so stored runs made by other code are not mixed with new ones.
+    """
+    v, h, n = _source_fingerprint()
+    return {"package_version": v, "source_sha256": h, "n_source_files": n}
+
+
+def study_hash(study: Study) -> str:
+    """Hex SHA-256 over :func:`input_hash` (study and scenario texts) and
+    :func:`code_fingerprint` (package version and source hash).
+
+    A stored study whose hash differs was made from other inputs or by other code; resuming it
+    is refused unless ``--force`` (:func:`lightcurve.studies.runner.prepare_output`).
+    """
+    fp = code_fingerprint()
+    h = hashlib.sha256(input_hash(study).encode())
+    h.update(f"\0version={fp['package_version']}\0source={fp['source_sha256']}".encode())
     return h.hexdigest()
 
 
@@ -208,11 +279,16 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
 def load_study(path) -> Study:
     """Load and validate a study TOML (module docstring); every scenario file is parsed.
 
+    Reflection models: every value of ``grid.reflection`` is a filter option
+    (:data:`REFLECTION_MODELS`); the simulated lightcurves do not depend on it (common random
+    numbers across reflection models), and the truth reflection parameters are perturbed as
+    the base scenario's ``[reflection]`` table says (none → nominal truth, on which the
+    reflection states should stay near zero).
+
     Raises
     ------
     InputError
-        Naming the file, key and allowed values for any bad entry; a reflection model other
-        than "none" is refused (the reflection models are not implemented yet).
+        Naming the file, key and allowed values for any bad entry.
     """
     from ..filters import METHODS
     from .scenario import parse_scenario
@@ -236,14 +312,9 @@ def load_study(path) -> Study:
         "sigma_theta_deg": _list(g, "sigma_theta_deg", float, min=0.0, max=180.0, min_open=True),
         "sigma_omega_deg_s": _list(g, "sigma_omega_deg_s", float, min=0.0, max=360.0, min_open=True),
         "r_percent": _list(g, "r_percent", float, min=0.0, max=100.0, min_open=True),
-        "reflection": _list(g, "reflection", str, choices=_KNOWN_REFLECTION) if g.has("reflection")
+        "reflection": _list(g, "reflection", str, choices=REFLECTION_MODELS) if g.has("reflection")
         else ["none"],
     }
-    for v in axes["reflection"]:
-        if v not in REFLECTION_MODELS:
-            raise InputError("the reflection models are not implemented yet; only attitude and "
-                             "rate estimation runs", file=path, field="grid.reflection", value=v,
-                             allowed="none")
     g.check_unknown()
 
     opts = {}

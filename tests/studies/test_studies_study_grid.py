@@ -47,14 +47,17 @@ def test_cell_key_is_canonical():
     assert c1.tag != c2.tag and c1.scenario_key != c2.scenario_key
 
 
-def test_reflection_models_refused(tmp_path, make_study):
+def test_reflection_models_accepted_unknown_refused(tmp_path, make_study):
+    # the grid accepts exactly the filters' reflection choices (issue 7: no longer "none" only)
+    from lightcurve.filters.reflection import REFLECTION_CHOICES
+
     p = make_study(tmp_path, reflection=["none", "model1"])
-    with pytest.raises(InputError, match="reflection models are not implemented") as ei:
-        load_study(p)
-    assert "grid.reflection" in str(ei.value) and "model1" in str(ei.value)
+    st = load_study(p)
+    assert [c.reflection for c in st.cells] == ["none", "model1"] * 2
     p = make_study(tmp_path, reflection=["lambert?"])
-    with pytest.raises(InputError, match="grid.reflection"):
+    with pytest.raises(InputError, match="grid.reflection") as ei:
         load_study(p)
+    assert all(m in str(ei.value) for m in REFLECTION_CHOICES)
 
 
 @pytest.mark.parametrize("bad, field", [

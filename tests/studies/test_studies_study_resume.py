@@ -111,3 +111,52 @@ def test_changed_study_refused_unless_force(tmp_path, make_study):
     new_runs = set(p.name for p in (out / "runs").glob("*.h5"))
     assert len(new_runs) == 2 and not (new_runs & old_runs)  # old runs discarded
     assert s["cells"][0]["sigma_theta_deg"] == 5.0
+
+
+def test_code_change_refused_unless_force(tmp_path, make_study, monkeypatch):
+    """The study hash covers the package version and source hash (issue 7): a stored study made
+    by other code is not resumed (the message says the code changed) unless --force."""
+    import lightcurve.studies.study as st
+
+    study_file = make_study(tmp_path, filters=("ukf",), runs=2)
+    out = tmp_path / "out"
+    study = load_study(study_file)
+    fp = st.code_fingerprint()
+    assert fp["n_source_files"] > 50 and len(fp["source_sha256"]) == 64
+    h0 = study.hash
+    runner.run_study(study, out, workers=1, progress=False, write_report=False)
+    meta = json.loads((out / "study.json").read_text())
+    assert meta["source_sha256"] == fp["source_sha256"] and meta["input_hash"] == study.input_hash
+    summ = json.loads((out / "summary.json").read_text())
+    assert summ["package_version"] == fp["package_version"]
+    # an edited source file changes the fingerprint (simulated: the real files stay untouched)
+    monkeypatch.setattr(st, "code_fingerprint",
+                        lambda: dict(fp, source_sha256="0" * 64))
+    assert study.hash != h0 and study.input_hash == meta["input_hash"]
+    with pytest.raises(InputError, match="code changed") as ei:
+        runner.run_study(study, out, workers=1, progress=False, write_report=False)
+    assert "--force" in str(ei.value)
+    before = {p.name for p in (out / "runs").glob("*.h5")}
+    s = runner.run_study(study, out, workers=1, progress=False, write_report=False, force=True)
+    assert [c["runs"] for c in s["cells"]] == [2]
+    assert json.loads((out / "study.json").read_text())["source_sha256"] == "0" * 64
+    assert {p.name for p in (out / "runs").glob("*.h5")} == before  # rerun, same run ids
+    # the tree hash sees a one-byte edit, a new file and a rename, and ignores __pycache__
+    import lightcurve
+
+    pkg = Path(lightcurve.__file__).parent
+    assert st.source_tree_hash(pkg) == (fp["source_sha256"], fp["n_source_files"])
+    tree = tmp_path / "tree"
+    (tree / "sub" / "__pycache__").mkdir(parents=True)
+    (tree / "a.py").write_text("x = 1\n")
+    (tree / "sub" / "b.py").write_text("y = 2\n")
+    h1 = st.source_tree_hash(tree)
+    (tree / "sub" / "__pycache__" / "b.py").write_text("junk")
+    assert st.source_tree_hash(tree) == h1 and h1[1] == 2
+    (tree / "a.py").write_text("x = 2\n")
+    h2 = st.source_tree_hash(tree)
+    assert h2 != h1
+    (tree / "c.py").write_text("")
+    assert st.source_tree_hash(tree)[0] != h2[0]
+    (tree / "c.py").rename(tree / "d.py")
+    assert st.source_tree_hash(tree)[0] not in (h1[0], h2[0])
