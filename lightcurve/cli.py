@@ -338,9 +338,13 @@ def _cmd_css_simulate(args) -> int:
     css = _css_sensors(args.config, args.fov_deg)
     gyro = None if args.gyro == "none" else args.gyro
     fp = FilterParams() if gyro else gyroless_params()
+    from dataclasses import replace as _replace
+
+    fp = _replace(fp, albedo_model=args.filter_albedo != "none")
     sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
                   duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
-                  albedo=_css_albedo(args.albedo), filter_params=fp)
+                  albedo=_css_albedo(args.albedo), filter_params=fp,
+                  filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
     r = simulate(sc, args.seed)
     m = settled_mask(r.t, r.lit, args.settle_s)
     e = r.error_deg[m]
@@ -447,6 +451,9 @@ def _register_css(sub) -> None:
     s.add_argument("--epoch", default="2015-03-01T00:00:00Z", help="epoch, ISO 8601 UTC")
     s.add_argument("--albedo", default="builtin",
                    help="builtin (zonal CERES fit), none, or a CERES CSV / TOMS .dat file")
+    s.add_argument("--filter-albedo", default="builtin",
+                   help="albedo model inside the EKF/ECKF: builtin (default), none (no albedo "
+                   "model, first-session filter), or a CERES CSV / TOMS .dat file")
     s.add_argument("--seed", type=_SEED, default=1, help="random seed (default 1)")
     s.add_argument("--settle-s", type=_num(0.0), default=300.0,
                    help="ignore errors this long after entering sunlight, s (default 300)")
@@ -516,7 +523,8 @@ def _register_css(sub) -> None:
         "faults", help="fault detection by averaged per-sensor NIS (off / stuck / random failures)",
         description="Monte Carlo of O'Keefe §5.1: one sensor fails (off, stuck or random) at "
         "--fail-s; the averaged per-sensor NIS of the calibration filter is tested against "
-        "the chi-square bound. Reports detection and false-alarm rates and times to detection.")
+        "the chi-square bound, and a dark-sensor test flags a lit sensor whose gain is "
+        "confidently below the prior's smallest plausible value. Reports detection and false-alarm rates and times to detection.")
     fa.add_argument("--runs", type=_num(1, 100000, integer=True), default=300,
                     help="runs per failure mode (default 300)")
     fa.add_argument("--workers", type=_num(1, 256, integer=True), default=1)
@@ -528,6 +536,11 @@ def _register_css(sub) -> None:
     fa.add_argument("--start-s", type=_num(0.0), default=600.0,
                     help="no decision before this time, s (default 600)")
     fa.add_argument("--fail-s", type=_num(0.0), default=1950.0, help="failure time, s (default 1950)")
+    fa.add_argument("--no-dark", action="store_true",
+                    help="averaged NIS only: switch off the dark-sensor test (a lit sensor whose "
+                    "output stays at zero; catches off failures of never-calibrated sensors)")
+    fa.add_argument("--star-period-s", type=_num(0.0, 3600.0), default=10.0,
+                    help="star-tracker period, s; 0 for none (default 10)")
     fa.add_argument("--out", help="write the summary to this JSON file")
     fa.set_defaults(func=_lazy("cmd_faults"))
 
@@ -561,63 +574,39 @@ def _register_css(sub) -> None:
 # attitude filters (invert)
 # ----------------------------------------------------------------------------------------
 def _cmd_invert(args) -> int:
-    import json
+    from .studies.batch import expand_inputs, invert_files
 
-    from .filters.invert import invert
-    from .io.atomic import atomic_write_text
-    from .io.lightcurve_h5 import read_lightcurve
+    n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+    bar = n_files > 1 and not args.quiet
 
+    def report(text, kind="info"):
+        if kind == "info":
+            line, stream = text, sys.stdout
+        else:
+            line, stream = f"lightcurve: {kind}: {text}", sys.stderr
+        if bar:
+            from tqdm import tqdm
+
+            tqdm.write(line, file=stream)
+        else:
+            print(line, file=stream)
+
+    res = invert_files(args.files, args.method, args.output, workers=args.workers,
+                       scheduler=args.scheduler, dask_local=args.dask_local, progress=bar,
+                       plot=args.plot, report=report, seed=args.seed,
+                       sigma_theta_deg=args.sigma_theta_deg,
+                       sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
+                       roughening=args.roughening, resampling=args.resampling,
+                       ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
+                       pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
+                       kappa=args.kappa, reflection=args.reflection,
+                       attitude="truth" if args.attitude_known else "estimate",
+                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
     out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    summary = {}
-    failed = 0
-    bad_inputs = 0
-    for f in args.files:
-        stem = Path(f).stem
-        try:
-            curve = read_lightcurve(f)
-            est = invert(curve, args.method, seed=args.seed,
-                         sigma_theta_deg=args.sigma_theta_deg,
-                         sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
-                         roughening=args.roughening, resampling=args.resampling,
-                         ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
-                         pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
-                         kappa=args.kappa, reflection=args.reflection)
-        except InputError as exc:  # report, go on with the other files, exit 2 at the end
-            print(f"lightcurve: error: {exc}", file=sys.stderr)
-            summary[stem] = {"file": str(f), "method": args.method, "error": str(exc)}
-            bad_inputs += 1
-            continue
-        from .io.paths import safe_output_path
-
-        res = safe_output_path(out, f"{stem}.{args.method}", ".h5", field="file name")
-        est.write(res)
-        s = est.summary()
-        s["file"] = str(f)
-        s["result"] = str(res)
-        summary[stem] = s
-        if est.diverged:
-            failed += 1
-        line = f"{f}: {args.method} {len(est)} epochs, {est.runtime_s:.2f} s"
-        if "final_att_error_rss_deg" in s:
-            line += (f", final RSS error {s['final_att_error_rss_deg']:.3f} deg / "
-                     f"{s['final_omega_error_rss_deg_s']:.4f} deg/s, inside 3-sigma: "
-                     f"{'yes' if s['inside_3sigma'] else 'no'}")
-        if est.diverged:
-            line += f", DIVERGED ({est.divergence_reason})"
-        if est.skipped_nan:
-            line += f", {est.skipped_nan} NaN magnitude(s) skipped"
-        print(line)
-        if args.plot:
-            from .filters.plots import plot_estimate
-
-            png = safe_output_path(out, f"{stem}.{args.method}", ".png", field="file name")
-            plot_estimate(est, png, title=f"{stem} ({args.method})")
-            print(f"wrote {png}")
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    print(f"wrote {out / 'summary.json'} ({len(summary)} file(s), {failed} diverged, "
-          f"{bad_inputs} rejected)")
-    return 2 if bad_inputs else 0
+    print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
+          f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
+    # exit 2 when an input was rejected (bad file or setting), 1 when a run failed otherwise
+    return 2 if res["n_input_errors"] else (1 if res["n_failed"] else 0)
 
 
 def _register_filters(sub) -> None:
@@ -627,9 +616,23 @@ def _register_filters(sub) -> None:
         description="Run an attitude filter on each lightcurve HDF5 file and write one result "
         "HDF5 per input plus DIR/summary.json (per file: method, final RSS attitude and rate "
         "error, final 3-sigma bounds, whether every component ended inside 3 sigma, "
-        "divergence flag, runtime). The initial estimate is the file's truth perturbed by "
-        "--sigma-theta-deg / --sigma-omega-deg-s using --seed (Bernard 2021 ch. 9).")
-    p.add_argument("files", nargs="+", metavar="FILE.h5", help="lightcurve HDF5 file(s)")
+        "divergence flag, runtime; or the error of a file that failed — the others go on). "
+        "The initial estimate is the file's truth perturbed by --sigma-theta-deg / "
+        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9). Many files run in parallel on "
+        "the executors of 'compare' (process pool, Dask); the results do not depend on the "
+        "executor. Exit code 2 if an input was rejected, 1 if a run failed.")
+    p.add_argument("files", nargs="+", metavar="FILE.h5",
+                   help="lightcurve HDF5 file(s) or glob patterns (expanded here, so quoted "
+                   "patterns work; a pattern matching nothing is an error)")
+    ex = p.add_mutually_exclusive_group()
+    ex.add_argument("--workers", type=_num(1, 4096, integer=True), default=None,
+                    help="local process-pool size (default: one per CPU, at most one per file; "
+                    "1 runs in this process)")
+    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    ex.add_argument("--dask-local", type=_num(1, 4096, integer=True), default=None, metavar="W",
+                    help="start a Dask LocalCluster with W worker processes")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--method", choices=("mekf", "ukf", "bpf"), default="ukf",
                    help="filter (default: ukf)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
@@ -651,10 +654,22 @@ def _register_filters(sub) -> None:
     p.add_argument("--alpha", type=_num(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
     p.add_argument("--beta", type=_num(), default=2.0, help="UKF beta (default 2)")
     p.add_argument("--kappa", type=_num(), default=0.0, help="UKF kappa (default 0)")
-    p.add_argument("--reflection", choices=("none", "random-walk", "model1", "model2"),
+    p.add_argument("--reflection", choices=("none", "random-walk", "model1", "model2", "model3"),
                    default="none",
-                   help="per-site magnitude-bias states for uncertain reflection parameters "
-                   "(Bernard ch. 8; MEKF and UKF only; default none)")
+                   help="states for uncertain reflection parameters (Bernard ch. 8): per-site "
+                   "magnitude biases (random-walk, model1, model2) or the facet parameters "
+                   "xi, a, m, A themselves (model3); MEKF and UKF (default none)")
+    p.add_argument("--attitude-known", action="store_true",
+                   help="hold attitude and rate at the file's truth and estimate only the "
+                   "reflection states (thesis sec. 10.7 parameter-only runs; needs --reflection)")
+    p.add_argument("--gate", choices=("auto", "reject", "inflate", "off"), default="auto",
+                   help="innovation (outlier) gate: skip a magnitude whose normalised innovation "
+                   "squared exceeds the chi-square threshold (reject), use it with inflated noise "
+                   "(inflate), or no gate; auto = reject in the UKF, inflate in the MEKF and the "
+                   "particle filter (default auto; counts in summary.json)")
+    p.add_argument("--gate-false-alarm", type=_num(0.0, 0.5, lo_open=True), default=1e-4,
+                   help="probability that the gate flags a good magnitude (default 1e-4: "
+                   "NIS > 15.14)")
     p.add_argument("--plot", action="store_true", help="also write a PNG per file")
     p.set_defaults(func=_cmd_invert)
 
@@ -687,12 +702,15 @@ def _register_diagnosis(sub) -> None:
         "Ljung-Box, runs, systematic segments), score every registered physics effect (signature "
         "correlation, fit, delta-BIC), fit the best one or two, and write DIR/diagnosis.json and "
         "DIR/report.html. Recordings spanning several nights get leave-one-night-out "
-        "cross-validation.")
-    p.add_argument("recording", help="lightcurve HDF5 file, or a CSV recording (needs --scenario)")
+        "cross-validation. A coarse-sun-sensor recording (HDF5 from 'css simulate', detected from "
+        "the file) is diagnosed against its sensors' direct-Sun model with the css_* effects.")
+    p.add_argument("recording", help="lightcurve HDF5 file, CSS recording HDF5, or a CSV recording "
+                   "(needs --scenario)")
     p.add_argument("--scenario", default=None, metavar="MODEL.toml",
                    help="the model (scenario TOML; its [effects] are switched off; an optional "
                    "[diagnosis] table sets free/exclude/max_effects/min_delta_bic). Default for HDF5: "
-                   "the file's own scenario")
+                   "the file's own scenario. For a CSS recording: optionally a CSS sensor "
+                   "configuration TOML (the model's nominal sensors; default: the file's)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     p.add_argument("--free", default=None,
                    help="free baseline parameters: none | zero_point | reflection | BRDF parameter "
