@@ -251,6 +251,19 @@ def initial_state_ext(p: "FilterProblem", bias=None, facets=None):
     return L, q, w, b, z, P
 
 
+def reflection_histories(n, nb, nz):
+    """NaN-filled per-epoch histories of the reflection states for n epochs.
+
+    Returns ``(b, b_sigma, z, z_cov)``: (n, nb) site biases and their 1σ, mag; (n, nz) Model 3
+    states and (n, nz, nz) their covariance (unbounded z units); None for an absent block.
+    """
+    b = np.full((n, nb), np.nan) if nb else None
+    bs = np.full((n, nb), np.nan) if nb else None
+    z = np.full((n, nz), np.nan) if nz else None
+    zc = np.full((n, nz, nz), np.nan) if nz else None
+    return b, bs, z, zc
+
+
 def truth_state(p: "FilterProblem", k):
     """The file's truth ``(q (4,), ω (3,))`` at epoch k (attitude-known mode)."""
     q = np.asarray(p.truth_q[k], float)

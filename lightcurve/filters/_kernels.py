@@ -75,12 +75,11 @@ def const_rate_nb(Q, W, dt):
 
 
 @nb.njit(cache=True, inline="always")
-def _euler_rhs(q, w, J, Ji, dq, dw):
-    # q̇ = ½ [0, ω] ⊗ q (Bernard eq. 4.12);  ω̇ = J⁻¹(−ω × Jω) (eq. 4.13, torque free)
-    dq[0] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2])
-    dq[1] = 0.5 * (q[0] * w[0] - (w[1] * q[3] - w[2] * q[2]))
-    dq[2] = 0.5 * (q[0] * w[1] - (w[2] * q[1] - w[0] * q[3]))
-    dq[3] = 0.5 * (q[0] * w[2] - (w[0] * q[2] - w[1] * q[1]))
+def euler_wdot(w, J, Ji, out):
+    """Torque-free Euler equations ``ω̇ = J⁻¹(−ω × Jω)`` (rad/s², body axes) into ``out`` (3,).
+
+    ``w`` (3,) body rate rad/s, ``J``/``Ji`` (3,3) inertia kg·m² and its inverse.
+    """
     h0 = J[0, 0] * w[0] + J[0, 1] * w[1] + J[0, 2] * w[2]
     h1 = J[1, 0] * w[0] + J[1, 1] * w[1] + J[1, 2] * w[2]
     h2 = J[2, 0] * w[0] + J[2, 1] * w[1] + J[2, 2] * w[2]
@@ -88,7 +87,17 @@ def _euler_rhs(q, w, J, Ji, dq, dw):
     r1 = -(w[2] * h0 - w[0] * h2)
     r2 = -(w[0] * h1 - w[1] * h0)
     for a in range(3):
-        dw[a] = Ji[a, 0] * r0 + Ji[a, 1] * r1 + Ji[a, 2] * r2
+        out[a] = Ji[a, 0] * r0 + Ji[a, 1] * r1 + Ji[a, 2] * r2
+
+
+@nb.njit(cache=True, inline="always")
+def _euler_rhs(q, w, J, Ji, dq, dw):
+    # q̇ = ½ [0, ω] ⊗ q (Bernard eq. 4.12);  ω̇ = J⁻¹(−ω × Jω) (eq. 4.13, torque free)
+    dq[0] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2])
+    dq[1] = 0.5 * (q[0] * w[0] - (w[1] * q[3] - w[2] * q[2]))
+    dq[2] = 0.5 * (q[0] * w[1] - (w[2] * q[1] - w[0] * q[3]))
+    dq[3] = 0.5 * (q[0] * w[2] - (w[0] * q[2] - w[1] * q[1]))
+    euler_wdot(w, J, Ji, dw)
 
 
 @nb.njit(cache=True, inline="always")
@@ -484,6 +493,28 @@ def weighted_stats_nb(dp, W, w):
     return mean, C
 
 
+@nb.njit(cache=True, inline="always")
+def _fill_facet_arrays(z, facet, kind_col, logit, areas0, params0, ar, pr):
+    """Facet areas ``ar`` (F,) m² and BRDF parameters ``pr`` (F,P) of one Model 3 state z (D,).
+
+    Starts from the nominal ``areas0``/``params0`` and overwrites the estimated entries with
+    ``p = 1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``; ``kind_col[d] == 3`` is an area, otherwise
+    the BRDF parameter column of facet ``facet[d]``.
+    """
+    F, P = params0.shape
+    for f in range(F):
+        ar[f] = areas0[f]
+        for j in range(P):
+            pr[f, j] = params0[f, j]
+    for d in range(z.shape[0]):
+        zz = z[d]
+        v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+        if kind_col[d] == 3:
+            ar[facet[d]] = v
+        else:
+            pr[facet[d], kind_col[d]] = v
+
+
 @nb.njit(cache=True, parallel=True)
 def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, areas0, ids,
                            params0, offset, m_out):
@@ -523,17 +554,7 @@ def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, ar
         for i in range(lo, hi):
             iq = i if qall else 0
             iz = i if zall else 0
-            for f in range(F):
-                ar[f] = areas0[f]
-                for j in range(P):
-                    pr[f, j] = params0[f, j]
-            for d in range(D):
-                zz = Z[iz, d]
-                v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
-                if kind_col[d] == 3:
-                    ar[facet[d]] = v
-                else:
-                    pr[facet[d], kind_col[d]] = v
+            _fill_facet_arrays(Z[iz], facet, kind_col, logit, areas0, params0, ar, pr)
             if use_zeta:
                 _rotvec_q(zeta[i, 0], zeta[i, 1], zeta[i, 2], dq)
                 _qmul_into(dq, Q[iq], qm)
@@ -602,17 +623,7 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
         sb = np.empty(3)
         ob = np.empty(3)
         for i in range(lo, hi):
-            for f in range(F):
-                ar[f] = areas0[f]
-                for j in range(P):
-                    pr[f, j] = params0[f, j]
-            for d in range(D):
-                zz = Z[i, d]
-                v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
-                if kind_col[d] == 3:
-                    ar[facet[d]] = v
-                else:
-                    pr[facet[d], kind_col[d]] = v
+            _fill_facet_arrays(Z[i], facet, kind_col, logit, areas0, params0, ar, pr)
             acc = 0.0
             for j in range(kmax + 1):
                 wj = 1.0 if j < kmax else phi_last

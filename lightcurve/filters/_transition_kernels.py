@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._kernels import euler_wdot as _wdot   # ω̇ = J⁻¹(−ω × Jω), shared with the particle kernels
+
 __all__ = ["error_F_nb", "van_loan_nb", "uncontrolled_transition_nb",
            "controlled_transition_nb"]
 
@@ -192,19 +194,6 @@ def van_loan_nb(F, Qc, dt, Phi, Qd):
     for i in range(n):
         for j in range(n):
             Qd[i, j] = 0.5 * (W[i, j] + W[j, i])
-
-
-@njit(cache=True)
-def _wdot(x, J, J_inv, out):
-    """Torque-free Euler equations ``ω̇ = J⁻¹(−ω × Jω)`` (rad/s²) into ``out`` (3,)."""
-    h0 = J[0, 0] * x[0] + J[0, 1] * x[1] + J[0, 2] * x[2]
-    h1 = J[1, 0] * x[0] + J[1, 1] * x[1] + J[1, 2] * x[2]
-    h2 = J[2, 0] * x[0] + J[2, 1] * x[1] + J[2, 2] * x[2]
-    c0 = -(x[1] * h2 - x[2] * h1)
-    c1 = -(x[2] * h0 - x[0] * h2)
-    c2 = -(x[0] * h1 - x[1] * h0)
-    for i in range(3):
-        out[i] = J_inv[i, 0] * c0 + J_inv[i, 1] * c1 + J_inv[i, 2] * c2
 
 
 @njit(cache=True)

@@ -139,6 +139,44 @@ def mag_states_nb(Q, s, o, normals, areas, ids, params, offset):
 # the state description
 # --------------------------------------------------------------------------------------------
 
+def check_kinds(kinds):
+    """Validate a selection of reflection-parameter kinds (subset of :data:`KINDS`).
+
+    Returns the kinds as a tuple in the order given; InputError (field ``params``) for an
+    unknown, repeated or empty selection.
+    """
+    kinds = tuple(kinds)
+    bad = [k for k in kinds if k not in KINDS]
+    if bad or not kinds or len(set(kinds)) != len(kinds):
+        raise InputError("unknown or repeated reflection parameter", field="params",
+                         value=",".join(map(str, kinds)), allowed=", ".join(KINDS))
+    return kinds
+
+
+def select_ct_facets(shape, facets, purpose, field="facets"):
+    """Indices of the Cook–Torrance facets (area > 0) whose parameters are estimated.
+
+    ``facets`` None → all of them; otherwise each index must be such a facet (InputError
+    naming it and the allowed ones). ``purpose`` completes the message when the shape has
+    none ("estimated (Model 3)", "fitted"). Returns a sorted int64 array.
+    """
+    F = shape.n_facets
+    ct = np.flatnonzero((shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0))
+    if facets is None:
+        fidx = ct
+    else:
+        fidx = np.asarray(sorted(set(int(i) for i in facets)), dtype=np.int64)
+        for i in fidx:
+            if not (0 <= i < F) or i not in ct:
+                raise InputError("facet is not a Cook-Torrance facet with area > 0 of the shape",
+                                 field="facets", value=int(i),
+                                 allowed=",".join(str(x) for x in ct))
+    if fidx.size == 0:
+        raise InputError(f"the shape has no Cook-Torrance facet whose parameters could be "
+                         f"{purpose}", field=field, value=shape.name)
+    return np.ascontiguousarray(fidx, dtype=np.int64)
+
+
 class FacetParameterStates:
     """Model 3 facet-parameter states (module docstring): layout, transforms, prior, dynamics.
 
@@ -163,12 +201,7 @@ class FacetParameterStates:
     """
 
     def __init__(self, shape, *, facets=None, kinds=KINDS, prior_frac=0.1, process_noise=0.0):
-        kinds = tuple(kinds)
-        bad = [k for k in kinds if k not in KINDS]
-        if bad or not kinds or len(set(kinds)) != len(kinds):
-            raise InputError("unknown or repeated reflection parameter", field="params",
-                             value=",".join(map(str, kinds)), allowed=", ".join(KINDS))
-        self.kinds = tuple(k for k in KINDS if k in kinds)      # canonical order
+        self.kinds = tuple(k for k in KINDS if k in check_kinds(kinds))   # canonical order
         self.prior_frac = float(prior_frac)
         if not (self.prior_frac > 0 and np.isfinite(self.prior_frac)):
             raise InputError("prior fraction must be > 0", field="reflection_frac",
@@ -177,20 +210,7 @@ class FacetParameterStates:
         if not (self.process_noise >= 0 and np.isfinite(self.process_noise)):
             raise InputError("process noise must be >= 0", field="process_noise",
                              value=process_noise)
-        F = shape.n_facets
-        ct = np.flatnonzero((shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0))
-        if facets is None:
-            fidx = ct
-        else:
-            fidx = np.asarray(sorted(set(int(i) for i in facets)), dtype=np.int64)
-            for i in fidx:
-                if not (0 <= i < F) or i not in ct:
-                    raise InputError("facet is not a Cook-Torrance facet with area > 0 of the "
-                                     "shape", field="facets", value=int(i),
-                                     allowed=",".join(str(x) for x in ct))
-        if fidx.size == 0:
-            raise InputError("the shape has no Cook-Torrance facet whose parameters could be "
-                             "estimated (Model 3)", field="reflection", value=shape.name)
+        fidx = select_ct_facets(shape, facets, "estimated (Model 3)", field="reflection")
         self.shape = shape
         self.fidx = np.ascontiguousarray(fidx, dtype=np.int64)
         names, kc, fc = [], [], []

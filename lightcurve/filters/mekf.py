@@ -43,7 +43,8 @@ from .. import rotations as rot
 from ..estimation.kalman import joseph_update
 from . import _kernels as K
 from ._common import (FilterProblem, Recorder, attach_bias, attach_facets, grp_to_dq,
-                      initial_state_ext, layout_transition, single_thread, truth_state)
+                      initial_state_ext, layout_transition, reflection_histories,
+                      single_thread, truth_state)
 from .gating import InnovationGate
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
@@ -93,10 +94,7 @@ def _run(problem, error, jacobian, bias=None, facets=None):
     gate = InnovationGate(p, auto="inflate")   # outlier gate, unlit/below-horizon screening
     L, q, w, b, z, P = initial_state_ext(p, bias, facets)
     na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
-    b_hist = np.full((p.n, nb), np.nan) if nb else None
-    bs_hist = np.full((p.n, nb), np.nan) if nb else None
-    z_hist = np.full((p.n, nz), np.nan) if nz else None
-    zc_hist = np.full((p.n, nz, nz), np.nan) if nz else None
+    b_hist, bs_hist, z_hist, zc_hist = reflection_histories(p.n, nb, nz)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:

@@ -56,7 +56,7 @@ from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented
 from . import _kernels as K
 from ._common import (FilterProblem, Recorder, StateLayout, apply_grp, attach_bias,
                       attach_facets, grp_rel, initial_state_ext, layout_transition,
-                      single_thread, truth_state)
+                      reflection_histories, single_thread, truth_state)
 from .gating import InnovationGate
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
@@ -104,10 +104,7 @@ def _run(p: FilterProblem, w6, w9, bias=None, facets=None) -> Estimate:
     rec.gate = InnovationGate(p)   # outlier gate + unlit/below-horizon screening (gating.py)
     L, q, w, b, z, P = initial_state_ext(p, bias, facets)
     na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
-    b_hist = np.full((p.n, nb), np.nan) if nb else None
-    bs_hist = np.full((p.n, nb), np.nan) if nb else None
-    z_hist = np.full((p.n, nz), np.nan) if nz else None
-    zc_hist = np.full((p.n, nz, nz), np.nan) if nz else None
+    b_hist, bs_hist, z_hist, zc_hist = reflection_histories(p.n, nb, nz)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:

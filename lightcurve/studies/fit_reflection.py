@@ -128,31 +128,15 @@ class ReflectionPosteriorModel:
 
     def __init__(self, shape, curve, q, *, facets=None, kinds=KINDS, prior_frac=0.1):
         from ..filters.models import MagnitudeModel
+        from ..filters.facet_states import check_kinds, select_ct_facets
         from ..photometry.magnitude import body_directions
 
-        kinds = tuple(kinds)
-        bad = [k for k in kinds if k not in KINDS]
-        if bad or not kinds or len(set(kinds)) != len(kinds):
-            raise InputError("unknown or repeated reflection parameter", field="params",
-                             value=",".join(kinds), allowed=", ".join(KINDS))
-        self.kinds = kinds
+        self.kinds = kinds = check_kinds(kinds)
         self.prior_frac = float(prior_frac)
         if not (self.prior_frac > 0 and np.isfinite(self.prior_frac)):
             raise InputError("prior fraction must be > 0", field="prior_frac", value=prior_frac)
+        fidx = select_ct_facets(shape, facets, "fitted")
         F = shape.n_facets
-        ct = np.flatnonzero((shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0))
-        if facets is None:
-            fidx = ct
-        else:
-            fidx = np.asarray(sorted(set(int(i) for i in facets)), dtype=np.int64)
-            for i in fidx:
-                if not (0 <= i < F) or i not in ct:
-                    raise InputError("facet is not a Cook-Torrance facet with area > 0 of the shape",
-                                     field="facets", value=int(i),
-                                     allowed=",".join(str(x) for x in ct))
-        if fidx.size == 0:
-            raise InputError("the shape has no Cook-Torrance facet to fit", field="facets",
-                             value=shape.name)
         self.shape = shape
         self.fidx = np.ascontiguousarray(fidx, dtype=np.int64)
         K = self.fidx.size
