@@ -208,9 +208,7 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         biases (:mod:`lightcurve.filters.reflection`; the estimate then carries ``bias`` and
         ``bias_sigma`` (N,S)) or Model 3 facet-parameter states
         (:mod:`lightcurve.filters.facet_states`; ``refl_z``, ``refl_p`` and 1σ (N,D), final
-        values in ``meta["reflection"]``). MEKF, UKF and — when
-        :func:`~lightcurve.filters.bpf.run_bpf` accepts ``bias=`` / ``facets=`` /
-        ``attitude=`` — the BPF (otherwise NotImplementedError).
+        values in ``meta["reflection"]``). All three filters.
     reflection_frac : float > 0 — relative 1σ of the reflection parameters (eq. 8.10 for the
         bias models; the Model 3 prior, §10.1).
     attitude : {"estimate", "truth"} — "truth": attitude known (§10.7), only the reflection
@@ -277,25 +275,7 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
     from .bpf import run_bpf
 
-    extra = {}
-    if bias is not None or facets is not None or attitude == "truth":
-        import inspect
-
-        accepted = inspect.signature(run_bpf).parameters
-        need = (["bias"] if bias is not None else []) + (["facets"] if facets is not None else [])
-        missing = [n for n in need if n not in accepted]
-        if missing:
-            raise NotImplementedError(
-                "the BPF does not accept reflection states (" + ", ".join(missing or need)
-                + ") yet; use the MEKF or the UKF")
-        if bias is not None:
-            extra["bias"] = bias
-        if facets is not None:
-            extra["facets"] = facets
-        if attitude == "truth":
-            if "attitude" not in accepted:
-                raise NotImplementedError("the BPF does not support the attitude-known mode yet")
-            extra["attitude"] = "truth"
+    extra = {"bias": bias, "facets": facets, "attitude": attitude}
     problem.meta.update({"particles": int(particles), "roughening": float(roughening),
                          "resampling": resampling, "ess_threshold": float(ess_threshold)})
     return run_bpf(problem, particles=particles, seed=seed, roughening=roughening,

@@ -53,7 +53,7 @@ from ..photometry.magnitude import AU_M, SUN_MAG_V, apparent_magnitude
 from . import _kernels as K
 from . import _transition_kernels as TK
 
-_EYE3 = np.eye(3)  # placeholder inertia for the controlled error_F kernel (not used there)
+_EYE3 = np.eye(3)  # inertia argument of the shared error_F kernel; the controlled model ignores it
 
 
 def _finite_rate(omega):
