@@ -110,6 +110,30 @@ def cell_areas_m2(lat_edges_rad, lon_edges_rad) -> np.ndarray:
     return AUTHALIC_RADIUS_M ** 2 * np.outer(np.diff(sb), dl)
 
 
+def cell_centers_ecef(lat_edges_rad, lon_edges_rad):
+    """Centres and outward geodetic normals of the cells of a latitude/longitude grid (WGS-84).
+
+    Each centre is on the ellipsoid at the authalic-latitude midpoint of its row (the
+    equal-area centre, eq. 2.16–2.18) and the longitude midpoint. Edges in rad, ascending.
+    Returns ``(centers (M,3) m ECEF, normals (M,3) unit ECEF, lat_c (nlat,) rad geodetic,
+    lon_c (nlon,) rad)`` with M = nlat·nlon, rows in latitude-major order.
+    """
+    lat_e, lon_e = np.asarray(lat_edges_rad, float), np.asarray(lon_edges_rad, float)
+    beta_e = authalic_latitude(lat_e)
+    beta_c = np.arcsin(0.5 * (np.sin(beta_e[:-1]) + np.sin(beta_e[1:])))
+    # invert β→φ on a fine grid by interpolation (monotonic)
+    phi_f = np.linspace(-np.pi / 2, np.pi / 2, 20001)
+    lat_c = np.interp(beta_c, authalic_latitude(phi_f), phi_f)
+    lon_c = 0.5 * (lon_e[:-1] + lon_e[1:])
+    LAT, LON = np.meshgrid(lat_c, lon_c, indexing="ij")
+    sphi, cphi = np.sin(LAT), np.cos(LAT)
+    N = WGS84_A_M / np.sqrt(1.0 - _E2 * sphi ** 2)
+    centers = np.stack([N * cphi * np.cos(LON), N * cphi * np.sin(LON),
+                        N * (1.0 - _E2) * sphi], axis=-1).reshape(-1, 3)
+    normals = np.stack([cphi * np.cos(LON), cphi * np.sin(LON), sphi], axis=-1).reshape(-1, 3)
+    return centers, normals, lat_c, lon_c
+
+
 @dataclass(frozen=True)
 class AlbedoMap:
     """An albedo map on a regular latitude/longitude grid.
@@ -152,19 +176,7 @@ class AlbedoGrid:
     @classmethod
     def from_map(cls, amap: AlbedoMap) -> "AlbedoGrid":
         lat_e, lon_e = amap.lat_edges_rad, amap.lon_edges_rad
-        # centre of each cell at the authalic-latitude midpoint (equal-area centre)
-        beta_e = authalic_latitude(lat_e)
-        beta_c = np.arcsin(0.5 * (np.sin(beta_e[:-1]) + np.sin(beta_e[1:])))
-        # invert β→φ on the fine grid by interpolation (monotonic)
-        phi_f = np.linspace(-np.pi / 2, np.pi / 2, 20001)
-        lat_c = np.interp(beta_c, authalic_latitude(phi_f), phi_f)
-        lon_c = 0.5 * (lon_e[:-1] + lon_e[1:])
-        LAT, LON = np.meshgrid(lat_c, lon_c, indexing="ij")
-        sphi, cphi = np.sin(LAT), np.cos(LAT)
-        N = WGS84_A_M / np.sqrt(1.0 - _E2 * sphi ** 2)
-        centers = np.stack([N * cphi * np.cos(LON), N * cphi * np.sin(LON),
-                            N * (1.0 - _E2) * sphi], axis=-1).reshape(-1, 3)
-        normals = np.stack([cphi * np.cos(LON), cphi * np.sin(LON), sphi], axis=-1).reshape(-1, 3)
+        centers, normals, _, _ = cell_centers_ecef(lat_e, lon_e)
         ra = (cell_areas_m2(lat_e, lon_e) * amap.values).reshape(-1)
         keep = ra > 0
         return cls(np.ascontiguousarray(centers[keep]), np.ascontiguousarray(normals[keep]),

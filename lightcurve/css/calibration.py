@@ -103,21 +103,11 @@ class AlbedoCells:
 
     @classmethod
     def from_map(cls, amap: AlbedoMap) -> "AlbedoCells":
-        from .albedo import _E2, WGS84_A_M, authalic_latitude, cell_areas_m2
+        from .albedo import cell_areas_m2, cell_centers_ecef
 
         lat_e, lon_e = np.asarray(amap.lat_edges_rad), np.asarray(amap.lon_edges_rad)
         # cell centres at the authalic-latitude midpoint, as AlbedoGrid (the truth model)
-        beta_e = authalic_latitude(lat_e)
-        beta_c = np.arcsin(0.5 * (np.sin(beta_e[:-1]) + np.sin(beta_e[1:])))
-        phi_f = np.linspace(-np.pi / 2, np.pi / 2, 20001)
-        lat_c = np.interp(beta_c, authalic_latitude(phi_f), phi_f)
-        lon_c = 0.5 * (lon_e[:-1] + lon_e[1:])
-        LAT, LON = np.meshgrid(lat_c, lon_c, indexing="ij")
-        sp, cp = np.sin(LAT), np.cos(LAT)
-        Nr = WGS84_A_M / np.sqrt(1.0 - _E2 * sp ** 2)
-        centers = np.stack([Nr * cp * np.cos(LON), Nr * cp * np.sin(LON), Nr * (1 - _E2) * sp],
-                           -1).reshape(-1, 3)
-        normals = np.stack([cp * np.cos(LON), cp * np.sin(LON), sp], -1).reshape(-1, 3)
+        centers, normals, lat_c, lon_c = cell_centers_ecef(lat_e, lon_e)
         ra = (cell_areas_m2(lat_e, lon_e) * amap.values).reshape(-1)
         dlon = float(np.mean(np.diff(lon_e)))
         if not np.allclose(np.diff(lon_e), dlon):
