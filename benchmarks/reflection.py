@@ -1,29 +1,23 @@
-"""Reflection-parameter uncertainty benchmark (issue 6).
+"""BPF step cost with Model 3 reflection states versus attitude only (issue 6, Bernard ch. 8).
 
-Runs the emcee acceptance of issue 6: 10 synthetic LEO lightcurves of the cube_1u shape with a
-known attitude (fast spin ≈ [2, 1, 3.6] deg/s, 300 epochs over 300 s, 1 % noise, Bernard eq.
-9.3), reflection parameters ξ, a, m and areas A of all six facets perturbed per Bernard §10.1
-(N(0, (0.1 p)²), seeded), 24 parameters fitted with ``fit_reflection`` (prior = the shape
-file's values with 10 % width). A case passes when its chain converged and the truth of every
-parameter the diagnostics call identified lies inside the central 99 % posterior interval;
-the acceptance is ≥ 9 of 10 cases.
+Measures the bootstrap particle filter on the bundled thesis LEO fast-spin case
+(pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml: controlled, Socorro, 73 epochs,
+eclipse ignored as in the thesis; truth shape perturbed per §10.1 by the scenario's
+``[reflection]`` section) twice per particle count:
 
-Calibration evidence independent of the 10 cases: simulation-based calibration (SBC, Talts et
-al. 2018) with ``reflection_sbc`` — truths drawn from the same prior, 200 synthetic cases per
-configuration, 150 epochs: (a) ξ, a, m, A of the glinting +Y facet (4 parameters), (b) the
-same for the +Y and +Z facets (8 parameters). The posterior CDF at the truth must be uniform
-(chi-square of its histogram and the dispersion statistic Σ Φ⁻¹(u)², family-wise false-alarm
-1 % each). For the 10 cases the JSON also gives, per miss, the posterior CDF at the truth and
-its z-score, and the probability that a calibrated method fails at least as many cases
-(Poisson-binomial over the cases, case i failing with probability 1 − 0.99^k_i for k_i
-identified parameters, treated as independent).
+* ``attitude`` — attitude-only state (GRP error + rate, the filter of issue 5);
+* ``model3`` — the same plus Model 3's 24 extra states (ξ, a, m, A of the six cube_1u facets,
+  reparameterised per eq. 8.41–8.44, constant dynamics eq. 8.39).
 
-The BPF step-cost comparison (Model 3, 24 extra states, versus attitude only) needs Model 3 in
-the BPF, which is not implemented yet; the JSON reports it as null.
+The plain bootstrap filter is timed (``progressive=False``: exactly one prediction per particle
+and epoch) so that µs per particle·step compares like with like. Each configuration runs in a
+fresh subprocess after a small warm-up (numba cache), so its peak RSS (ru_maxrss, whole process)
+is its own. The §10.7/§10.8 accuracy runs of the BPF are ``benchmarks/reflection_bpf.py``; the
+emcee posterior benchmark is ``benchmarks/reflection_emcee.py``.
 
-Usage: python benchmarks/reflection.py [--cases 10] [--epochs 300] [--sbc-runs 200]
-       [--skip-cases] [--skip-sbc] [--sbc-config 4,8] [--workers 1]
-Prints one JSON line.
+Usage: python benchmarks/reflection.py [--particles 10000 100000]
+Prints ONE JSON line (µs per particle·step, particle·steps/s, peak RSS, the Model 3 / attitude
+cost ratio per particle count, ``cpu_count``, numba threads, the 1-minute load average).
 """
 
 from __future__ import annotations
@@ -31,109 +25,73 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
+import sys
 import time
 
-import numpy as np
+CHILD = r"""
+import json, resource, sys, time, warnings
+warnings.simplefilter("ignore")
+sys.path.insert(0, sys.argv[3])
+from reflection_bpf import scenario_with_reflection
+from lightcurve.studies.simulate import simulate
+from lightcurve.filters import build_problem, run_bpf
+from lightcurve.filters.facet_states import FacetParameterStates
+
+kind, N = sys.argv[1], int(sys.argv[2])
+lc = simulate(scenario_with_reflection(), 1)
+prob = build_problem(lc, seed=0, sigma_theta_deg=3.0)
+kw = {}
+if kind == "model3":
+    kw["facets"] = FacetParameterStates(prob.model.shape)
+run_bpf(prob, particles=500, seed=0, progressive=False, **kw)   # warm-up (numba cache)
+t0 = time.perf_counter()
+est = run_bpf(prob, particles=N, seed=0, progressive=False, **kw)
+dt = time.perf_counter() - t0
+n = len(est)
+print(json.dumps({"states": kind, "extra_states": int(kw["facets"].dim) if kw else 0,
+                  "particles": N, "epochs": n, "runtime_s": dt,
+                  "us_per_particle_step": dt / (N * n) * 1e6,
+                  "particle_steps_per_s": N * n / dt,
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+                  "final_att_error_rss_deg": est.summary().get("final_att_error_rss_deg")}))
+"""
 
 
-def _run_case(seed, epochs, max_steps):
-    """One acceptance case (seed 1000 + seed): fit, coverage of the identified parameters."""
-    from lightcurve.photometry import load_shape
-    from lightcurve.studies.fit_reflection import (
-        ConvergenceError,
-        ReflectionPosteriorModel,
-        fit_reflection,
-        synthetic_reflection_case,
-    )
-
-    shape = load_shape("cube_1u")
-    t0 = time.perf_counter()
-    curve, _, vals = synthetic_reflection_case(shape, seed=1000 + seed, n_epochs=epochs)
-    model = ReflectionPosteriorModel(shape, curve, curve.truth_q)
-    truth = np.array([vals[n.split("[")[0]][int(n.split("[")[1][:-1])] for n in model.names])
-    row = {"seed": 1000 + seed}
-    try:
-        fit = fit_reflection(curve, shape=shape, seed=seed, truth=truth, max_steps=max_steps)
-    except ConvergenceError as exc:
-        row.update(converged=False, reasons=exc.diagnostics.reasons, passed=False)
-    else:
-        inside = fit.truth_inside(0.99)
-        d = fit.diagnostics
-        zt = model.to_z(truth)
-        u = np.mean(fit.samples_z < zt[None, :], axis=0)
-        zsc = (zt - fit.samples_z.mean(0)) / fit.samples_z.std(0)
-        misses = {n: {"u": round(float(u[i]), 4), "z": round(float(zsc[i]), 2),
-                      "width_ratio": round(float(fit.width_ratio[i]), 3)}
-                  for i, n in enumerate(fit.names) if fit.identified[i] and not inside[i]}
-        row.update(converged=True, steps=d.n_steps, tau_max=float(np.max(d.tau)),
-                   acceptance=round(d.mean_acceptance, 3),
-                   identified=[n for n, i in zip(fit.names, fit.identified) if i],
-                   identified_outside_99=[n for n, i, o in zip(fit.names, fit.identified, inside)
-                                          if i and not o],
-                   misses=misses,
-                   all_outside_99=int(np.sum(~inside)),
-                   predictive_coverage_95=round(fit.summary()["predictive_coverage_95"], 3),
-                   passed=bool(np.all(inside[fit.identified])))
-    row["runtime_s"] = round(time.perf_counter() - t0, 1)
-    return row
+def step_cost(particles):
+    """Time attitude-only and Model 3 BPF runs, each in its own subprocess (list of rows)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.path.dirname(here) + os.pathsep + env.get("PYTHONPATH", "")
+    rows = []
+    for n in particles:
+        for kind in ("attitude", "model3"):
+            out = subprocess.run([sys.executable, "-c", CHILD, kind, str(n), here], env=env,
+                                 capture_output=True, text=True, check=True)
+            rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    ratio = {}
+    for n in particles:
+        a = [r for r in rows if r["particles"] == n and r["states"] == "attitude"][0]
+        b = [r for r in rows if r["particles"] == n and r["states"] == "model3"][0]
+        ratio[str(n)] = b["us_per_particle_step"] / a["us_per_particle_step"]
+    return {"benchmark": "reflection", "mode": "step_cost",
+            "filter": "plain bootstrap (progressive=False)", "runs": rows,
+            "model3_over_attitude_cost": ratio}
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", type=int, default=10)
-    ap.add_argument("--epochs", type=int, default=300)
-    ap.add_argument("--max-steps", type=int, default=40_000)
-    ap.add_argument("--sbc-runs", type=int, default=200)
-    ap.add_argument("--sbc-config", default="4,8", help="SBC problem sizes to run (4 and/or 8)")
-    ap.add_argument("--skip-cases", action="store_true")
-    ap.add_argument("--skip-sbc", action="store_true")
-    ap.add_argument("--workers", type=int, default=1, help="processes for the 10 cases")
+    ap.add_argument("--particles", type=int, nargs="+", default=[10_000, 100_000],
+                    help="particle counts to time (default: 10000 100000)")
     args = ap.parse_args()
+    t0 = time.perf_counter()
+    out = step_cost(args.particles)
+    import numba
 
-    from lightcurve.photometry import load_shape
-    from lightcurve.studies.fit_reflection import reflection_sbc
-
-    shape = load_shape("cube_1u")
-    t_all = time.perf_counter()
-    seeds = list(range(0 if args.skip_cases else args.cases))
-    if args.workers > 1 and len(seeds) > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        # forkserver: numba's threading layer does not survive fork (see studies/runner.py)
-        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("forkserver")) as ex:
-            cases = list(ex.map(_run_case, seeds, [args.epochs] * len(seeds),
-                                [args.max_steps] * len(seeds)))
-    else:
-        cases = [_run_case(seed, args.epochs, args.max_steps) for seed in seeds]
-    n_pass = sum(c["passed"] for c in cases)
-    # probability of at least this many failing cases if the posterior were calibrated
-    p_fail = [1.0 - 0.99 ** len(c.get("identified", [])) for c in cases if c.get("converged")]
-    dist = np.array([1.0])
-    for pf in p_fail:
-        dist = np.convolve(dist, [1.0 - pf, pf])
-    n_fail = sum(1 for c in cases if c.get("converged") and not c["passed"])
-    p_at_least = float(dist[n_fail:].sum()) if cases else None
-    sbc = {}
-    configs = {"4": dict(facets=[2], kinds=("xi", "a", "m", "A")),
-               "8": dict(facets=[2, 4], kinds=("xi", "a", "m", "A"))}
-    for key in ([] if args.skip_sbc else [k.strip() for k in args.sbc_config.split(",")]):
-        t0 = time.perf_counter()
-        res = reflection_sbc(shape, n_runs=args.sbc_runs, seed0=20_000, n_epochs=150, n_bins=10,
-                             false_alarm=0.01, **configs[key])
-        res.pop("identified")
-        res["u"] = [[round(x, 4) for x in row] for row in res["u"]]
-        res["runtime_s"] = round(time.perf_counter() - t0, 1)
-        sbc[f"{key}_params"] = res
-    print(json.dumps({
-        "benchmark": "reflection", "cpu_count": os.cpu_count(), "shape": "cube_1u",
-        "n_params": 24, "epochs": args.epochs, "cases": cases, "n_passed": n_pass,
-        "n_cases": len(cases), "acceptance_met": n_pass >= int(np.ceil(0.9 * len(cases))),
-        "n_failed_converged": n_fail, "p_at_least_this_many_failures_if_calibrated": p_at_least,
-        "sbc": sbc,
-        "runtime_s": round(time.perf_counter() - t_all, 1),
-        "bpf_step_cost_model3_vs_attitude_only": None,
-        "note": "BPF Model 3 not implemented yet (issue 6 part 4)"}))
+    out.update({"wall_s": time.perf_counter() - t0, "cpu_count": os.cpu_count(),
+                "numba_threads": numba.get_num_threads(),
+                "load_avg_1min": os.getloadavg()[0]})
+    print(json.dumps(out))
 
 
 if __name__ == "__main__":

@@ -1,14 +1,8 @@
 """Reflection states in the bootstrap particle filter (issue 6, Bernard ch. 8 and §10.7–10.8).
 
-Three modes, each printing ONE JSON line (with ``os.cpu_count()``):
+Two modes, each printing ONE JSON line (with ``os.cpu_count()``); the step cost of the BPF with
+Model 3 versus attitude only is ``benchmarks/reflection.py``.
 
-* default — step cost of the BPF with Model 3 (24 extra states for the 6-facet cube_1u) versus
-  attitude only, at 10,000 and 100,000 particles, on the bundled thesis LEO fast-spin case
-  (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml, controlled, Socorro, 73 epochs,
-  eclipse ignored as in the thesis). The plain bootstrap filter is timed (``progressive=False``:
-  exactly one prediction per particle and epoch) so that µs per particle·step compares like
-  with like. Each configuration runs in a fresh subprocess after a small warm-up (numba cache)
-  so its peak RSS (ru_maxrss, whole process) is its own.
 * ``--acceptance`` — §10.7 parameter-only runs: attitude known (the file's truth), Model 3
   with the BPF on the same case with the §10.1 truth perturbation (scenario ``[reflection]``,
   10 % σ, seeded per run), ``--seeds`` runs (default 10). Two variants on the same data: the
@@ -23,8 +17,7 @@ Three modes, each printing ONE JSON line (with ``os.cpu_count()``):
   parameters' inside-3σ rate and shrink; the attitude-only BPF on the same (perturbed) data as
   the reference.
 
-Usage: python benchmarks/reflection_bpf.py [--particles 10000 100000]
-       python benchmarks/reflection_bpf.py --acceptance [--seeds 10] [--particles 10000]
+Usage: python benchmarks/reflection_bpf.py --acceptance [--seeds 10] [--particles 10000]
        python benchmarks/reflection_bpf.py --combined [--seeds 5] [--particles 10000]
 """
 
@@ -33,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -71,59 +63,6 @@ def prior_sd_p(fs, n=200_000):
     rng = np.random.default_rng(0x5D)
     z = fs.z0 + rng.standard_normal((n, fs.dim)) * np.sqrt(np.diag(fs.P0))
     return fs.to_p(z).std(axis=0)
-
-
-# --------------------------------------------------------------------------------------------
-# step cost
-# --------------------------------------------------------------------------------------------
-
-CHILD = r"""
-import json, resource, sys, time, warnings
-warnings.simplefilter("ignore")
-sys.path.insert(0, sys.argv[3])
-import numpy as np
-from reflection_bpf import scenario_with_reflection
-from lightcurve.studies.simulate import simulate
-from lightcurve.filters import build_problem, run_bpf
-from lightcurve.filters.facet_states import FacetParameterStates
-
-kind, N = sys.argv[1], int(sys.argv[2])
-lc = simulate(scenario_with_reflection(), 1)
-prob = build_problem(lc, seed=0, sigma_theta_deg=3.0)
-kw = {}
-if kind == "model3":
-    kw["facets"] = FacetParameterStates(prob.model.shape)
-run_bpf(prob, particles=500, seed=0, progressive=False, **kw)   # warm-up (numba cache)
-t0 = time.perf_counter()
-est = run_bpf(prob, particles=N, seed=0, progressive=False, **kw)
-dt = time.perf_counter() - t0
-n = len(est)
-print(json.dumps({"states": kind, "extra_states": int(kw["facets"].dim) if kw else 0,
-                  "particles": N, "epochs": n, "runtime_s": dt,
-                  "us_per_particle_step": dt / (N * n) * 1e6,
-                  "particle_steps_per_s": N * n / dt,
-                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-                  "final_att_error_rss_deg": est.summary().get("final_att_error_rss_deg")}))
-"""
-
-
-def step_cost(particles):
-    here = os.path.dirname(os.path.abspath(__file__))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.path.dirname(here) + os.pathsep + env.get("PYTHONPATH", "")
-    rows = []
-    for n in particles:
-        for kind in ("attitude", "model3"):
-            out = subprocess.run([sys.executable, "-c", CHILD, kind, str(n), here], env=env,
-                                 capture_output=True, text=True, check=True)
-            rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
-    ratio = {}
-    for n in particles:
-        a = [r for r in rows if r["particles"] == n and r["states"] == "attitude"][0]
-        b = [r for r in rows if r["particles"] == n and r["states"] == "model3"][0]
-        ratio[str(n)] = b["us_per_particle_step"] / a["us_per_particle_step"]
-    return {"mode": "step_cost", "filter": "plain bootstrap (progressive=False)",
-            "runs": rows, "model3_over_attitude_cost": ratio}
 
 
 # --------------------------------------------------------------------------------------------
@@ -231,7 +170,7 @@ def main():
     elif args.combined:
         out = combined(args.seeds or 5, (args.particles or [10_000])[0])
     else:
-        out = step_cost(args.particles or [10_000, 100_000])
+        ap.error("choose --acceptance or --combined (the step cost is benchmarks/reflection.py)")
     import numba
 
     out.update({"wall_s": time.perf_counter() - t0, "cpu_count": os.cpu_count(),

@@ -33,7 +33,7 @@ strictly σ depends on the parameters; letting it follow m(θ) changes the log l
 Calibration: :func:`reflection_sbc` runs simulation-based calibration (truths drawn from
 this prior, data from the simulator, posterior from :func:`fit_reflection`); the posterior CDF
 at the truth must be uniform. Checked in ``tests/studies/test_studies_fit_reflection_sbc.py``
-(2 parameters, 40 runs) and ``benchmarks/reflection.py`` (4 and 8 parameters).
+(2 parameters, 40 runs) and ``benchmarks/reflection_emcee.py`` (4 and 8 parameters).
 
 Diagnostics
 -----------

@@ -6,7 +6,7 @@ Gaussian, eq. 9.3 noise) and the posterior (same prior, Gaussian likelihood with
 truth, u = P(θ < θ_true | y), is U(0, 1) for every parameter (Cook, Gelman & Rubin 2006;
 Talts et al. 2018, "Validating Bayesian inference algorithms with simulation-based
 calibration"). This is the evidence that intervals from ``fit_reflection`` have their nominal
-coverage; the larger version (200 runs, 4 and 8 parameters) is in ``benchmarks/reflection.py``.
+coverage; the larger version (200 runs, 4 and 8 parameters) is in ``benchmarks/reflection_emcee.py``.
 
 Problem kept small for speed: ξ and m of the +Y facet of cube_1u (the glinting facet whose ξ
 is the parameter the 24-parameter acceptance cases identify most often), 150 epochs.
