@@ -39,6 +39,27 @@ def test_scenarios_sunlit_and_visible_at_night(orbit, a_km, dyn):
         assert np.degrees(g.sun_elevation_rad).max() < -18.0, site  # astronomical night
 
 
+def test_geo_nadir_case_shares_the_assumed_geo_orbit_and_is_sunlit_at_night():
+    """The nadir GEO IC2 case of issue 6 and the GEO IC1 cases of issue 7 are one assumed GEO
+    geometry: at every second common to both windows (04:00–04:06:40 UTC) their positions agree,
+    and over the nadir case's whole hour the object stays sunlit, > 30° up and the sky is dark.
+    (Before the unification the two files used different longitudes and epochs.)"""
+    nadir = load_scenario(PIPE / "thesis" / "geo-ic2-nadir-controlled-1site.toml")
+    spin = load_scenario(PIPE / "thesis" / "geo-ic1-fast-spin-controlled-1site.toml")
+    assert nadir.epoch_utc == spin.epoch_utc
+    t = np.arange(0.0, spin.duration_s + 1e-9, 20.0)
+    r1, _ = nadir.orbit.positions(nadir.epoch_utc, t)
+    r2, _ = spin.orbit.positions(spin.epoch_utc, t)
+    # same elements, epoch and propagator: the same positions
+    assert np.max(np.linalg.norm(r1 - r2, axis=1)) < 1e-6
+    t = np.arange(0.0, nadir.duration_s + 1e-9, 30.0)
+    r, v = nadir.orbit.positions(nadir.epoch_utc, t)
+    g = compute_geometry(nadir.epoch_utc, t, 0, ["socorro"], r, v)
+    assert np.all(g.lit_fraction == 1.0)
+    assert np.degrees(g.elevation_rad).min() > 30.0
+    assert np.degrees(g.sun_elevation_rad).max() < -18.0
+
+
 @pytest.mark.parametrize("name", STUDIES)
 def test_study_loads_and_one_run_simulates_and_inverts(name):
     study = load_study(PIPE / "studies" / f"{name}.toml")
