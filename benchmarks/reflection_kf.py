@@ -15,7 +15,11 @@ the filters using the nominal shape):
    and UKF, ``--seeds`` seeds each. Success = final attitude error inside 3σ on every axis,
    RSS below 5°, and not flagged diverged.
 
-Usage: ``python benchmarks/reflection_kf.py [--seeds 10]`` (nice -n 10 on a shared machine).
+Usage: ``python benchmarks/reflection_kf.py [--seeds 10] [--parts geo,107,108] [--scenario PATH]``
+(nice -n 10 on a shared machine); ``--scenario`` replaces the LEO file of the ``107`` part, e.g.
+pipelines/thesis/leo-ic1-fast-spin-controlled-1site-inertial-rates.toml (rates read in inertial
+axes, the −Z facet question). The ``107`` output also gives the per-facet fraction of epochs lit
+and visible (truth of the first seed).
 """
 
 from __future__ import annotations
@@ -128,9 +132,14 @@ def part_geo_model1(seeds):
     return rows
 
 
-def part_sec10_7(seeds):
-    sc = _scenario(LEO, True)
-    out = {}
+def part_sec10_7(seeds, scenario=None):
+    """§10.7 runs on ``scenario`` (path; default the thesis LEO fast-spin file)."""
+    from lightcurve.photometry.facet_exposure import facet_exposure_fractions
+
+    sc = _scenario(scenario or LEO, True)
+    # per-facet fraction of epochs lit (n·s > 0) AND visible (n·o > 0), truth of the first seed
+    out = {"scenario": sc.name, "omega_frame": sc.attitude.omega_frame,
+           "facet_exposure_first_seed": facet_exposure_fractions(_sim(sc, seeds[0]), shape=sc.shape)}
     for method in ("ukf", "mekf"):
         shrink, inside, err_sig = [], [], []
         names = None
@@ -182,6 +191,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--parts", default="geo,107,108")
+    ap.add_argument("--scenario", default=None,
+                    help="scenario TOML of the 107 part (default: " + LEO.name + ")")
     a = ap.parse_args(argv)
     seeds = list(range(1, a.seeds + 1))
     parts = a.parts.split(",")
@@ -191,7 +202,7 @@ def main(argv=None):
     if "geo" in parts:
         res["geo_model1"] = part_geo_model1(seeds[:3])
     if "107" in parts:
-        res["sec10_7"] = part_sec10_7(seeds)
+        res["sec10_7"] = part_sec10_7(seeds, a.scenario)
     if "108" in parts:
         res["sec10_8"] = part_sec10_8(seeds)
     res["wall_s"] = round(time.perf_counter() - t0, 1)

@@ -42,6 +42,19 @@ class AttitudeSpec:
     ``frame = "nadir"`` makes ``euler321_deg`` relative to the nadir (LVLH) frame at the epoch
     (z to the Earth's centre, y along the negative orbit normal) and ``omega_deg_s`` relative to
     it, so zero angles and rates give a nadir-pointing object turning at the orbit rate.
+
+    ``omega_frame`` (TOML ``[attitude] omega_frame``, default ``"body"``) says in which axes the
+    file gave the rates. ``"body"``: the file's ``omega_deg_s`` are body-axis components and are
+    used as they are. ``"inertial"`` (only with ``frame = "inertial"``): the file gave the
+    components ω_I of the angular velocity in the inertial axes (ECI = GCRS), the frame the
+    Euler angles are relative to; they are converted ONCE, at the epoch, to body axes,
+    ``ω_B = A(q0) ω_I`` with q0 the quaternion of ``euler321_deg`` (Bernard eq. 3.7, 3.16).
+    After parsing, ``omega_deg_s`` therefore always holds the epoch body rates (deg/s, body
+    axes) and ``omega_input_deg_s`` the values as written in the file. For a torque-free
+    isotropic (or constant-rate controlled) body the inertial angular velocity is constant, so
+    the truth then turns about the fixed inertial axis ω̂_I. With ``frame = "nadir"`` the
+    rates are relative to the rotating nadir frame (see above) and an inertial-axes reading
+    is ambiguous (relative or total rate?), so ``omega_frame = "inertial"`` is refused there.
     """
 
     dynamics: str
@@ -54,6 +67,10 @@ class AttitudeSpec:
     inertia_kg_m2: np.ndarray | None = None
     #: ``dynamics = "law"``: the attitude law's name (lightcurve.dynamics.laws.LAWS)
     law: str = ""
+    #: axes of the file's rates: "body" or "inertial" (converted to body at parse time)
+    omega_frame: str = "body"
+    #: the rates exactly as written in the file (deg/s, in ``omega_frame`` axes); None = omega_deg_s
+    omega_input_deg_s: np.ndarray | None = None
 
 
 @dataclass
@@ -227,6 +244,25 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         from ..dynamics.laws import LAWS
 
         att.law = at.str("law", choices=LAWS)
+    att.omega_frame = at.str("omega_frame", "body", choices=("body", "inertial"))
+    att.omega_input_deg_s = att.omega_deg_s.copy()
+    if att.omega_frame == "inertial":
+        if att.frame != "inertial":
+            # nadir rates are relative to the rotating nadir frame (AttitudeSpec docstring):
+            # "inertial axes" would not say whether the orbit rate is included - refuse
+            raise InputError('omega_frame = "inertial" needs frame = "inertial" (with a nadir '
+                             "frame the rates are relative to the nadir frame, in body axes)",
+                             file=file, field="attitude.omega_frame", value=att.omega_frame,
+                             allowed='"body" (with frame = "nadir")')
+        if dyn == "law":
+            raise InputError("an attitude law prescribes its own rates", file=file,
+                             field="attitude.omega_frame", value=att.omega_frame,
+                             allowed='"body" (with dynamics = "law")')
+        from ..rotations import euler321_to_quat, quat_rotate
+
+        # ω_B = A(q0) ω_I once at the epoch (v_b = A(q) v_I, Bernard eq. 3.16/3.26)
+        q0 = euler321_to_quat(np.radians(att.euler321_deg))
+        att.omega_deg_s = quat_rotate(q0, att.omega_input_deg_s)  # linear: deg/s in, deg/s out
     at.check_unknown()
 
     sites = []
