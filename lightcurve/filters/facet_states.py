@@ -49,9 +49,11 @@ import numpy as np
 
 from ..errors import InputError
 from ..photometry.kernels import COOK_TORRANCE, brdf_product_nb
+from ..photometry.partials import kernel_capable, magnitude_partials_q_nb
+from ._kernels import _fill_facet_arrays, _flux
 
 __all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
-           "dp_dz", "mag_states_nb"]
+           "dp_dz", "mag_states_nb", "mag_z_states_nb", "partials_z_nb"]
 
 #: the four Cook–Torrance facet parameters Model 3 can estimate
 KINDS = ("xi", "a", "m", "A")
@@ -133,6 +135,79 @@ def mag_states_nb(Q, s, o, normals, areas, ids, params, offset):
                                                  ox, oy, oz)
         out[i] = offset - 2.5 * math.log10(acc) if acc > 0.0 else np.inf
     return out
+
+
+@nb.njit(cache=True)
+def mag_z_states_nb(Q, s, o, normals, areas0, ids, params0, offset, Z, kind_col, facet, logit):
+    """Apparent magnitudes (S,) of S (attitude, Model 3 state) pairs at one epoch.
+
+    As :func:`mag_states_nb`, but the per-state facet arrays are filled inside the kernel
+    from the unbounded states Z (S,D) and the layout (``kind_col``, ``facet``, ``logit``) —
+    no (S,F,P) arrays built in NumPy. +inf where no light reaches the observer. Serial.
+    """
+    S = Q.shape[0]
+    F = normals.shape[0]
+    out = np.empty(S)
+    areas = np.empty(F)
+    params = np.empty(params0.shape)
+    sb = np.empty(3)
+    ob = np.empty(3)
+    for i in range(S):
+        # the BPF's per-particle fill and the attitude-only flux loop (filters._kernels)
+        _fill_facet_arrays(Z[i], facet, kind_col, logit, areas0, params0, areas, params)
+        acc = _flux(Q[i], s, o, normals, areas, ids, params, sb, ob)
+        out[i] = offset - 2.5 * math.log10(acc) if acc > 0.0 else np.inf
+    return out
+
+
+@nb.njit(cache=True)
+def partials_z_nb(q, s, o, normals, areas0, ids, params0, offset, z, kind_col, facet, logit):
+    """Magnitude and partials at ONE attitude and Model 3 state, in one pass over the facets.
+
+    q (4,) inertial→body quaternion; s, o (3,) unit ECI object→Sun / object→observer; the
+    shape's nominal kernel arrays (``ids`` Lambert / Cook–Torrance / Phong only, see
+    :func:`lightcurve.photometry.partials.kernel_capable`); offset (mag) as in
+    :func:`mag_states_nb`; z (D,) and the state layout (``kind_col``, ``facet``, ``logit``
+    of :class:`FacetParameterStates`). Returns ``(m, ∂m/∂δθ (3,), ∂m/∂z (D,))`` with
+    ``∂m/∂z_d = ∂m/∂p_d · dp_d/dz_d``; m = +inf and NaN partials where no light is reflected.
+    No shape copy, no Python loop over facets.
+    """
+    F = normals.shape[0]
+    areas = np.empty(F)
+    params = np.empty(params0.shape)
+    _fill_facet_arrays(z, facet, kind_col, logit, areas0, params0, areas, params)
+    D = z.shape[0]
+    dp = np.empty(D)          # dp/dz: p(1−p) (logit) or p (log), as dp_dz
+    for d in range(D):
+        if logit[d]:
+            p = 1.0 / (1.0 + math.exp(-z[d]))
+            dp[d] = p * (1.0 - p)
+        else:
+            dp[d] = math.exp(z[d])
+    dA = np.empty(F)
+    dxi = np.empty(F)
+    da = np.empty(F)
+    dmm = np.empty(F)
+    m, tx, ty, tz = magnitude_partials_q_nb(q, s, o, normals, areas, ids, params, offset,
+                                            dA, dxi, da, dmm)
+    dth = np.empty(3)
+    dth[0] = tx
+    dth[1] = ty
+    dth[2] = tz
+    dz = np.empty(D)
+    for d in range(D):
+        c = kind_col[d]
+        f = facet[d]
+        if c == 0:
+            v = dxi[f]
+        elif c == 1:
+            v = da[f]
+        elif c == 2:
+            v = dmm[f]
+        else:
+            v = dA[f]
+        dz[d] = v * dp[d]
+    return m, dth, dz
 
 
 # --------------------------------------------------------------------------------------------
@@ -237,6 +312,10 @@ class FacetParameterStates:
                                  field=self.names[d], value=float(p),
                                  allowed="(0, 1)" if self.logit[d] else "> 0")
         self.z0 = self.to_z(self.p_nominal)
+        # plain arrays of the one-pass kernels (partials_z_nb): no shape copy per call
+        self._normals = np.ascontiguousarray(shape.normals_body, dtype=float)
+        self._ids = np.ascontiguousarray(shape.model_ids, dtype=np.int64)
+        self._kernel_partials = kernel_capable(self._ids)
         self.prior_sd_p = self.prior_frac * self.p_nominal
         self.prior_sd_z = self.prior_sd_p / dp_dz(self.z0, self.logit)
         self.P0 = np.diag(self.prior_sd_z ** 2)
@@ -319,11 +398,11 @@ class FacetParameterStates:
         if Z.shape != (Q.shape[0], self.dim):
             raise ValueError(f"Z must be ({Q.shape[0]}, {self.dim}), got {Z.shape}")
         if getattr(model, "kernel_ok", False):
-            areas, params = self.facet_arrays(Z)
-            n = np.ascontiguousarray(self.shape.normals_body, dtype=float)
-            ids = np.ascontiguousarray(self.shape.model_ids, dtype=np.int64)
-            return mag_states_nb(Q, model.s_eci[k], model.o_eci[k], n, areas, ids, params,
-                                 float(model.offset[k]))
+            # per-state facet arrays filled inside the kernel (same values as facet_arrays)
+            return mag_z_states_nb(Q, model.s_eci[k], model.o_eci[k], self._normals,
+                                   self._areas0, self._ids, self._params0,
+                                   float(model.offset[k]), np.ascontiguousarray(Z),
+                                   self.kind_col, self.facet, self.logit)
         from ..photometry.magnitude import apparent_magnitude
 
         out = np.empty(Q.shape[0])
@@ -338,10 +417,25 @@ class FacetParameterStates:
     def partials(self, model, q, z, k):
         """Analytic ``(m, ∂m/∂δθ (3,), ∂m/∂z (D,))`` at attitude q (4,) and state z (D,), epoch k.
 
-        ``∂m/∂z_d = ∂m/∂p_d · dp_d/dz_d`` with ∂m/∂ξ, ∂m/∂a, ∂m/∂m, ∂m/∂A from
-        :func:`lightcurve.photometry.magnitude_partials` evaluated on the shape with p(z);
-        δθ is the body-frame error rotation of ``q = δq(δθ) ⊗ q̂``. NaN where m = +inf.
+        ``∂m/∂z_d = ∂m/∂p_d · dp_d/dz_d`` with ∂m/∂ξ, ∂m/∂a, ∂m/∂m, ∂m/∂A of the shape with
+        p(z); δθ is the body-frame error rotation of ``q = δq(δθ) ⊗ q̂``. NaN where m = +inf.
+        Shapes whose facets are all Lambert / Cook–Torrance / Phong use the one-pass numba
+        kernel :func:`partials_z_nb` (no shape copy); others :meth:`partials_numpy`. The two
+        agree to rounding (tested to 1e-12).
         """
+        if not self._kernel_partials:
+            return self.partials_numpy(model, q, z, k)
+        z = np.ascontiguousarray(z, dtype=float).reshape(self.dim)
+        q = np.ascontiguousarray(q, dtype=float).reshape(4)
+        m, dth, dz = partials_z_nb(q, model.s_eci[k], model.o_eci[k], self._normals,
+                                   self._areas0, self._ids, self._params0,
+                                   float(model.offset[k]), z, self.kind_col, self.facet,
+                                   self.logit)
+        return float(m), dth, dz
+
+    def partials_numpy(self, model, q, z, k):
+        """:meth:`partials` by :func:`lightcurve.photometry.magnitude_partials` (NumPy
+        backend) on a copy of the shape with p(z) — any BRDF; the reference of the kernel."""
         from ..photometry.partials import magnitude_partials
 
         z = np.asarray(z, float).reshape(self.dim)
@@ -349,7 +443,8 @@ class FacetParameterStates:
         with np.errstate(divide="ignore", invalid="ignore"):
             mp = magnitude_partials(self.shape_at(z), q[None, :], model.s_eci[k:k + 1],
                                     model.o_eci[k:k + 1], model.range_obs[k:k + 1],
-                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag)
+                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag,
+                                    backend="numpy")
         cols = (mp.dm_dxi[0], mp.dm_da[0], mp.dm_dm[0], mp.dm_dA[0])
         dm_dp = np.array([cols[c][f] for c, f in zip(self.kind_col, self.facet)])
         m = float(mp.m[0]) + float(model.lit_offset[k])

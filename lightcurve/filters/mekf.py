@@ -31,16 +31,27 @@ Per epoch k (times sorted as in the lightcurve; two sites may share a time, Δt 
    Screening (:mod:`lightcurve.filters.gating`): epochs with the object unlit or below the
    horizon are skipped, and a magnitude whose ``ν²/S`` (``S = H P⁻ Hᵀ + R``) exceeds the χ²
    gate is rejected (or used with inflated R), flagged and counted.
+
+Implementation (issue 6, speed): the scalar Joseph update is a numba kernel
+(:func:`joseph_scalar_nb`, O(n²), the same algebra as
+:func:`lightcurve.estimation.joseph_update`, which calls LAPACK triangular solves whose
+thread pool costs milliseconds per call on a loaded machine), and with the analytic Jacobian
+the magnitude and all its partials come from one numba pass over the facets
+(:func:`lightcurve.photometry.partials.magnitude_partials_q_nb`,
+:func:`lightcurve.filters.facet_states.partials_z_nb`) when every facet is Lambert,
+Cook–Torrance or Phong — no shape copy per epoch. Results equal the NumPy path to rounding
+(tests/filters/test_filters_model3_speed_equivalence.py).
 """
 
 from __future__ import annotations
 
+import math
 import time
 
+import numba as nb
 import numpy as np
 
-from .. import rotations as rot
-from ..estimation.kalman import joseph_update
+from ..photometry.partials import kernel_capable, magnitude_partials_q_nb
 from . import _kernels as K
 from ._common import (FilterProblem, Recorder, attach_bias, attach_facets, grp_to_dq,
                       initial_state_ext, layout_transition, reflection_histories,
@@ -52,12 +63,19 @@ __all__ = ["run_mekf"]
 
 
 def _reset(q, dth, error):
+    """``normalise(δq(δθ⁺) ⊗ q)`` (Bernard eq. 3.20 product, written out on scalars: the
+    same operations as :func:`lightcurve.rotations.quat_mult` without its array overhead)."""
     if error == "grp":
         dq = grp_to_dq(dth)[0]
     else:
         dq = np.concatenate([[1.0], 0.5 * np.asarray(dth, float)])
         dq /= np.linalg.norm(dq)
-    qn = rot.quat_mult(dq, q)
+    a0, a1, a2, a3 = (float(v) for v in dq)
+    b0, b1, b2, b3 = (float(v) for v in q)
+    qn = np.array([a0 * b0 - (a1 * b1 + a2 * b2 + a3 * b3),
+                   (a0 * b1 + b0 * a1) - (a2 * b3 - a3 * b2),
+                   (a0 * b2 + b0 * a2) - (a3 * b1 - a1 * b3),
+                   (a0 * b3 + b0 * a3) - (a1 * b2 - a2 * b1)])
     return qn / np.linalg.norm(qn)
 
 
@@ -85,10 +103,27 @@ def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=N
         return _run(problem, error, jacobian, bias, facets)
 
 
+class _Photometry:
+    """The shape's plain kernel arrays, packed once per run (attitude-only analytic path)."""
+
+    def __init__(self, model, jacobian):
+        shape = model.shape
+        ids = np.ascontiguousarray(shape.model_ids, dtype=np.int64)
+        self.ok = jacobian == "analytic" and kernel_capable(ids)
+        n, a, _, prm = shape.kernel_arrays()
+        self.normals = np.ascontiguousarray(n, dtype=float)
+        self.areas = np.ascontiguousarray(a, dtype=float)
+        self.ids = ids
+        self.params = np.ascontiguousarray(prm, dtype=float)
+        F = self.areas.shape[0]
+        self.work = tuple(np.empty(F) for _ in range(4))   # ∂m/∂A, ∂m/∂ξ, ∂m/∂a, ∂m/∂m
+
+
 def _run(problem, error, jacobian, bias=None, facets=None):
     t0 = time.perf_counter()
     p = problem
     m = p.model
+    ph = _Photometry(m, jacobian)
     dyn = p.dynamics
     rec = Recorder(p, "mekf")
     gate = InnovationGate(p, auto="inflate")   # outlier gate, unlit/below-horizon screening
@@ -119,7 +154,7 @@ def _run(problem, error, jacobian, bias=None, facets=None):
         elif gate.skip_epoch(k, rec):
             pass  # object unlit or below the horizon: flagged and counted, not used
         else:
-            yhat, Hth, Hz = _predict(m, facets, q, z, k, jacobian)
+            yhat, Hth, Hz = _predict(m, facets, q, z, k, jacobian, ph)
             if not np.isfinite(yhat) or not np.all(np.isfinite(Hth)) \
                     or not np.all(np.isfinite(Hz)):
                 rec.flags[k] |= FLAG_INVISIBLE
@@ -139,9 +174,9 @@ def _run(problem, error, jacobian, bias=None, facets=None):
                 # innovation gate: None = outlier rejected (flagged; prior kept)
                 R = gate.check(k, y - yhat, float(H[0] @ P @ H[0]) + R, R, rec)
                 if R is not None:
-                    dx, Pn, info = joseph_update(np.zeros(nx), P, y, H, R, h=yhat)
-                    rec.innovation(k, float(info.innovation[0]), float(info.S[0, 0]))
-                    if info.ok:
+                    dx, Pn, nu, S, ok = _update(P, H[0], R, y, yhat)
+                    rec.innovation(k, nu, S)
+                    if ok:
                         if na:
                             q = _reset(q, dx[:3], error)
                             w = w + dx[3:6]
@@ -167,9 +202,79 @@ def _run(problem, error, jacobian, bias=None, facets=None):
     return est
 
 
-def _predict(m, facets, q, z, k, jacobian, h=1e-6):
+@nb.njit(cache=True)
+def joseph_scalar_nb(P, H, R, nu, dx, Pn):
+    """Joseph-form Kalman update of a scalar measurement, in place into ``dx`` (n,), ``Pn`` (n,n).
+
+    P (n,n) prior covariance of the error state (prior error state zero), H (n,) the
+    measurement row, R > 0 its noise variance (mag²), nu = y − ŷ the innovation (mag).
+    ``S = H P Hᵀ + R``, ``K = P Hᵀ / S``, ``δx⁺ = K ν``,
+    ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` evaluated as ``B − (B Hᵀ) Kᵀ + R K Kᵀ`` with
+    ``B = P − K (H P)`` (the same product, O(n²)), symmetrised. Returns ``(S, status)``:
+    0 ok; 1 non-finite innovation; 2 S not positive (or not finite); 3 non-finite posterior —
+    the failure reasons of :func:`lightcurve.estimation.joseph_update` (then dx/Pn are
+    undefined and the caller keeps the prior).
+    """
+    n = P.shape[0]
+    PHt = np.zeros(n)
+    HP = np.zeros(n)
+    for j in range(n):
+        hj = H[j]
+        if hj != 0.0:
+            for i in range(n):
+                PHt[i] += P[i, j] * hj
+                HP[i] += hj * P[j, i]
+    hph = 0.0
+    for i in range(n):
+        hph += H[i] * PHt[i]
+    S = hph + R
+    if not math.isfinite(nu):
+        return S, 1
+    if not (S > 0.0 and math.isfinite(S)):
+        return S, 2
+    Kg = PHt / S
+    # B Hᵀ = P Hᵀ − K (H P Hᵀ)
+    BH = PHt - Kg * hph
+    bad = False
+    for i in range(n):
+        for j in range(n):
+            Pn[i, j] = P[i, j] - Kg[i] * HP[j] - BH[i] * Kg[j] + R * Kg[i] * Kg[j]
+    for i in range(n):
+        dx[i] = Kg[i] * nu
+        if not math.isfinite(dx[i]):
+            bad = True
+        for j in range(i + 1):
+            v = 0.5 * (Pn[i, j] + Pn[j, i])
+            Pn[i, j] = v
+            Pn[j, i] = v
+            if not math.isfinite(v):
+                bad = True
+    return S, 3 if bad else 0
+
+
+def _update(P, h, R, y, yhat):
+    """Scalar Joseph update (:func:`joseph_scalar_nb`) → ``(δx⁺, P⁺, ν, S, ok)``."""
+    n = P.shape[0]
+    dx = np.empty(n)
+    Pn = np.empty((n, n))
+    nu = float(y - yhat)
+    S, status = joseph_scalar_nb(np.ascontiguousarray(P), np.ascontiguousarray(h, dtype=float),
+                                 float(R), nu, dx, Pn)
+    return dx, Pn, nu, float(S), status == 0
+
+
+def _predict(m, facets, q, z, k, jacobian, ph=None, h=1e-6):
     """``(ŷ, ∂m/∂δθ (3,), ∂m/∂z (D,))`` at the attitude q and Model 3 state z (D = 0 without
-    facet states). Analytic partials, or central differences (step h rad / h in z)."""
+    facet states). Analytic partials (one numba pass over the facets when ``ph`` — a
+    :class:`_Photometry` — allows it), or central differences (step h rad / h in z)."""
+    if facets is None and ph is not None and ph.ok:
+        dA, dxi, da, dmm = ph.work
+        yhat, tx, ty, tz = magnitude_partials_q_nb(
+            np.ascontiguousarray(q, dtype=float), m.s_eci[k], m.o_eci[k], ph.normals, ph.areas,
+            ph.ids, ph.params, float(m.offset[k]), dA, dxi, da, dmm)
+        if not math.isfinite(yhat):
+            return yhat, np.full(3, np.nan), np.zeros(0)
+        return yhat, np.array([tx, ty, tz]), np.zeros(0)
     if facets is None:
         yhat = float(m.predict_q(q[None, :], k)[0])
         Hth = m.jacobian_theta(q, k, method=jacobian) if np.isfinite(yhat) else np.full(3, np.nan)
