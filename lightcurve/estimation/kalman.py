@@ -249,6 +249,12 @@ def _gain(P, H, R, nu):
     if not ok:
         return S, None, np.nan, "innovation covariance S is not positive definite"
     PHt = P @ H.T
+    if L.shape[0] == 1:
+        # scalar measurement (a magnitude, one CSS voltage): the triangular solves are two
+        # divisions. Same arithmetic as the general branch; it avoids SciPy's BLAS call, whose
+        # thread-pool wake-up costs milliseconds per 1×1 solve on a loaded machine.
+        ell = L[0, 0]
+        return S, (PHt / ell) / ell, float((nu[0] / ell) ** 2), ""
     # K = P Hᵀ S⁻¹, from S Kᵀ = H P  (two triangular solves with L)
     Kt = solve_triangular(L.T, solve_triangular(L, PHt.T, lower=True), lower=False)
     w = solve_triangular(L, nu, lower=True)

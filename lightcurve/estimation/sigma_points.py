@@ -296,8 +296,15 @@ def unscented_update(x, P, X, Y, y, weights, R=None):
         return x.copy(), P.copy(), UpdateInfo(nu, Pyy, np.nan, False, None,
                                               "innovation covariance is not positive definite")
     Pxy = unscented_cross_covariance(X, x, Y, ym, weights)
-    K = cho_solve((L, True), Pxy.T).T
-    w = solve_triangular(L, nu, lower=True)
+    if m == 1:
+        # scalar measurement: the Cholesky solves are divisions (no BLAS thread-pool wake-up;
+        # see estimation.kalman._gain)
+        ell = L[0, 0]
+        K = (Pxy / ell) / ell
+        w = nu / ell
+    else:
+        K = cho_solve((L, True), Pxy.T).T
+        w = solve_triangular(L, nu, lower=True)
     x_new = x + K @ nu
     P_new = symmetrize(P - K @ Pyy @ K.T)
     if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))):
