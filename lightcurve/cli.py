@@ -573,6 +573,30 @@ def _register_css(sub) -> None:
 # ----------------------------------------------------------------------------------------
 # attitude filters (invert)
 # ----------------------------------------------------------------------------------------
+def _csv_list(text, option):
+    """Split a comma-separated CLI value into stripped, non-empty items (InputError if none)."""
+    items = tuple(x.strip() for x in str(text).split(",") if x.strip())
+    if not items:
+        raise InputError("needs at least one comma-separated value", field=option,
+                         value=text)
+    return items
+
+
+def _csv_ints(text, option):
+    """Comma-separated non-negative integers (facet indices) from a CLI value."""
+    out = []
+    for x in _csv_list(text, option):
+        try:
+            v = int(x)
+        except ValueError:
+            v = -1
+        if v < 0 or str(v) != x.lstrip("+"):
+            raise InputError("not a non-negative integer", field=option, value=x,
+                             allowed="0-based facet indices, e.g. 0,2,5")
+        out.append(v)
+    return tuple(out)
+
+
 def _cmd_invert(args) -> int:
     from .studies.batch import expand_inputs, invert_files
 
@@ -601,6 +625,11 @@ def _cmd_invert(args) -> int:
                        pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
                        kappa=args.kappa, reflection=args.reflection,
                        attitude="truth" if args.attitude_known else "estimate",
+                       reflection_frac=args.reflection_frac,
+                       reflection_kinds=_csv_list(args.reflection_params, "--reflection-params"),
+                       reflection_facets=(None if args.reflection_facets is None else
+                                          _csv_ints(args.reflection_facets,
+                                                    "--reflection-facets")),
                        gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
@@ -658,7 +687,21 @@ def _register_filters(sub) -> None:
                    default="none",
                    help="states for uncertain reflection parameters (Bernard ch. 8): per-site "
                    "magnitude biases (random-walk, model1, model2) or the facet parameters "
-                   "xi, a, m, A themselves (model3); MEKF and UKF (default none)")
+                   "xi, a, m, A themselves (model3); MEKF, UKF and particle filter "
+                   "(default none)")
+    p.add_argument("--reflection-params", default="xi,a,m,A", metavar="LIST",
+                   help="model3: comma-separated parameters to estimate per facet, from xi "
+                   "(diffuse fraction), a (albedo = F0), m (Beckmann slope), A (area) "
+                   "(default xi,a,m,A). a and A reach the magnitude almost only as the product "
+                   "a*A (diffuse term, and the specular term near normal incidence): estimated "
+                   "together with equal priors neither shrinks by more than ~sqrt(2); leave A "
+                   "out when the areas are known to make a observable")
+    p.add_argument("--reflection-facets", default=None, metavar="LIST",
+                   help="model3: comma-separated facet indices (0-based, shape-file order) "
+                   "whose parameters are estimated (default: every Cook-Torrance facet)")
+    p.add_argument("--reflection-frac", type=_num(0.0, lo_open=True), default=0.1,
+                   help="relative 1-sigma of the reflection parameters: prior of model3, "
+                   "eq. 8.10 bias variance of model1/2 (default 0.1 = Bernard sec. 10.1)")
     p.add_argument("--attitude-known", action="store_true",
                    help="hold attitude and rate at the file's truth and estimate only the "
                    "reflection states (thesis sec. 10.7 parameter-only runs; needs --reflection)")
@@ -781,14 +824,8 @@ def _cmd_fit_reflection(args) -> int:
         raise InputError("--attitude estimate needs --estimate FILE.h5 (an 'invert' result)",
                          field="--estimate")
     curve = read_lightcurve(args.file)
-    kinds = tuple(k.strip() for k in args.params.split(",") if k.strip())
-    facets = None
-    if args.facets:
-        try:
-            facets = [int(x) for x in args.facets.split(",") if x.strip()]
-        except ValueError:
-            raise InputError("facet indices must be integers", field="--facets",
-                             value=args.facets) from None
+    kinds = _csv_list(args.params, "--params")
+    facets = list(_csv_ints(args.facets, "--facets")) if args.facets else None
     say = (lambda n, d: None) if args.quiet else (
         lambda n, d: print(f"  {n} steps: max tau {d.as_dict()['tau_max_steps']:.1f}, "
                            f"acceptance {d.mean_acceptance:.2f}", flush=True))

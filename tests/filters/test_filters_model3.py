@@ -242,3 +242,31 @@ def test_cli_invert_model3_attitude_known(tmp_path, pcurve):
     assert rc == 0
     rc = main(["invert", str(f), "--attitude-known", "-o", str(tmp_path / "o2")])
     assert rc == 2                          # nothing to estimate: InputError → exit 2
+
+
+def test_cli_invert_model3_parameter_and_facet_selection(tmp_path):
+    """`--reflection-params`, `--reflection-facets` and `--reflection-frac` reach Model 3: the
+    state holds exactly the chosen kinds × facets (canonical kind order ξ, a, m, A), the prior σ
+    follows the fraction (σ_p = frac · p₀ in the physical parameter, Bernard §10.1), and a bad
+    list is rejected before anything is written (exit 2)."""
+    from lightcurve.cli import main
+
+    c, _ = _perturbed_curve(n=30, dt=4.0)
+    f = tmp_path / "m3.h5"
+    c.write(f)
+    out = tmp_path / "o"
+    rc = main(["invert", str(f), "--method", "ukf", "--reflection", "model3", "--attitude-known",
+               "--reflection-params", "m,xi", "--reflection-facets", "0,2",
+               "--reflection-frac", "0.2", "-o", str(out)])
+    assert rc == 0
+    fr = json.loads((out / "summary.json").read_text())["m3"]["final_reflection"]
+    assert sorted(fr) == ["m[0]", "m[2]", "xi[0]", "xi[2]"]
+    xi0 = load_shape("cube_1u").facet_params("xi")[0]      # 0.2 in shapes/cube_1u.toml
+    assert fr["xi[0]"]["prior_sigma"] == pytest.approx(0.2 * xi0, rel=1e-9)
+    for bad in (["--reflection-params", "xi,q"], ["--reflection-facets", "0,x"],
+                ["--reflection-facets", "-1"]):
+        o = tmp_path / f"bad{len(list(tmp_path.iterdir()))}"
+        rc = main(["invert", str(f), "--method", "ukf", "--reflection", "model3",
+                   "--attitude-known", *bad, "-o", str(o)])
+        assert rc == 2, bad
+        assert not (o / "m3.ukf.h5").exists()
