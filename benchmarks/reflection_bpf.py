@@ -18,7 +18,15 @@ Model 3 versus attitude only is ``benchmarks/reflection.py``.
   the reference.
 
 Usage: python benchmarks/reflection_bpf.py --acceptance [--seeds 10] [--particles 10000]
+                                           [--scenario PATH]
+       (``--scenario``: another scenario file for the §10.7 runs, e.g. pipelines/thesis/
+       leo-ic1-fast-spin-controlled-1site-inertial-rates.toml; the output gives the per-facet
+       fraction of epochs lit and visible, ``facet_exposure_seed1000``)
        python benchmarks/reflection_bpf.py --combined [--seeds 5] [--particles 10000]
+                                           [--rejuvenation auto|separate|joint]
+                                           [--kernel-bandwidth H] [--sigmas 3 10]
+                                           [--no-reference]
+       (``--rejuvenation separate`` reproduces the session-2 filter for before/after)
 """
 
 from __future__ import annotations
@@ -40,13 +48,16 @@ SCENARIO = "leo-ic1-fast-spin-controlled-1site.toml"
 REFLECTION = "\n[reflection]\nperturb = true\nsigma_frac = 0.1\n"
 
 
-def scenario_with_reflection():
-    """The thesis LEO fast-spin scenario with the §10.1 ``[reflection]`` perturbation."""
+def scenario_with_reflection(path=None):
+    """The thesis LEO fast-spin scenario (or the scenario file ``path``) with the §10.1
+    ``[reflection]`` perturbation appended (the file must not have its own ``[reflection]``)."""
+    from pathlib import Path
+
     from lightcurve._paths import data_dir
     from lightcurve.io.atomic import atomic_write_text
     from lightcurve.studies.scenario import load_scenario
 
-    src = data_dir("pipelines") / "thesis" / SCENARIO
+    src = Path(path) if path else data_dir("pipelines") / "thesis" / SCENARIO
     with tempfile.TemporaryDirectory(prefix="lc_refl_bpf_") as d:
         path = os.path.join(d, "scenario.toml")
         atomic_write_text(path, src.read_text() + REFLECTION)
@@ -77,12 +88,16 @@ def _param_rows(names, shrink, inside):
             for d, n in enumerate(names)}
 
 
-def acceptance(seeds, particles, moves=1):
+def acceptance(seeds, particles, moves=1, scenario=None):
+    """§10.7 runs; ``scenario``: path of the scenario file (default: the thesis LEO fast spin)."""
     from lightcurve.filters import build_problem, run_bpf
     from lightcurve.filters.facet_states import FacetParameterStates
+    from lightcurve.photometry.facet_exposure import facet_exposure_fractions
     from lightcurve.studies.simulate import simulate
 
-    sc = scenario_with_reflection()
+    sc = scenario_with_reflection(scenario)
+    # per-facet fraction of epochs lit (n·s > 0) AND visible (n·o > 0), from the truth of seed 1000
+    exposure = facet_exposure_fractions(simulate(sc, 1000), shape=sc.shape)
     res = {}
     for variant, mv in (("plain", 0), ("move", moves)):
         shrink, inside, runs = [], [], []
@@ -114,11 +129,22 @@ def acceptance(seeds, particles, moves=1):
             "inside_3sigma_rate_all_params": float(np.mean(I)),
             "minus_z_xi_a_pass_runs": int(ok.sum()), "runs": runs}
     return {"mode": "acceptance_10_7", "particles": particles, "seeds": seeds,
+            "scenario": sc.name, "omega_frame": sc.attitude.omega_frame,
+            "facet_exposure_seed1000": exposure,
             "criterion": "xi[5] and a[5] (-Z facet): shrink >= 2 and |error| <= 3 sigma",
             **res}
 
 
-def combined(seeds, particles, sigmas=(3.0, 10.0)):
+def combined(seeds, particles, sigmas=(3.0, 10.0), rejuvenation="auto", kernel_bandwidth=None,
+             reference=True):
+    """§10.8 combined runs (module docstring). ``rejuvenation`` / ``kernel_bandwidth`` go to
+    :func:`run_bpf` ("auto" = the joint Liu–West kernel with the Musso bandwidth for Model 3;
+    "separate" = the session-2 filter: table 7.9 on the attitude, Liu–West δ = 0.98 on z).
+    Per run also the final NEES of the attitude (3 dof) and of attitude + rate (6 dof), and
+    per σθ their sums with the χ² 99.9 % bounds (a consistent filter exceeds them with
+    probability 0.1 %). ``reference``: also run the attitude-only BPF on the same data."""
+    from scipy.stats import chi2
+
     from lightcurve.filters import build_problem, run_bpf
     from lightcurve.filters.facet_states import FacetParameterStates
     from lightcurve.studies.simulate import simulate
@@ -133,26 +159,46 @@ def combined(seeds, particles, sigmas=(3.0, 10.0)):
             fs = FacetParameterStates(p.model.shape)
             psd0 = prior_sd_p(fs)
             tv = truth_vector(lc, fs.names)
-            e = run_bpf(p, particles=particles, seed=i, facets=fs)
-            ref = run_bpf(build_problem(lc, seed=i, sigma_theta_deg=st), particles=particles,
-                          seed=i)
-            s, sr = e.summary(), ref.summary()
+            t0 = time.perf_counter()
+            e = run_bpf(p, particles=particles, seed=i, facets=fs, rejuvenation=rejuvenation,
+                        kernel_bandwidth=kernel_bandwidth)
+            rt = time.perf_counter() - t0
+            s = e.summary()
             pm, ps = e.refl_p[-1], e.refl_p_sigma[-1]
             shrink.append(psd0 / ps)
             inside.append(np.abs(tv - pm) <= 3 * ps)
-            runs.append({"seed": i, "final_att_error_rss_deg": s["final_att_error_rss_deg"],
-                         "att_inside_3sigma": s["inside_3sigma"], "diverged": s["diverged"],
-                         "params_inside_3sigma": float(np.mean(inside[-1])),
-                         "attitude_only_final_att_error_rss_deg": sr["final_att_error_rss_deg"],
-                         "attitude_only_diverged": sr["diverged"]})
+            nees_att = float(np.sum((e.att_error_deg[-1] / e.att_sigma_deg[-1]) ** 2))
+            nees_w = float(np.sum((e.omega_error_rad_s[-1] / e.omega_sigma_rad_s[-1]) ** 2))
+            row = {"seed": 2000 + i, "final_att_error_rss_deg": s["final_att_error_rss_deg"],
+                   "att_inside_3sigma": s["inside_3sigma"], "diverged": s["diverged"],
+                   "final_3sigma_att_deg": s["final_3sigma_att_deg"],
+                   "nees_att": nees_att, "nees_att_rate": nees_att + nees_w,
+                   "params_inside_3sigma": float(np.mean(inside[-1])),
+                   "param_z_shrink_median": float(np.median(fs.prior_sd_z
+                                                            / e.refl_z_sigma[-1])),
+                   "runtime_s": rt}
+            if reference:
+                sr = run_bpf(build_problem(lc, seed=i, sigma_theta_deg=st),
+                             particles=particles, seed=i).summary()
+                row.update({"attitude_only_final_att_error_rss_deg":
+                            sr["final_att_error_rss_deg"],
+                            "attitude_only_diverged": sr["diverged"]})
+            runs.append(row)
         errs = [r["final_att_error_rss_deg"] for r in runs]
+        n = len(runs)
         out[f"sigma_theta_{st:g}_deg"] = {
             "final_att_error_rss_deg_median": float(np.median(errs)),
             "final_att_error_rss_deg_max": float(np.max(errs)),
             "att_inside_3sigma_runs": int(sum(r["att_inside_3sigma"] for r in runs)),
+            "diverged_runs": int(sum(r["diverged"] for r in runs)),
+            "nees_att_sum": float(sum(r["nees_att"] for r in runs)),
+            "nees_att_sum_chi2_999": float(chi2.ppf(0.999, 3 * n)),
+            "nees_att_rate_sum": float(sum(r["nees_att_rate"] for r in runs)),
+            "nees_att_rate_sum_chi2_999": float(chi2.ppf(0.999, 6 * n)),
             "params_inside_3sigma_rate": float(np.mean(inside)),
             "parameters": _param_rows(fs.names, shrink, inside), "runs": runs}
-    return {"mode": "combined_10_8", "particles": particles, "seeds": seeds, **out}
+    return {"mode": "combined_10_8", "particles": particles, "seeds": seeds,
+            "rejuvenation": rejuvenation, "kernel_bandwidth": kernel_bandwidth, **out}
 
 
 def main():
@@ -162,13 +208,25 @@ def main():
     ap.add_argument("--combined", action="store_true")
     ap.add_argument("--seeds", type=int, default=None)
     ap.add_argument("--moves", type=int, default=1)
+    ap.add_argument("--rejuvenation", default="auto", choices=("auto", "separate", "joint"),
+                    help="--combined: the BPF's rejuvenation after resampling (run_bpf)")
+    ap.add_argument("--kernel-bandwidth", type=float, default=None,
+                    help="--combined: joint-kernel bandwidth h (default: Musso et al. optimum)")
+    ap.add_argument("--no-reference", action="store_true",
+                    help="--combined: skip the attitude-only reference runs")
+    ap.add_argument("--sigmas", type=float, nargs="+", default=[3.0, 10.0],
+                    help="--combined: initial attitude σθ values, deg")
+    ap.add_argument("--scenario", default=None,
+                    help="--acceptance: scenario TOML (default: pipelines/thesis/" + SCENARIO + ")")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
     if args.acceptance:
-        out = acceptance(args.seeds or 10, (args.particles or [10_000])[0], args.moves)
+        out = acceptance(args.seeds or 10, (args.particles or [10_000])[0], args.moves,
+                         scenario=args.scenario)
     elif args.combined:
-        out = combined(args.seeds or 5, (args.particles or [10_000])[0])
+        out = combined(args.seeds or 5, (args.particles or [10_000])[0], tuple(args.sigmas),
+                       args.rejuvenation, args.kernel_bandwidth, not args.no_reference)
     else:
         ap.error("choose --acceptance or --combined (the step cost is benchmarks/reflection.py)")
     import numba
