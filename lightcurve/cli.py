@@ -621,6 +621,7 @@ def _cmd_invert(args) -> int:
                        sigma_theta_deg=args.sigma_theta_deg,
                        sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
                        roughening=args.roughening, resampling=args.resampling,
+                       rejuvenation=args.rejuvenation,
                        ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
                        pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
                        kappa=args.kappa, reflection=args.reflection,
@@ -672,8 +673,14 @@ def _register_filters(sub) -> None:
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
     p.add_argument("--particles", type=_num(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
     p.add_argument("--roughening", type=_num(0.0), default=0.2,
-                   help="BPF roughening constant G (Bernard table 7.9; default 0.2)")
+                   help="BPF roughening constant G (Bernard table 7.9; used with --rejuvenation "
+                   "separate; default 0.2)")
     p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic")
+    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
+                   help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
+                   "the whole state with the Musso et al. (2001) bandwidth; separate = the "
+                   "table-7.9 roughening of attitude and rate (uses --roughening); auto = joint "
+                   "when the attitude is estimated (default)")
     p.add_argument("--ess-threshold", type=_num(0.0, 1.0), default=0.5,
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
     p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",

@@ -176,7 +176,8 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
            alpha=1.0, beta=2.0, kappa=0.0, error="grp", jacobian="analytic",
            keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
            reflection_process_noise=0.0, reflection_facets=None,
-           reflection_kinds=("xi", "a", "m", "A"), gate=None) -> Estimate:
+           reflection_kinds=("xi", "a", "m", "A"), gate=None,
+           rejuvenation="auto") -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -188,8 +189,13 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     sigma_theta_deg, sigma_omega_deg_s : float
         1σ of the initial attitude (deg, per axis) and rate (deg/s) errors; also ``P₀``.
     particles, roughening, resampling, ess_threshold :
-        BPF: number of particles, roughening constant 𝒢 (Bernard table 7.9), "systematic" or
-        "multinomial", resample when ``N_eff < ess_threshold · N``.
+        BPF: number of particles, roughening constant 𝒢 (Bernard table 7.9; used by the
+        "separate" rejuvenation), "systematic" or "multinomial", resample when
+        ``N_eff < ess_threshold · N``.
+    rejuvenation : {"auto", "separate", "joint"}
+        BPF: how the resampled cloud is moved (:func:`lightcurve.filters.bpf.run_bpf`): "joint"
+        = one Liu–West kernel on the full state (default "auto": joint when the attitude is
+        estimated), "separate" = the table-7.9 roughening of attitude and rate.
     initial_q, initial_omega :
         User initial estimate (inertial→body quaternion; rad/s body axes) instead of the
         perturbed truth.
@@ -275,7 +281,8 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
     from .bpf import run_bpf
 
-    extra = {"bias": bias, "facets": facets, "attitude": attitude}
+    extra = {"bias": bias, "facets": facets, "attitude": attitude,
+             "rejuvenation": rejuvenation}
     problem.meta.update({"particles": int(particles), "roughening": float(roughening),
                          "resampling": resampling, "ess_threshold": float(ess_threshold)})
     return run_bpf(problem, particles=particles, seed=seed, roughening=roughening,

@@ -352,8 +352,9 @@ def test_combined_model3_bpf_covariance_is_honest(leo_combined_curves):
 
 
 def test_rejuvenation_argument_checks(biased_curve):
-    """rejuvenation / kernel_bandwidth are validated; "auto" leaves the attitude-only and
-    site-bias runs on the separate (table 7.9) roughening, bit for bit."""
+    """rejuvenation / kernel_bandwidth are validated; "auto" is the joint kernel whenever the
+    attitude is estimated (attitude-only: d = 6; Model 3: d = 30) and differs from the
+    separate (table 7.9) roughening."""
     p = build_problem(biased_curve, seed=2, sigma_theta_deg=3.0)
     with pytest.raises(ValueError, match="rejuvenation"):
         run_bpf(p, particles=50, seed=0, rejuvenation="musso")
@@ -363,8 +364,10 @@ def test_rejuvenation_argument_checks(biased_curve):
     with pytest.raises(ValueError, match="attitude estimated"):
         run_bpf(p, particles=50, seed=0, facets=fs, attitude="truth", rejuvenation="joint")
     a = run_bpf(p, particles=300, seed=1)
-    b = run_bpf(p, particles=300, seed=1, rejuvenation="separate")
-    assert np.array_equal(a.q, b.q) and "rejuvenation" not in a.meta
+    b = run_bpf(p, particles=300, seed=1, rejuvenation="joint")
+    c = run_bpf(p, particles=300, seed=1, rejuvenation="separate")
+    assert np.array_equal(a.q, b.q) and a.meta["rejuvenation"]["dimension"] == 6
+    assert not np.array_equal(a.q, c.q) and "rejuvenation" not in c.meta
     e = run_bpf(p, particles=300, seed=1, facets=fs)
     assert e.meta["rejuvenation"]["kind"] == "joint" and e.meta["rejuvenation"]["dimension"] == 30
 
@@ -382,3 +385,28 @@ def test_bpf_numpy_backend_matches_numba_with_joint_kernel():
     assert sum(a.meta["tempering_stages"][:6]) > 0        # the stage kernel is exercised
     np.testing.assert_allclose(a.refl_p[:6], b.refl_p[:6], atol=1e-9)
     np.testing.assert_allclose(a.att_error_deg[:6], b.att_error_deg[:6], atol=1e-9)
+
+
+def test_cli_invert_bpf_rejuvenation_option(tmp_path):
+    """`lightcurve invert --method bpf --rejuvenation {auto,separate,joint}` reaches the filter:
+    the stored result records the joint kernel (d = 6 attitude-only) by default and for
+    "joint", and no kernel for "separate"; "auto" and "joint" give the same estimate."""
+    from lightcurve.cli import main
+    from lightcurve.filters.result import read_estimate
+
+    f = tmp_path / "c.h5"
+    make_curve(n=20, seed=4).write(f)
+    q = {}
+    for mode in ("auto", "joint", "separate"):
+        out = tmp_path / mode
+        rc = main(["invert", str(f), "--method", "bpf", "--particles", "300",
+                   "--rejuvenation", mode, "-o", str(out)])
+        assert rc == 0
+        est = read_estimate(out / "c.bpf.h5")
+        q[mode] = est.q
+        if mode == "separate":
+            assert "rejuvenation" not in est.meta
+        else:
+            assert est.meta["rejuvenation"]["kind"] == "joint"
+            assert est.meta["rejuvenation"]["dimension"] == 6
+    assert np.array_equal(q["auto"], q["joint"]) and not np.array_equal(q["auto"], q["separate"])
