@@ -48,9 +48,10 @@ SCENARIO = "leo-ic1-fast-spin-controlled-1site.toml"
 REFLECTION = "\n[reflection]\nperturb = true\nsigma_frac = 0.1\n"
 
 
-def scenario_with_reflection(path=None):
+def scenario_with_reflection(path=None, params=None):
     """The thesis LEO fast-spin scenario (or the scenario file ``path``) with the §10.1
-    ``[reflection]`` perturbation appended (the file must not have its own ``[reflection]``)."""
+    ``[reflection]`` perturbation appended (the file must not have its own ``[reflection]``);
+    ``params``: the perturbed kinds (default all: ξ, a, m, A)."""
     from pathlib import Path
 
     from lightcurve._paths import data_dir
@@ -60,7 +61,8 @@ def scenario_with_reflection(path=None):
     src = Path(path) if path else data_dir("pipelines") / "thesis" / SCENARIO
     with tempfile.TemporaryDirectory(prefix="lc_refl_bpf_") as d:
         path = os.path.join(d, "scenario.toml")
-        atomic_write_text(path, src.read_text() + REFLECTION)
+        extra = "" if params is None else "params = [%s]\n" % ", ".join(f'"{k}"' for k in params)
+        atomic_write_text(path, src.read_text() + REFLECTION + extra)
         return load_scenario(path)          # loaded eagerly (text, shape, sites)
 
 
@@ -88,14 +90,17 @@ def _param_rows(names, shrink, inside):
             for d, n in enumerate(names)}
 
 
-def acceptance(seeds, particles, moves=1, scenario=None):
-    """§10.7 runs; ``scenario``: path of the scenario file (default: the thesis LEO fast spin)."""
+def acceptance(seeds, particles, moves=1, scenario=None, params=None):
+    """§10.7 runs; ``scenario``: path of the scenario file (default: the thesis LEO fast spin);
+    ``params``: the kinds perturbed in the truth AND estimated (default all four; e.g.
+    ("xi", "a", "m") = areas known exactly, which lifts the a·A degeneracy)."""
     from lightcurve.filters import build_problem, run_bpf
     from lightcurve.filters.facet_states import FacetParameterStates
     from lightcurve.photometry.facet_exposure import facet_exposure_fractions
     from lightcurve.studies.simulate import simulate
 
-    sc = scenario_with_reflection(scenario)
+    kinds = tuple(params) if params else ("xi", "a", "m", "A")
+    sc = scenario_with_reflection(scenario, params)
     # per-facet fraction of epochs lit (n·s > 0) AND visible (n·o > 0), from the truth of seed 1000
     exposure = facet_exposure_fractions(simulate(sc, 1000), shape=sc.shape)
     res = {}
@@ -104,9 +109,10 @@ def acceptance(seeds, particles, moves=1, scenario=None):
         for i in range(seeds):
             lc = simulate(sc, 1000 + i)
             p = build_problem(lc, seed=i)
-            fs = FacetParameterStates(p.model.shape)
+            fs = FacetParameterStates(p.model.shape, kinds=kinds)
             psd0 = prior_sd_p(fs)
             tv = truth_vector(lc, fs.names)
+            ixi, ia = fs.names.index("xi[5]"), fs.names.index("a[5]")
             t0 = time.perf_counter()
             e = run_bpf(p, particles=particles, seed=i, facets=fs, attitude="truth",
                         mcmc_moves=mv)
@@ -114,12 +120,12 @@ def acceptance(seeds, particles, moves=1, scenario=None):
             shrink.append(psd0 / ps)
             inside.append(np.abs(tv - pm) <= 3 * ps)
             runs.append({"seed": i, "runtime_s": time.perf_counter() - t0,
-                         "xi5": [float(tv[5]), float(pm[5]), float(ps[5])],
-                         "a5": [float(tv[11]), float(pm[11]), float(ps[11])],
+                         "xi5": [float(tv[ixi]), float(pm[ixi]), float(ps[ixi])],
+                         "a5": [float(tv[ia]), float(pm[ia]), float(ps[ia])],
                          "mcmc_acceptance": e.meta["reflection"].get("mcmc_acceptance")})
         rows = _param_rows(fs.names, shrink, inside)
         S, I = np.asarray(shrink), np.asarray(inside)
-        ok = (S[:, 5] >= 2) & (S[:, 11] >= 2) & I[:, 5] & I[:, 11]
+        ok = (S[:, ixi] >= 2) & (S[:, ia] >= 2) & I[:, ixi] & I[:, ia]
         res[variant] = {
             "parameters": rows,
             "observable_shrink_ge2_in_all_runs": [n for n, r in rows.items()
@@ -129,7 +135,7 @@ def acceptance(seeds, particles, moves=1, scenario=None):
             "inside_3sigma_rate_all_params": float(np.mean(I)),
             "minus_z_xi_a_pass_runs": int(ok.sum()), "runs": runs}
     return {"mode": "acceptance_10_7", "particles": particles, "seeds": seeds,
-            "scenario": sc.name, "omega_frame": sc.attitude.omega_frame,
+            "scenario": sc.name, "omega_frame": sc.attitude.omega_frame, "params": list(kinds),
             "facet_exposure_seed1000": exposure,
             "criterion": "xi[5] and a[5] (-Z facet): shrink >= 2 and |error| <= 3 sigma",
             **res}
@@ -216,6 +222,9 @@ def main():
                     help="--combined: skip the attitude-only reference runs")
     ap.add_argument("--sigmas", type=float, nargs="+", default=[3.0, 10.0],
                     help="--combined: initial attitude σθ values, deg")
+    ap.add_argument("--params", default=None,
+                    help="--acceptance: comma-separated kinds perturbed and estimated (default "
+                    "xi,a,m,A; xi,a,m = areas known)")
     ap.add_argument("--scenario", default=None,
                     help="--acceptance: scenario TOML (default: pipelines/thesis/" + SCENARIO + ")")
     args = ap.parse_args()
@@ -223,7 +232,8 @@ def main():
     t0 = time.perf_counter()
     if args.acceptance:
         out = acceptance(args.seeds or 10, (args.particles or [10_000])[0], args.moves,
-                         scenario=args.scenario)
+                         scenario=args.scenario,
+                         params=args.params.split(",") if args.params else None)
     elif args.combined:
         out = combined(args.seeds or 5, (args.particles or [10_000])[0], tuple(args.sigmas),
                        args.rejuvenation, args.kernel_bandwidth, not args.no_reference)

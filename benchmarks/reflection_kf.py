@@ -50,15 +50,18 @@ LEO = THESIS / "leo-ic1-fast-spin-controlled-1site.toml"
 REFL = '\n[reflection]\nperturb = true\nsigma_frac = 0.1\nparams = ["xi", "a", "m", "A"]\n'
 
 
-def _scenario(path, add_reflection):
+def _scenario(path, add_reflection, params=("xi", "a", "m", "A")):
+    """Load the scenario ``path``, with the §10.1 ``[reflection]`` perturbation of ``params``
+    inserted when ``add_reflection``."""
     txt = Path(path).read_text()
+    refl = REFL.replace('"xi", "a", "m", "A"', ", ".join(f'"{k}"' for k in params))
     if not add_reflection:
         return load_scenario(path)
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / Path(path).name
         # [effects] is the last table of the thesis files: append [reflection] before it
-        txt = txt.replace("\n[effects]", REFL + "\n[effects]") if "[effects]" in txt \
-            else txt + REFL
+        txt = txt.replace("\n[effects]", refl + "\n[effects]") if "[effects]" in txt \
+            else txt + refl
         p.write_text(txt)
         return load_scenario(p)
 
@@ -132,20 +135,22 @@ def part_geo_model1(seeds):
     return rows
 
 
-def part_sec10_7(seeds, scenario=None):
-    """§10.7 runs on ``scenario`` (path; default the thesis LEO fast-spin file)."""
+def part_sec10_7(seeds, scenario=None, params=("xi", "a", "m", "A")):
+    """§10.7 runs on ``scenario`` (path; default the thesis LEO fast-spin file); ``params``: the
+    kinds perturbed in the truth and estimated (("xi", "a", "m"): areas known)."""
     from lightcurve.photometry.facet_exposure import facet_exposure_fractions
 
-    sc = _scenario(scenario or LEO, True)
+    sc = _scenario(scenario or LEO, True, params)
     # per-facet fraction of epochs lit (n·s > 0) AND visible (n·o > 0), truth of the first seed
-    out = {"scenario": sc.name, "omega_frame": sc.attitude.omega_frame,
+    out = {"scenario": sc.name, "omega_frame": sc.attitude.omega_frame, "params": list(params),
            "facet_exposure_first_seed": facet_exposure_fractions(_sim(sc, seeds[0]), shape=sc.shape)}
     for method in ("ukf", "mekf"):
         shrink, inside, err_sig = [], [], []
         names = None
         for seed in seeds:
             c = _sim(sc, seed)
-            e = invert(c, method, seed=seed, reflection="model3", attitude="truth")
+            e = invert(c, method, seed=seed, reflection="model3", attitude="truth",
+                       reflection_kinds=params)
             names = e.refl_names
             tv = truth_vector(c, names)
             prior = np.array(e.meta["reflection"]["prior_sigma_p"])
@@ -193,6 +198,9 @@ def main(argv=None):
     ap.add_argument("--parts", default="geo,107,108")
     ap.add_argument("--scenario", default=None,
                     help="scenario TOML of the 107 part (default: " + LEO.name + ")")
+    ap.add_argument("--params", default="xi,a,m,A",
+                    help="kinds perturbed and estimated in the 107 part (default xi,a,m,A; "
+                    "xi,a,m = areas known)")
     a = ap.parse_args(argv)
     seeds = list(range(1, a.seeds + 1))
     parts = a.parts.split(",")
@@ -202,7 +210,7 @@ def main(argv=None):
     if "geo" in parts:
         res["geo_model1"] = part_geo_model1(seeds[:3])
     if "107" in parts:
-        res["sec10_7"] = part_sec10_7(seeds, a.scenario)
+        res["sec10_7"] = part_sec10_7(seeds, a.scenario, tuple(a.params.split(",")))
     if "108" in parts:
         res["sec10_8"] = part_sec10_8(seeds)
     res["wall_s"] = round(time.perf_counter() - t0, 1)
