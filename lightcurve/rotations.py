@@ -584,16 +584,26 @@ def qmul_nb(q, p):
     return out
 
 
+@njit(cache=True, inline="always")
+def qrot_xyz_nb(q0, q1, q2, q3, vx, vy, vz):
+    """``A(q) v`` (inertial→body, passive, Bernard eq. 3.16) on scalars → ``(x, y, z)``;
+    ``q = [q0, q1, q2, q3]`` scalar first. For kernels that keep vectors in registers."""
+    tx = 2.0 * (q2 * vz - q3 * vy)
+    ty = 2.0 * (q3 * vx - q1 * vz)
+    tz = 2.0 * (q1 * vy - q2 * vx)
+    return (vx - q0 * tx + (q2 * tz - q3 * ty),
+            vy - q0 * ty + (q3 * tx - q1 * tz),
+            vz - q0 * tz + (q1 * ty - q2 * tx))
+
+
 @njit(cache=True)
 def qrot_nb(q, v):
     """``A(q) v`` (inertial→body) for 1-D arrays."""
-    tx = 2.0 * (q[2] * v[2] - q[3] * v[1])
-    ty = 2.0 * (q[3] * v[0] - q[1] * v[2])
-    tz = 2.0 * (q[1] * v[1] - q[2] * v[0])
+    x, y, z = qrot_xyz_nb(q[0], q[1], q[2], q[3], v[0], v[1], v[2])
     out = np.empty(3)
-    out[0] = v[0] - q[0] * tx + (q[2] * tz - q[3] * ty)
-    out[1] = v[1] - q[0] * ty + (q[3] * tx - q[1] * tz)
-    out[2] = v[2] - q[0] * tz + (q[1] * ty - q[2] * tx)
+    out[0] = x
+    out[1] = y
+    out[2] = z
     return out
 
 

@@ -50,6 +50,7 @@ import numpy as np
 from ..errors import InputError
 from ..photometry.kernels import COOK_TORRANCE, brdf_product_nb
 from ..photometry.partials import kernel_capable, magnitude_partials_q_nb
+from ..rotations import qrot_xyz_nb
 from ._kernels import _fill_facet_arrays, _flux
 
 __all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
@@ -110,19 +111,9 @@ def mag_states_nb(Q, s, o, normals, areas, ids, params, offset):
     out = np.empty(S)
     for i in range(S):
         q0, q1, q2, q3 = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
-        # A(q) v for the passive inertial→body rotation (as lightcurve.rotations.qrot_nb)
-        tx = 2.0 * (q2 * s[2] - q3 * s[1])
-        ty = 2.0 * (q3 * s[0] - q1 * s[2])
-        tz = 2.0 * (q1 * s[1] - q2 * s[0])
-        sx = s[0] - q0 * tx + (q2 * tz - q3 * ty)
-        sy = s[1] - q0 * ty + (q3 * tx - q1 * tz)
-        sz = s[2] - q0 * tz + (q1 * ty - q2 * tx)
-        tx = 2.0 * (q2 * o[2] - q3 * o[1])
-        ty = 2.0 * (q3 * o[0] - q1 * o[2])
-        tz = 2.0 * (q1 * o[1] - q2 * o[0])
-        ox = o[0] - q0 * tx + (q2 * tz - q3 * ty)
-        oy = o[1] - q0 * ty + (q3 * tx - q1 * tz)
-        oz = o[2] - q0 * tz + (q1 * ty - q2 * tx)
+        # ŝ, ô in body axes: A(q) v, the passive inertial→body rotation
+        sx, sy, sz = qrot_xyz_nb(q0, q1, q2, q3, s[0], s[1], s[2])
+        ox, oy, oz = qrot_xyz_nb(q0, q1, q2, q3, o[0], o[1], o[2])
         acc = 0.0
         for f in range(F):
             mid = ids[f]

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from ..rotations import quat_rotate, rotvec_to_quat
+from ..rotations import qrot_xyz_nb, quat_rotate, rotvec_to_quat
 from .facets import Shape
 from .kernels import COOK_TORRANCE, LAMBERT, PHONG, brdf_product_nb, facet_products_kernel
 from .magnitude import SUN_MAG_V, body_directions, magnitude_from_flux
@@ -93,27 +93,10 @@ def facet_products(shape: Shape, s_body, o_body) -> np.ndarray:
 
 
 def _fresnel_and_derivs(c, f0):
-    """F(c; F0), ∂F/∂c and ∂F/∂F0 of the standard Cook–Torrance Fresnel term."""
-    u = np.sqrt(f0)
-    nr = (1.0 + u) / (1.0 - u)
-    g = np.sqrt(nr * nr + c * c - 1.0)
-    A = (g - c) / (g + c)
-    N1 = c * g + c * c - 1.0
-    N2 = c * g - c * c + 1.0
-    B = N1 / N2
-    F = 0.5 * A * A * (1.0 + B * B)
-    # total derivative in c (g depends on c: g' = c/g)
-    gp = c / g
-    dA_dc = (2.0 * c * gp - 2.0 * g) / (g + c) ** 2
-    dB_dc = ((g + c * gp + 2.0 * c) * N2 - N1 * (g + c * gp - 2.0 * c)) / N2**2
-    dF_dc = A * dA_dc * (1.0 + B * B) + A * A * B * dB_dc
-    # derivative in F0 through g(nr(F0))
-    dA_dg = 2.0 * c / (g + c) ** 2
-    dB_dg = c * (2.0 - 2.0 * c * c) / N2**2
-    dF_dg = A * dA_dg * (1.0 + B * B) + A * A * B * dB_dg
-    dnr_df0 = 1.0 / (u * (1.0 - u) ** 2)
-    dF_df0 = dF_dg * (nr / g) * dnr_df0
-    return F, dF_dc, dF_df0
+    """F(c; F0), ∂F/∂c and ∂F/∂F0 of the standard Cook–Torrance Fresnel term (arrays; the
+    numba kernels call :func:`_fresnel_derivs_nb` on scalars — one implementation)."""
+    c, f0 = np.broadcast_arrays(np.asarray(c, dtype=float), np.asarray(f0, dtype=float))
+    return _fresnel_derivs_nb(np.ascontiguousarray(c), np.ascontiguousarray(f0))
 
 
 # --------------------------------------------------------------------------------------------
@@ -126,10 +109,13 @@ _ANALYTIC_IDS = (LAMBERT, COOK_TORRANCE, PHONG)
 
 @nb.njit(cache=True, inline="always")
 def _fresnel_derivs_nb(c, f0):
-    """Scalar ``(F, ∂F/∂c, ∂F/∂F0)`` — the same algebra as :func:`_fresnel_and_derivs`."""
-    u = math.sqrt(f0)
+    """``(F, ∂F/∂c, ∂F/∂F0)`` of the standard Cook–Torrance Fresnel term (DESIGN.md:
+    ``F = ½ (g−c)²/(g+c)² [1 + (c(g+c)−1)²/(c(g−c)+1)²]``, ``g² = n² + c² − 1``,
+    ``n = (1+√F0)/(1−√F0)``); ``c`` = ô·ĥ. Scalars or equal-shape arrays; ∂F/∂c is the total
+    derivative (g depends on c: g' = c/g), ∂F/∂F0 goes through g(n(F0))."""
+    u = np.sqrt(f0)
     nr = (1.0 + u) / (1.0 - u)
-    g = math.sqrt(nr * nr + c * c - 1.0)
+    g = np.sqrt(nr * nr + c * c - 1.0)
     A = (g - c) / (g + c)
     N1 = c * g + c * c - 1.0
     N2 = c * g - c * c + 1.0
@@ -335,19 +321,9 @@ def magnitude_partials_q_nb(q, s, o, normals, areas, ids, params, offset, dm_dA,
     (mag, mag rad⁻¹); m = +inf and NaN partials where Φ = 0.
     """
     q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
-    # A(q) v for the passive inertial→body rotation (as lightcurve.rotations.qrot_nb)
-    tx = 2.0 * (q2 * s[2] - q3 * s[1])
-    ty = 2.0 * (q3 * s[0] - q1 * s[2])
-    tz = 2.0 * (q1 * s[1] - q2 * s[0])
-    sx = s[0] - q0 * tx + (q2 * tz - q3 * ty)
-    sy = s[1] - q0 * ty + (q3 * tx - q1 * tz)
-    sz = s[2] - q0 * tz + (q1 * ty - q2 * tx)
-    tx = 2.0 * (q2 * o[2] - q3 * o[1])
-    ty = 2.0 * (q3 * o[0] - q1 * o[2])
-    tz = 2.0 * (q1 * o[1] - q2 * o[0])
-    ox = o[0] - q0 * tx + (q2 * tz - q3 * ty)
-    oy = o[1] - q0 * ty + (q3 * tx - q1 * tz)
-    oz = o[2] - q0 * tz + (q1 * ty - q2 * tx)
+    # ŝ, ô in body axes: A(q) v, the passive inertial→body rotation
+    sx, sy, sz = qrot_xyz_nb(q0, q1, q2, q3, s[0], s[1], s[2])
+    ox, oy, oz = qrot_xyz_nb(q0, q1, q2, q3, o[0], o[1], o[2])
     F = normals.shape[0]
     P = np.empty(F)
     flux, dx, dy, dz = flux_partials_nb(sx, sy, sz, ox, oy, oz, normals, areas, ids, params,
