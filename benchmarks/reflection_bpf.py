@@ -142,7 +142,7 @@ def acceptance(seeds, particles, moves=1, scenario=None, params=None):
 
 
 def combined(seeds, particles, sigmas=(3.0, 10.0), rejuvenation="auto", kernel_bandwidth=None,
-             reference=True):
+             reference=True, joint_max_spread_deg=None):
     """§10.8 combined runs (module docstring). ``rejuvenation`` / ``kernel_bandwidth`` go to
     :func:`run_bpf` ("auto" = the joint Liu–West kernel with the Musso bandwidth for Model 3;
     "separate" = the session-2 filter: table 7.9 on the attitude, Liu–West δ = 0.98 on z).
@@ -166,8 +166,10 @@ def combined(seeds, particles, sigmas=(3.0, 10.0), rejuvenation="auto", kernel_b
             psd0 = prior_sd_p(fs)
             tv = truth_vector(lc, fs.names)
             t0 = time.perf_counter()
+            kw = {} if joint_max_spread_deg is None else {
+                "joint_max_spread_deg": joint_max_spread_deg}
             e = run_bpf(p, particles=particles, seed=i, facets=fs, rejuvenation=rejuvenation,
-                        kernel_bandwidth=kernel_bandwidth)
+                        kernel_bandwidth=kernel_bandwidth, **kw)
             rt = time.perf_counter() - t0
             s = e.summary()
             pm, ps = e.refl_p[-1], e.refl_p_sigma[-1]
@@ -222,6 +224,8 @@ def main():
                     help="--combined: skip the attitude-only reference runs")
     ap.add_argument("--sigmas", type=float, nargs="+", default=[3.0, 10.0],
                     help="--combined: initial attitude σθ values, deg")
+    ap.add_argument("--joint-max-spread-deg", type=float, default=None,
+                    help="--combined: run_bpf's joint_max_spread_deg (default: run_bpf's)")
     ap.add_argument("--params", default=None,
                     help="--acceptance: comma-separated kinds perturbed and estimated (default "
                     "xi,a,m,A; xi,a,m = areas known)")
@@ -236,7 +240,8 @@ def main():
                          params=args.params.split(",") if args.params else None)
     elif args.combined:
         out = combined(args.seeds or 5, (args.particles or [10_000])[0], tuple(args.sigmas),
-                       args.rejuvenation, args.kernel_bandwidth, not args.no_reference)
+                       args.rejuvenation, args.kernel_bandwidth, not args.no_reference,
+                       args.joint_max_spread_deg)
     else:
         ap.error("choose --acceptance or --combined (the step cost is benchmarks/reflection.py)")
     import numba

@@ -88,11 +88,20 @@ Extra states (Bernard ch. 8; issue 6)
   The wide joint kernel is our choice (not the thesis's table 7.9, which roughens [δp, ω]
   only, with the range E_j; with "joint" the ``roughening`` constant is not used).
   "separate" keeps the previous scheme bit for bit. The attitude-only filter showed the same
-  rate collapse, so "joint" is its default too since session 3 (measured, thesis LEO fast
-  spin, 20 seeds 3000–3019 per row, 10⁴ particles, final attitude inside 3σ and median final
-  RSS error, separate → joint: controlled 1 site σθ 3° 10/20 → 19/20, 0.67° → 0.73°;
-  σθ 10° 4/20 → 20/20, 0.79° → 0.80°; uncontrolled 2 sites σθ 3° 0/20 (4 diverged) → 19/20
-  (1), 1.00° → 0.20°; σθ 10° 0/20 (6 diverged) → 12/20 (6 diverged), median 0.95° → 0.31°).
+  rate collapse, so "joint" is its default too since session 3 — but only while the resampled
+  attitude cloud is compact (largest per-axis σ of its GRP error < ``joint_max_spread_deg``,
+  default 25°); a wider cloud gets the separate roughening. Applied at every resampling, the
+  kernel's shrinkage toward the mean merged the modes of wide multimodal clouds: σθ = 60°
+  attitude-only runs (pipelines/default.toml, seeds 0–19) then ended ≈ 170° off in 19 of 20.
+  Measured, 10⁴ particles, 20 seeds per row; final attitude inside 3σ (diverged) and median
+  final RSS error for separate → auto with the threshold at 10° / 25° (default):
+  LEO fast spin controlled 1 site (seeds 3000–3019) σθ 3°: 10/20 → 19/20 / 19/20, 0.67° →
+  0.73°; σθ 10°: 4/20 → 20/20 / 20/20, 0.79° → 0.73° / 0.80°; uncontrolled 2 sites σθ 3°:
+  0/20 (4) → 19/20 (1), 1.00° → 0.20°; σθ 10°: 0/20 (6) → 17/20 (3) / 13/20 (5), 0.95° →
+  0.27° / 0.26°; default scenario σθ = 60° (seeds 0–19): below 5° 20/20 → 20/20 / 20/20,
+  inside 9/20 → 16/20 / 17/20, 0.86° → 0.67° / 0.64°. Model 3 combined σθ 10° (seeds
+  2000–2009): 10° threshold 8/10 inside, attitude+rate NEES sum 205 (χ²₆₀ 99.9 % bound 99.6),
+  parameters inside 3σ 94.6 %; 25° threshold 10/10, NEES 81.9, 97.9 % — hence 25°.
 * Random draws: the extra-state initial draw follows the attitude draw, the extra-state noise
   follows the attitude noise at each step, the jitter follows the attitude roughening, so the
   attitude-only filter is unchanged bit for bit and every run is deterministic per seed.
@@ -247,7 +256,8 @@ def run_bpf(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
             resampling="systematic", ess_threshold=0.5, progressive=True,
             max_stages=30, keep_clouds=(), cloud_size=2000, bias=None, facets=None,
             attitude="estimate", param_discount=0.98, mcmc_moves=None,
-            rejuvenation="auto", kernel_bandwidth=None) -> Estimate:
+            rejuvenation="auto", kernel_bandwidth=None,
+            joint_max_spread_deg=25.0) -> Estimate:
     """Run the bootstrap particle filter with numba kernels (module docstring) → Estimate.
 
     Parameters
@@ -284,23 +294,31 @@ def run_bpf(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
         (module docstring, "Rejuvenation of the combined state"): "separate" = table 7.9 on
         [δp, ω] (attitude only between tempering stages) plus the Liu–West jitter (or
         resample-move) of the extra states; "joint" = one Liu–West kernel on the full state
-        (attitude estimated only; ``roughening`` unused); "auto" = "joint" when the attitude
-        is estimated, "separate" when it is held at the truth.
+        (attitude estimated only; ``roughening`` unused while it applies); "auto" = "joint"
+        when the attitude is estimated, "separate" when it is held at the truth.
     kernel_bandwidth : float in [0, 1) or None — h of the joint kernel; None = the Musso et
         al. (2001) optimum for d = 6 + extra states and N particles (0 disables the kernel).
+    joint_max_spread_deg : float > 0 — the joint kernel is applied only while the resampled
+        attitude cloud is compact: largest per-axis standard deviation of its GRP error below
+        this (deg, default 25; module docstring for the measurements); a wider cloud gets the "separate" roughening (a wide cloud
+        is often multimodal, and the kernel's shrinkage toward the mean would merge the
+        modes: with the joint kernel at every resampling, σθ = 60° attitude-only runs ended
+        ≈ 170° off in 19 of 20 seeds). ``meta["rejuvenation"]["joint_applied"]`` counts the
+        resamplings that used the kernel.
     """
     backend = "numba" if problem.model.kernel_ok else "numpy"
     return _run(problem, particles, seed, roughening, resampling, ess_threshold, backend,
                 progressive, max_stages, keep_clouds, cloud_size, bias=bias, facets=facets,
                 attitude=attitude, param_discount=param_discount, mcmc_moves=mcmc_moves,
-                rejuvenation=rejuvenation, kernel_bandwidth=kernel_bandwidth)
+                rejuvenation=rejuvenation, kernel_bandwidth=kernel_bandwidth,
+                joint_max_spread_deg=joint_max_spread_deg)
 
 
 def run_bpf_numpy(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
                   resampling="systematic", ess_threshold=0.5, progressive=True,
                   max_stages=30, bias=None, facets=None, attitude="estimate",
                   param_discount=0.98, mcmc_moves=None, rejuvenation="auto",
-                  kernel_bandwidth=None) -> Estimate:
+                  kernel_bandwidth=None, joint_max_spread_deg=25.0) -> Estimate:
     """The same bootstrap particle filter in plain vectorised NumPy (benchmark reference).
 
     Uses the same random draws in the same order as :func:`run_bpf`; results agree with it up
@@ -309,7 +327,8 @@ def run_bpf_numpy(problem: FilterProblem, *, particles=10_000, seed=0, roughenin
     return _run(problem, particles, seed, roughening, resampling, ess_threshold, "numpy",
                 progressive, max_stages, bias=bias, facets=facets, attitude=attitude,
                 param_discount=param_discount, mcmc_moves=mcmc_moves,
-                rejuvenation=rejuvenation, kernel_bandwidth=kernel_bandwidth)
+                rejuvenation=rejuvenation, kernel_bandwidth=kernel_bandwidth,
+                joint_max_spread_deg=joint_max_spread_deg)
 
 
 def _propagate_np(dyn, Q, W, dt):
@@ -606,7 +625,7 @@ def _predict_facets(backend, p, ext, k, Q, zeta, out):
 def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshold, backend,
          progressive=True, max_stages=30, keep_clouds=(), cloud_size=2000, bias=None,
          facets=None, attitude="estimate", param_discount=0.98, mcmc_moves=None,
-         rejuvenation="auto", kernel_bandwidth=None):
+         rejuvenation="auto", kernel_bandwidth=None, joint_max_spread_deg=25.0):
     N, G, ess_thr = _check(particles, roughening, resampling, ess_threshold)
     if bias is not None and facets is not None:
         raise ValueError("site biases and Model 3 facet states are alternatives; give one")
@@ -648,6 +667,10 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
     ext.setup_moves(p, mcmc_moves, tq if fixed else None)
     joint = _resolve_rejuvenation(rejuvenation, ext, fixed)
     kern = _joint_bandwidth(kernel_bandwidth, N, 6 + ext.ne) if joint else None
+    joint_spread = float(np.radians(joint_max_spread_deg))
+    if not joint_spread > 0.0:
+        raise ValueError(f"joint_max_spread_deg must be > 0, got {joint_max_spread_deg}")
+    n_joint = 0
     logw = np.full(N, -np.log(N))
     w_mean = p.omega0.copy() if not fixed else p.truth_omega[0].copy()
     empty6 = np.zeros((0, 6))
@@ -743,12 +766,13 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
                         zeta = np.ascontiguousarray(zeta[idx])
                     logw = np.full(N, -np.log(N))
                     rec.flags[k] |= FLAG_RESAMPLED
-                    if joint:
+                    if not fixed:
                         _, _, _, dps, qst = _mean_cov(ops, Q, W, np.full(N, 1.0 / N))
+                    if joint and _joint_applies(dps, joint_spread):
                         Q, W = _joint_kernel(ops, Q, W, ext, qst, dps, rng, kern)
+                        n_joint += 1
                     else:
                         if not fixed:
-                            _, _, _, dps, qst = _mean_cov(ops, Q, W, np.full(N, 1.0 / N))
                             Q, W = _roughen(ops, Q, W, qst, G, rng, attitude_only=True, dp=dps)
                         if ext.n_moves:
                             ext.move(k, 1.0 - rest, rng)
@@ -783,10 +807,11 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
             logw = np.full(N, -np.log(N))
             rec.flags[k] |= FLAG_RESAMPLED
             ext.take(idx)
-            if joint:
+            if joint and _joint_applies(dp[idx], joint_spread):
                 Q = np.ascontiguousarray(Q[idx])
                 W = np.ascontiguousarray(W[idx])
                 Q, W = _joint_kernel(ops, Q, W, ext, qref, dp[idx], rng, kern)
+                n_joint += 1
             else:
                 if not fixed:
                     Q = np.ascontiguousarray(Q[idx])
@@ -803,7 +828,9 @@ def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshol
     ext.attach(est)
     if joint:
         est.meta["rejuvenation"] = {"kind": "joint", "bandwidth_h": kern[1],
-                                    "shrinkage_a": kern[0], "dimension": 6 + ext.ne}
+                                    "shrinkage_a": kern[0], "dimension": 6 + ext.ne,
+                                    "max_spread_deg": float(joint_max_spread_deg),
+                                    "joint_applied": n_joint}
         if ext.kind is not None:
             est.meta["reflection"]["roughening"] = "joint-liu-west"
     est.clouds = clouds or None
@@ -851,6 +878,14 @@ def _joint_bandwidth(h, N, d):
     if not 0.0 <= h < 1.0:
         raise ValueError(f"kernel_bandwidth must lie in [0, 1), got {h}")
     return float(np.sqrt(1.0 - h * h)), h
+
+
+def _joint_applies(dp, max_spread_rad):
+    """True when the resampled attitude cloud is compact enough for the joint kernel: the
+    largest per-axis standard deviation of its GRP error ``dp`` (≈ rad for small angles, a = 1,
+    f = 4) is below ``max_spread_rad``. A wide cloud is often multimodal (the symmetric-shape
+    ambiguities of a cube), and shrinking it toward its mean would merge the modes."""
+    return float(np.max(np.std(dp, axis=0))) < max_spread_rad
 
 
 def _joint_kernel(ops, Q, W, ext, qref, dp, rng, kern):
