@@ -29,6 +29,9 @@ import subprocess
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from reflection_bpf import print_with_machine  # noqa: E402  (shared JSON footer)
+
 CHILD = r"""
 import json, resource, sys, time, warnings
 warnings.simplefilter("ignore")
@@ -86,12 +89,7 @@ def main():
     args = ap.parse_args()
     t0 = time.perf_counter()
     out = step_cost(args.particles)
-    import numba
-
-    out.update({"wall_s": time.perf_counter() - t0, "cpu_count": os.cpu_count(),
-                "numba_threads": numba.get_num_threads(),
-                "load_avg_1min": os.getloadavg()[0]})
-    print(json.dumps(out))
+    print_with_machine(out, t0)
 
 
 if __name__ == "__main__":

@@ -66,6 +66,17 @@ def scenario_with_reflection(path=None, params=None):
         return load_scenario(path)          # loaded eagerly (text, shape, sites)
 
 
+def print_with_machine(out, t0):
+    """Add wall time since ``t0`` (perf_counter), core count, numba threads and the 1-minute
+    load average to the dict ``out`` and print it as ONE JSON line."""
+    import numba
+
+    out.update({"wall_s": time.perf_counter() - t0, "cpu_count": os.cpu_count(),
+                "numba_threads": numba.get_num_threads(),
+                "load_avg_1min": os.getloadavg()[0]})
+    print(json.dumps(out))
+
+
 def truth_vector(lc, names):
     vals = json.loads(lc.attrs["reflection_truth"])
     return np.array([vals[n.split("[")[0]][int(n.split("[")[1][:-1])] for n in names])
@@ -244,12 +255,7 @@ def main():
                        args.joint_max_spread_deg)
     else:
         ap.error("choose --acceptance or --combined (the step cost is benchmarks/reflection.py)")
-    import numba
-
-    out.update({"wall_s": time.perf_counter() - t0, "cpu_count": os.cpu_count(),
-                "numba_threads": numba.get_num_threads(),
-                "load_avg_1min": os.getloadavg()[0]})
-    print(json.dumps(out))
+    print_with_machine(out, t0)
 
 
 if __name__ == "__main__":
