@@ -19,7 +19,12 @@ from lightcurve.photometry import apparent_magnitude, load_shape
 def biased_curve():
     """The filter tests' synthetic lightcurve with a +0.15 mag constant model error, 80 epochs
     (the same data as the MEKF/UKF Model 1 test)."""
-    c = make_curve(n=80, seed=3)
+    return _biased(80)
+
+
+def _biased(n):
+    """``make_curve(n, seed=3)`` with +0.15 mag added to every measured magnitude."""
+    c = make_curve(n=n, seed=3)
     c.mag = c.mag + 0.15
     return c
 
@@ -139,9 +144,7 @@ def test_model3_kernel_vs_photometry_magnitude_random_parameters():
 
 def test_bpf_reflection_runs_are_deterministic_per_seed():
     """Same seed → bit-identical histories (bias and Model 3); another seed → different."""
-    c = make_curve(n=25, seed=3)
-    c.mag = c.mag + 0.15
-    p = build_problem(c, seed=2, sigma_theta_deg=3.0)
+    p = build_problem(_biased(25), seed=2, sigma_theta_deg=3.0)
     bias = SiteBias.from_problem("model2", p)
     a = run_bpf(p, particles=300, seed=4, bias=bias)
     b = run_bpf(p, particles=300, seed=4, bias=bias)
@@ -162,9 +165,7 @@ def test_bpf_numpy_backend_matches_numba_with_reflection_states():
     """The NumPy reference implementation of the extra states (bias added to the prediction,
     per-particle facet flux) follows the numba run: same draws, round-off differences only —
     final estimates agree closely over a short run."""
-    c = make_curve(n=12, seed=3)
-    c.mag = c.mag + 0.15
-    p = build_problem(c, seed=2, sigma_theta_deg=3.0)
+    p = build_problem(_biased(12), seed=2, sigma_theta_deg=3.0)
     bias = SiteBias.from_problem("model1", p)
     a = run_bpf(p, particles=400, seed=1, bias=bias)
     b = run_bpf_numpy(p, particles=400, seed=1, bias=bias)
