@@ -1,0 +1,52 @@
+"""``lightcurve compare``: Monte Carlo filter-comparison studies."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ._args import number
+
+__all__ = ["register"]
+
+
+def _cmd_compare(args) -> int:
+    from ..studies.runner import run_study
+    from ..studies.study import load_study
+
+    study = load_study(args.study)
+    summary = run_study(study, args.output, runs=args.runs, workers=args.workers,
+                        scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
+                        progress=not args.quiet)
+    cells = summary["cells"]
+    cnt = {c: sum(1 for x in cells if x["color"] == c) for c in ("green", "yellow", "red")}
+    fails = sum(x["failures"] for x in cells)
+    print(f"{len(cells)} cells x {summary['runs_per_cell']} runs: {cnt['green']} green, "
+          f"{cnt['yellow']} yellow, {cnt['red']} red; {fails} failed runs")
+    print(f"wrote {Path(args.output) / 'summary.json'} and {Path(args.output) / 'report.html'}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "compare",
+        help="run a Monte Carlo filter-comparison study (resumable; process pool or Dask)",
+        description="Run every cell of a study TOML (grid of filters, dynamics, sites, initial "
+        "errors, noise levels) RUNS times: simulate, invert, score. Each finished run is stored "
+        "under DIR/runs/ as it completes; rerunning the same command resumes. Writes "
+        "DIR/summary.json and a self-contained DIR/report.html (Bernard 2021 fig. 9.4 table). "
+        "Results do not depend on the executor or the worker count.")
+    p.add_argument("study", metavar="STUDY.toml", help="study file (docs/formats.md, Studies)")
+    p.add_argument("--runs", type=number(1, 1_000_000, integer=True), default=None,
+                   help="runs per cell (default: the study's [study] runs)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    ex = p.add_mutually_exclusive_group()
+    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None,
+                    help="local process-pool size (default: all CPUs; 1 runs in this process)")
+    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None, metavar="W",
+                    help="start a Dask LocalCluster with W worker processes")
+    p.add_argument("--force", action="store_true",
+                   help="discard stored runs of a different (changed) study instead of refusing")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_compare)

@@ -1,0 +1,49 @@
+"""``lightcurve sites``: the observing-site catalogue."""
+
+from __future__ import annotations
+
+__all__ = ["register"]
+
+
+def _cmd_sites_list(args) -> int:
+    from ..geometry.sites import load_sites
+
+    sites = load_sites(args.sites)
+    if not sites:
+        print("no sites found")
+        return 0
+    print(f"{'id':<16} {'lat_deg':>10} {'lon_deg':>11} {'height_m':>9}  band  name")
+    for sid in sorted(sites):
+        s = sites[sid]
+        print(f"{s.id:<16} {s.lat_deg:>10.4f} {s.lon_deg:>11.4f} {s.height_m:>9.1f}  "
+              f"{s.band:<4}  {s.name}")
+    return 0
+
+
+def _cmd_sites_show(args) -> int:
+    from ..geometry.sites import get_site
+
+    print(get_site(args.id, args.sites).describe())
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "sites",
+        help="list or show observing sites (observatories/*.toml)",
+        description="The site catalog: the bundled observatories/ folder plus any folders "
+        "given with --sites (later folders override earlier ones). Each site is one TOML "
+        "file with id, name, lat_deg, lon_deg (WGS84), height_m and optional band and "
+        "[horizon_mask].",
+    )
+    ssub = p.add_subparsers(title="sites commands", metavar="SUBCOMMAND")
+    pl = ssub.add_parser("list", help="list all known sites")
+    pl.add_argument("--sites", action="append", metavar="DIR", default=None,
+                    help="extra folder of site TOML files (repeatable)")
+    pl.set_defaults(func=_cmd_sites_list)
+    ps = ssub.add_parser("show", help="show one site")
+    ps.add_argument("id", help="site id, e.g. socorro")
+    ps.add_argument("--sites", action="append", metavar="DIR", default=None,
+                    help="extra folder of site TOML files (repeatable)")
+    ps.set_defaults(func=_cmd_sites_show)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
