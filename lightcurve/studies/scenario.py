@@ -372,13 +372,13 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
 
 
 def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, site_dirs=None,
-                             scenario=None) -> Scenario:
+                             scenario=None, shape=None) -> Scenario:
     """The validated scenario of a lightcurve file, resolved from what the file carries.
 
     ``scenario``: a scenario TOML path given by the user (it overrides the file's own
     scenario text); otherwise the scenario text stored in the file (root attribute
-    ``scenario``). Either way the shape the file carries (:attr:`Lightcurve.shape`) replaces
-    the scenario's ``[shape]`` when present, and the file's sites (ids and WGS84 coordinates)
+    ``scenario``). Either way ``shape`` (a resolved Shape from the caller) or else the shape
+    the file carries (:attr:`Lightcurve.shape`) replaces the scenario's ``[shape]`` when present, and the file's sites (ids and WGS84 coordinates)
     answer the scenario's ``[[sites]] name = "<id>"`` references before ``site_dirs`` and the
     catalogue — so a received file needs neither the shape library nor the site folder it was
     made with. ``drop``: top-level tables removed before validation (e.g. ``("effects",
@@ -414,4 +414,5 @@ def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, si
         except InputError:
             continue
     return parse_scenario(doc, file=fname, text=text, library_dirs=library_dirs,
-                          site_dirs=site_dirs, shape=getattr(curve, "shape", None), sites=known)
+                          site_dirs=site_dirs, sites=known,
+                          shape=shape if shape is not None else getattr(curve, "shape", None))
