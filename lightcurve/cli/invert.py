@@ -103,11 +103,13 @@ def register(sub) -> None:
     p.add_argument("--initial-q", default=None, metavar="Q1,Q2,Q3,Q4",
                    help="initial attitude estimate (inertial->body quaternion, scalar first, "
                    "at the first epoch) instead of the file's perturbed truth; needed for "
-                   "recordings without truth. Its 1-sigma error is --sigma-theta-deg")
+                   "recordings without truth. Its 1-sigma error is --sigma-theta-deg. Write "
+                   "--initial-q=-0.5,... when the first value is negative")
     p.add_argument("--initial-omega-deg-s", default=None, metavar="WX,WY,WZ",
                    help="initial body-rate estimate, deg/s body axes (default: the file's "
                    "perturbed truth; needed without truth). Its 1-sigma error is "
-                   "--sigma-omega-deg-s")
+                   "--sigma-omega-deg-s. Write --initial-omega-deg-s=-1,... when the first "
+                   "value is negative")
     add_model_options(p)
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
     p.add_argument("--roughening", type=number(0.0), default=0.2,

@@ -873,7 +873,7 @@ def _split_model(model):
 
 def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=None,
                     unlit=None, element_sets=None, scenarios=None, shape=None,
-                    objects=None) -> dict:
+                    objects=None, recording=None) -> dict:
     """Read a CSV recording into one :class:`Lightcurve` (no truth) per (object, band).
 
     Parameters
@@ -898,6 +898,8 @@ def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=N
         The shape stored in every output (instead of the scenario's).
     objects : iterable of str, optional
         Only these object ids.
+    recording : RecordingSpec, Section or dict, optional
+        A column mapping replacing the scenario's ``[recording]``.
 
     Returns
     -------
@@ -920,7 +922,15 @@ def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=N
         raise InputError("unknown policy for rows in the Earth's shadow", file=path, field="unlit",
                          value=unlit, allowed="skip, keep")
     scenario, spec = _split_model(scenario_or_recording_section)
-    spec = _as_spec(spec)
+    scenarios = dict(scenarios or {})
+    if recording is None and spec is None:  # the per-object scenarios' common [recording]
+        specs = [sc.recording for sc in scenarios.values() if getattr(sc, "recording", None)]
+        if any(x != specs[0] for x in specs[1:]):
+            raise InputError("the per-object scenarios map the columns differently; give one "
+                             "[recording] mapping (lightcurve import --columns MAP.toml)",
+                             file=path, field="recording")
+        spec = specs[0] if specs else None
+    spec = _as_spec(recording if recording is not None else spec)
     header, raw = _read_rows(path, spec)
     ci, colname, spec = _resolve_columns(path, header, spec)
     default_site = None
@@ -940,7 +950,6 @@ def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=N
             raise InputError("object not in the recording", file=path, field="object",
                              value=sorted(missing)[0], allowed=", ".join(dict.fromkeys(rows.obj)))
         groups = {k: v for k, v in groups.items() if k[0] in want}
-    scenarios = dict(scenarios or {})
     base_epoch = spec.epoch_utc or (scenario.epoch_utc if scenario is not None else None)
     if base_epoch is None:
         for sc in scenarios.values():
