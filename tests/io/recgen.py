@@ -193,7 +193,8 @@ def magnitudes(facets, A, s_unit, o_unit, range_obs, range_sun, sun_mag=-26.74):
         ok = (ns > 0) & (no > 0)
         val = cook_torrance_product(np.where(ok, ns, 1.0), np.where(ok, no, 1.0), nh, c, xi, a, m)
         flux += np.where(ok, area * val, 0.0)
-    return sun_mag - 2.5 * np.log10(flux / range_obs ** 2) + 5 * np.log10(range_sun / AU)
+    with np.errstate(divide="ignore"):   # no lit facet towards the observer: +inf
+        return sun_mag - 2.5 * np.log10(flux / range_obs ** 2) + 5 * np.log10(range_sun / AU)
 
 
 # ---------------------------------------------------------------------------------- the box
@@ -282,3 +283,50 @@ def observe(ts, eph, epoch, t_s, r_obj, site_lla):
     lit = (along > 0) | (perp > R_EARTH)
     return {"alt": alt, "az": az, "range": rng, "s": s_u, "o": o_u,
             "range_sun": np.linalg.norm(to_sun, axis=1), "phase": phase, "lit": lit}
+
+
+def rv_to_elements(r, v):
+    """Osculating (a m, e, i, Ω, ω, M rad) of a two-body state (Vallado Algorithm 9 style)."""
+    r, v = np.asarray(r, float), np.asarray(v, float)
+    rn, vn = np.linalg.norm(r), np.linalg.norm(v)
+    h = np.cross(r, v)
+    nvec = np.cross([0, 0, 1.0], h)
+    evec = np.cross(v, h) / MU - r / rn
+    e = np.linalg.norm(evec)
+    a = 1.0 / (2.0 / rn - vn * vn / MU)
+    i = np.arccos(h[2] / np.linalg.norm(h))
+    raan = np.arctan2(nvec[1], nvec[0]) % (2 * np.pi)
+    argp = np.arccos(np.clip(np.dot(nvec, evec) / (np.linalg.norm(nvec) * e), -1, 1))
+    if evec[2] < 0:
+        argp = 2 * np.pi - argp
+    nu = np.arccos(np.clip(np.dot(evec, r) / (e * rn), -1, 1))
+    if np.dot(r, v) < 0:
+        nu = 2 * np.pi - nu
+    E = 2 * np.arctan(np.sqrt((1 - e) / (1 + e)) * np.tan(nu / 2))
+    M = (E - e * np.sin(E)) % (2 * np.pi)
+    return a, e, i, raan, argp, M
+
+
+def tle_lines(satnum, epoch: datetime, r, v, intldesg="22001A"):
+    """TLE lines (sgp4's exporter) of mean elements set equal to the osculating elements of
+    (r, v) at ``epoch`` (a test object: SGP4 then follows a nearby, slightly different path)."""
+    from sgp4.api import WGS72, Satrec
+    from sgp4.exporter import export_tle
+
+    a, e, i, raan, argp, M = rv_to_elements(r, v)
+    jd = 2440587.5 + epoch.timestamp() / 86400.0
+    sat = Satrec()
+    n_rad_min = np.sqrt(MU / a ** 3) * 60.0
+    sat.sgp4init(WGS72, "i", int(satnum), jd - 2433281.5, 0.0, 0.0, 0.0, e, argp, i, M,
+                 n_rad_min, raan)
+    sat.classification = "U"
+    sat.intldesg = intldesg
+    return export_tle(sat)
+
+
+def sgp4_gcrs(ts, line1, line2, times):
+    """GCRS position (m) of a TLE object by skyfield (the SGP4/TEME oracle)."""
+    from skyfield.api import EarthSatellite
+
+    sat = EarthSatellite(line1, line2, ts=ts)
+    return np.asarray(sat.at(ts.from_datetimes(times)).position.m).reshape(3, -1).T
