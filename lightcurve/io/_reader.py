@@ -31,7 +31,7 @@ def read_text_capped(path, *, max_bytes: int, what: str = "file") -> str:
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise InputError(f"not a regular file (a {what} must be a plain file)", file=path)
+            raise InputError(f"not a regular file (the {what} must be a plain file)", file=path)
         if st.st_size > max_bytes:
             raise InputError(f"{what} too large", file=path, value=f"{st.st_size} bytes",
                              allowed=f"<= {max_bytes} bytes")
