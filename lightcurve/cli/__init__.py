@@ -1,11 +1,11 @@
 """The ``lightcurve`` command line.
 
 One module per subcommand group (``sites``, ``shapes``, ``simulate``/``plot``/``demo``, ``css``,
-``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``, ``selfcheck``); each has a
-``register(subparsers)`` function and thin handlers that parse arguments, call the library and
-print. Shared option types live in :mod:`lightcurve.cli._args`. Exit codes: 0 success,
-1 run-time failure, 2 bad usage or bad input (one clear line; the traceback only with
-``--debug``).
+``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``,
+``selfcheck``); each has a ``register(subparsers)`` function and thin handlers that parse
+arguments, call the library and print. Shared option types live in
+:mod:`lightcurve.cli._args`. Exit codes: 0 success, 1 run-time failure, 2 bad usage or bad
+input (one clear line; the traceback only with ``--debug``).
 """
 
 from __future__ import annotations

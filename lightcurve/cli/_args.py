@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["number", "SEED", "csv_list", "csv_ints", "csv_floats", "add_model_options",
-           "initial_q", "initial_omega_rad_s"]
+           "add_shape", "add_library", "add_sites", "initial_q", "initial_omega_rad_s"]
 
 
 def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
@@ -106,22 +106,34 @@ def initial_omega_rad_s(text, option="--initial-omega-deg-s"):
     return tuple(float(x) for x in w)
 
 
-def add_model_options(p, *, shape=True, library=True, sites=True) -> None:
-    """The model-input options, spelled the same in every command.
+def add_shape(p) -> None:
+    """``--shape NAME|FILE.toml``: a shape replacing the one the file carries (``args.shape``)."""
+    p.add_argument("--shape", default=None, metavar="NAME|FILE.toml",
+                   help="shape to model with instead of the one the file carries (a library "
+                   "name, looked up in --library folders first, or a shape TOML)")
 
-    ``--shape NAME|FILE.toml`` (a shape replacing the one the file carries), ``--library DIR``
-    and ``--sites DIR`` (repeatable extra shape-library and observatory folders, searched
-    before the bundled ones). Values land in ``args.shape``, ``args.library``, ``args.sites``.
-    """
+
+def add_library(p) -> None:
+    """``--library DIR`` (repeatable) → ``args.library`` (list or None)."""
+    p.add_argument("--library", action="append", default=None, metavar="DIR",
+                   help="extra shape library folder (repeatable; searched before the bundled "
+                   "shapes/)")
+
+
+def add_sites(p) -> None:
+    """``--sites DIR`` (repeatable) → ``args.sites`` (list or None)."""
+    p.add_argument("--sites", action="append", default=None, metavar="DIR",
+                   help="extra observatory folder of site TOML files (repeatable; searched "
+                   "before the bundled observatories/)")
+
+
+def add_model_options(p, *, shape=True, library=True, sites=True) -> None:
+    """The model-input options spelled the same in every command: :func:`add_shape`,
+    :func:`add_library`, :func:`add_sites` (values in ``args.shape``, ``args.library``,
+    ``args.sites``)."""
     if shape:
-        p.add_argument("--shape", default=None, metavar="NAME|FILE.toml",
-                       help="shape to model with instead of the one the file carries (a "
-                       "library name, looked up in --library folders first, or a shape TOML)")
+        add_shape(p)
     if library:
-        p.add_argument("--library", action="append", default=None, metavar="DIR",
-                       help="extra shape library folder (repeatable; searched before the "
-                       "bundled shapes/)")
+        add_library(p)
     if sites:
-        p.add_argument("--sites", action="append", default=None, metavar="DIR",
-                       help="extra observatory folder of site TOML files (repeatable; "
-                       "searched before the bundled observatories/)")
+        add_sites(p)

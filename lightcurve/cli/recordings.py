@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 import warnings
 from pathlib import Path
@@ -58,7 +59,7 @@ def output_paths(out, keys) -> dict:
         if out.is_dir():
             res[(obj, band)] = safe_output_path(out, name, ".h5", field="object")
         else:
-            stem = out.name[:-3] if out.name.endswith(".h5") else out.name
+            stem = out.name.removesuffix(".h5")
             res[(obj, band)] = safe_output_path(out.parent, f"{stem}.{name}", ".h5", field="object")
     if len(set(res.values())) != len(res):
         raise InputError("two objects give the same output file name", field="-o", value=str(out))
@@ -139,6 +140,13 @@ def _utc(text, option):
         raise InputError(exc.bare_message, field=option, value=text, allowed=exc.allowed) from None
 
 
+def _after(start, seconds) -> str:
+    """ISO UTC text of ``start + seconds`` (whole seconds)."""
+    from datetime import timedelta
+
+    return (start + timedelta(seconds=float(seconds))).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
 #: longest time span ``lightcurve passes`` searches (days)
 MAX_PASS_SPAN_DAYS = 31.0
 
@@ -205,10 +213,8 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
             if not np.any(vis):
                 continue
             k = int(np.argmax(el))
-            from datetime import timedelta
-
             iv = np.flatnonzero(vis)
-            at = (lambda s: (ps["rise"] + timedelta(seconds=float(s))).strftime("%Y-%m-%dT%H:%M:%SZ"))
+            at = functools.partial(_after, ps["rise"])
             out.append({"object": es.name or str(es.norad), "norad": es.norad,
                         "rise_utc": at(0.0), "culmination_utc": at(tt[k]), "set_utc": at(dur),
                         "max_elevation_deg": round(float(el[k]), 2),
@@ -261,8 +267,8 @@ def _cmd_passes(args) -> int:
     else:
         sys.stdout.write(buf.getvalue())
         print(f"{len(rows)} visible pass(es) over {site.id} (object sunlit, Sun below "
-              f"{args.twilight_deg:g} deg at the site, elevation >= {args.min_elevation_deg:g} deg)",
-              file=sys.stderr)
+              f"{args.twilight_deg:g} deg at the site, elevation >= "
+              f"{args.min_elevation_deg:g} deg)", file=sys.stderr)
     return 0
 
 

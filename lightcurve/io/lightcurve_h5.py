@@ -87,6 +87,11 @@ class Lightcurve:
         return self.truth_q is not None
 
     @property
+    def camera_index(self) -> np.ndarray | None:
+        """Alias of :attr:`camera` (per-row camera index, or None)."""
+        return self.camera
+
+    @property
     def obj_to_sun_unit(self) -> np.ndarray:
         """(N,3) unit vector from the object to the Sun, ECI."""
         d = self.r_sun_eci_m - self.r_obj_eci_m
