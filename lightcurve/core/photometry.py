@@ -47,6 +47,7 @@ from .rotations import qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 __all__ = [
     "LAMBERT", "COOK_TORRANCE", "PHONG", "ASHIKHMIN_SHIRLEY", "COOK_TORRANCE_THESIS",
     "ANALYTIC_IDS", "PARAM_COLUMNS", "fresnel_xyz", "beckmann_xyz", "cook_torrance_xyz",
+    "cook_torrance_fresnel_xyz", "facet_sum_xyz",
     "brdf_product_nb", "brdf_value_kernel", "brightness_kernel", "facet_products_kernel",
     "facet_flux_nb", "mag_kernel_nb", "flux_partials_nb", "partials_many_nb",
     "magnitude_partials_q_nb", "nchunks_nb",
@@ -113,11 +114,27 @@ def cook_torrance_xyz(ns, no, nh, c, xi, a, m, thesis):
     ``(P, ∂P/∂ns, ∂P/∂no, ∂P/∂nh, ∂P/∂c, ∂P/∂ξ, ∂P/∂a, ∂P/∂m)``.
 
     ``ns = n̂·ŝ > 0``, ``no = n̂·ô > 0``, ``nh = n̂·ĥ``, ``c = ô·ĥ``; ``ξ`` diffuse fraction,
-    ``a = F0``, ``m`` Beckmann slope. ``P = ξ a/π ns no + (1−ξ)/4 F D G`` (physical form), or
-    ``ξ a/π ns² no + …`` with ``thesis`` (eq. 5.8 as printed). The specular term is zero for
-    ``ξ ≥ 1``, ``nh ≤ 0`` or ``c ≤ 0``. At the kinks of ``min(…)`` in G the derivative of the
-    active branch is returned. Callers that use only ``P`` pay nothing for the derivatives
-    (inlined, the unused arithmetic is removed by the compiler).
+    ``a = F0``, ``m`` Beckmann slope; ``thesis`` selects eq. 5.8's printed diffuse form.
+    :func:`fresnel_xyz` then :func:`cook_torrance_fresnel_xyz`.
+    """
+    if xi >= 1.0 or nh <= 0.0 or c <= 0.0:
+        return cook_torrance_fresnel_xyz(ns, no, nh, c, 0.0, 0.0, 0.0, xi, a, m, thesis)
+    F, dF_dc, dF_df0 = fresnel_xyz(c, a)
+    return cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis)
+
+
+@nb.njit(cache=True, inline="always")
+def cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis):
+    """:func:`cook_torrance_xyz` with the Fresnel factor given: ``F = F(c, a)``, ``∂F/∂c``,
+    ``∂F/∂F0`` from :func:`fresnel_xyz` (rotation invariant — ``c = ô·ĥ = |ŝ+ô|/2`` does not
+    depend on the attitude — so a caller evaluating many attitudes at one epoch computes them
+    once per facet material; pass zeros for the derivatives it does not use).
+
+    ``P = ξ a/π ns no + (1−ξ)/4 F D G`` (physical form), or ``ξ a/π ns² no + …`` with
+    ``thesis`` (eq. 5.8 as printed). The specular term is zero for ``ξ ≥ 1``, ``nh ≤ 0`` or
+    ``c ≤ 0``. At the kinks of ``min(…)`` in G the derivative of the active branch is returned.
+    Callers that use only ``P`` pay nothing for the derivatives (inlined, the unused arithmetic
+    is removed by the compiler).
     """
     kd = xi * a * _INV_PI
     if thesis:
@@ -154,7 +171,6 @@ def cook_torrance_xyz(ns, no, nh, c, xi, a, m, thesis):
         dG_dnh = 2.0 * ns / c
         dG_dns = 2.0 * nh / c
         dG_dc = -g2 / c
-    F, dF_dc, dF_df0 = fresnel_xyz(c, a)
     ks = (1.0 - xi) * 0.25
     P = diff + ks * F * D * G
     return (P, d_ns + ks * F * D * dG_dns, d_no + ks * F * D * dG_dno,
