@@ -14,7 +14,7 @@ Equations
   of constant ``u_s`` the wheel momentum is linear in time and needs no state of its own.
   Without wheels ``h = 0`` and this is Bernard eq. 4.13 (η, the process noise, is added by
   the filters).
-* Gravity-gradient torque (Bernard appendix A; Markley & Crassidis 2014 eq. 3.155):
+* Gravity-gradient torque (Bernard eq. 4.20):
   ``T_gg = 3μ/|r|³ û × (J û)``, ``û = A(q) r̂`` — optional inside the step, evaluated at every
   RK4 stage.
 * Error dynamics of ``δx = [δθ, δω]`` (``q_true = δq(δθ) ⊗ q̂``): controlled
@@ -53,6 +53,7 @@ from .rotations import qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 __all__ = [
     "mat9", "quat_rate_xyz", "omega_dot_xyz", "gravity_gradient_xyz", "rk4_step_xyz", "rk4_nb",
     "rk4_propagate_nb", "const_rate_xyz", "const_rate_nb", "const_rate_batch_nb",
+    "omega_dot_batch_nb", "quat_rate_batch_nb", "gravity_gradient_batch_nb",
     "error_F_nb", "van_loan_nb", "uncontrolled_transition_nb", "controlled_transition_nb",
 ]
 
@@ -104,7 +105,7 @@ def omega_dot_xyz(w0, w1, w2, J, K, T, h):
 
 @njit(cache=True, inline="always")
 def gravity_gradient_xyz(q0, q1, q2, q3, k, rx, ry, rz, J):
-    """Gravity-gradient torque ``k û × (J û)``, ``û = A(q) r̂`` (Bernard appendix A) → 3-tuple
+    """Gravity-gradient torque ``k û × (J û)``, ``û = A(q) r̂`` (Bernard eq. 4.20) → 3-tuple
     N m; ``k = 3μ/|r|³`` (1/s²), ``r̂`` unit ECI position, ``J`` row-major 9-tuple (kg m²)."""
     ux, uy, uz = qrot_xyz_nb(q0, q1, q2, q3, rx, ry, rz)
     J00, J01, J02, J10, J11, J12, J20, J21, J22 = J
@@ -554,3 +555,36 @@ def controlled_transition_nb(w, dt):
             Phi[i, j] = e - sa * (S[i, j] * dt) + ca * (S2[i, j] * dt * dt)
             Phi[i, 3 + j] = e * dt - a1 * S[i, j] + a2 * S2[i, j]
     return Phi
+
+
+@njit(cache=True)
+def omega_dot_batch_nb(W, J, J_inv, T, out):
+    """Row-wise Euler's equations ``ω̇ = J⁻¹(−ω × Jω + T)`` (Bernard eq. 4.13,
+    :func:`omega_dot_xyz`): W, T, out (N,3) (rad/s, N m, rad/s²); J, J_inv (3,3)."""
+    Jt = mat9(J)
+    Kt = mat9(J_inv)
+    for i in range(W.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = omega_dot_xyz(W[i, 0], W[i, 1], W[i, 2], Jt, Kt,
+                                                        (T[i, 0], T[i, 1], T[i, 2]), None)
+
+
+@njit(cache=True)
+def quat_rate_batch_nb(Q, W, out):
+    """Row-wise ``q̇ = ½ [0, ω] ⊗ q`` (Bernard eq. 4.12, :func:`quat_rate_xyz`): Q, out (N,4),
+    W (N,3) rad/s."""
+    for i in range(Q.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = quat_rate_xyz(
+            Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3], W[i, 0], W[i, 1], W[i, 2])
+
+
+@njit(cache=True)
+def gravity_gradient_batch_nb(Q, R, J, mu, out):
+    """Row-wise gravity-gradient torque ``3μ/|r|³ û × (J û)``, ``û = A(q) r̂`` (Bernard eq. 4.20,
+    :func:`gravity_gradient_xyz`): Q (N,4), R (N,3) ECI positions m, J (3,3) kg m², μ m³/s²;
+    out (N,3) N m (body axes)."""
+    Jt = mat9(J)
+    for i in range(Q.shape[0]):
+        rn = math.sqrt(R[i, 0] ** 2 + R[i, 1] ** 2 + R[i, 2] ** 2)
+        out[i, 0], out[i, 1], out[i, 2] = gravity_gradient_xyz(
+            Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3], 3.0 * mu / rn ** 3, R[i, 0] / rn, R[i, 1] / rn,
+            R[i, 2] / rn, Jt)

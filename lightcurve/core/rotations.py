@@ -43,7 +43,8 @@ __all__ = [
     "qmul_batch_nb", "qrot_batch_nb", "q2dcm_batch_nb", "dcm2q_batch_nb", "rotvec2q_batch_nb",
     "q2rotvec_batch_nb", "q2grp_batch_nb", "grp2q_batch_nb", "q2mrp_batch_nb",
     "mrp2q_batch_nb", "mrp_compose_batch_nb", "mrp2dcm_batch_nb", "euler321_to_dcm_batch_nb",
-    "q2euler321_batch_nb", "skew_batch_nb",
+    "q2euler321_batch_nb", "skew_batch_nb", "euler321_to_q_batch_nb", "mrp_shadow_batch_nb",
+    "mrp_dcm_vec_jac_batch_nb",
 ]
 
 
@@ -663,3 +664,24 @@ def skew_batch_nb(V, out):
     """Row-wise cross-product matrices: out (N,3,3) from V (N,3)."""
     for i in range(V.shape[0]):
         out[i] = skew_nb(V[i])
+
+
+@njit(cache=True)
+def euler321_to_q_batch_nb(ANG, out):
+    """Row-wise quaternions (N,4) of 3-2-1 angles ANG (N,3) rad (:func:`euler321_to_q_nb`)."""
+    for i in range(ANG.shape[0]):
+        out[i] = euler321_to_q_nb(ANG[i])
+
+
+@njit(cache=True)
+def mrp_shadow_batch_nb(S, threshold, out):
+    """Row-wise :func:`mrp_shadow_nb` (O'Keefe eq. 4.2): out (N,3)."""
+    for i in range(S.shape[0]):
+        out[i] = mrp_shadow_nb(S[i], threshold)
+
+
+@njit(cache=True)
+def mrp_dcm_vec_jac_batch_nb(S, A, out):
+    """Row-wise :func:`mrp_dcm_vec_jac_nb` (O'Keefe eq. 4.32): out (N,3,3)."""
+    for i in range(S.shape[0]):
+        out[i] = mrp_dcm_vec_jac_nb(S[i], A[i])
