@@ -30,7 +30,7 @@ from numba import njit
 
 __all__ = [
     "cholesky_nb", "forward_nb", "backward_nb", "spd_solve_nb", "spd_inverse_nb", "inverse_nb",
-    "symmetrize_nb", "joseph_update_nb", "joseph_scalar_nb",
+    "symmetrize_nb", "kalman_gain_nb", "joseph_apply_nb", "joseph_update_nb", "joseph_scalar_nb",
     "UPDATE_OK", "UPDATE_BAD_INNOVATION", "UPDATE_BAD_S", "UPDATE_BAD_POSTERIOR",
 ]
 
@@ -179,8 +179,62 @@ def symmetrize_nb(P):
 
 
 @njit(cache=True)
+def kalman_gain_nb(P, H, R, nu, consider):
+    """Gain of a measurement update → ``(K (n,m), S (m,m), nis, ok)``.
+
+    ``S = H P Hᵀ + R`` (symmetrised), ``K = P Hᵀ S⁻¹`` through the Cholesky factor of S, rows
+    of ``consider`` states (bool (n,)) zeroed (Schmidt), ``nis = νᵀ S⁻¹ ν``. ``ok`` False (K
+    zero, nis NaN) for a non-finite innovation or an S that is not positive definite.
+    """
+    n = P.shape[0]
+    m = nu.shape[0]
+    PHt = P @ H.T
+    S = H @ PHt + R
+    for i in range(m):
+        for j in range(i):
+            a = 0.5 * (S[i, j] + S[j, i])
+            S[i, j] = a
+            S[j, i] = a
+    K = np.zeros((n, m))
+    for i in range(m):
+        if not np.isfinite(nu[i]):
+            return K, S, np.nan, False
+    L, ok = cholesky_nb(S)
+    if not ok:
+        return K, S, np.nan, False
+    for r in range(n):
+        kr = backward_nb(L, forward_nb(L, PHt[r, :].copy()))
+        for c in range(m):
+            K[r, c] = 0.0 if consider[r] else kr[c]
+    w = forward_nb(L, nu)
+    nis = 0.0
+    for i in range(m):
+        nis += w[i] * w[i]
+    return K, S, nis, True
+
+
+@njit(cache=True)
+def joseph_apply_nb(x, P, nu, H, R, K):
+    """``x⁺ = x + K ν`` and ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` (symmetrised) for any gain
+    → ``(x⁺, P⁺, ok)``; ``ok`` False (prior copies returned) when the posterior is not finite."""
+    n = x.shape[0]
+    IKH = np.eye(n) - K @ H
+    Pn = IKH @ P @ IKH.T + K @ R @ K.T
+    xn = x + K @ nu
+    for i in range(n):
+        if not np.isfinite(xn[i]):
+            return x.copy(), P.copy(), False
+        for j in range(n):
+            if not np.isfinite(Pn[i, j]):
+                return x.copy(), P.copy(), False
+    symmetrize_nb(Pn)
+    return xn, Pn, True
+
+
+@njit(cache=True)
 def joseph_update_nb(x, P, nu, H, R, consider):
-    """Kalman measurement update, Joseph-form covariance, optional Schmidt consider states.
+    """Kalman measurement update, Joseph-form covariance, optional Schmidt consider states
+    (:func:`kalman_gain_nb` then :func:`joseph_apply_nb`).
 
     Parameters
     ----------
@@ -193,40 +247,12 @@ def joseph_update_nb(x, P, nu, H, R, consider):
     x_post (n,), P_post (n, n), nis ``νᵀ S⁻¹ ν`` (NaN when refused), ok (bool). On failure
     ``x_post`` and ``P_post`` are copies of the prior.
     """
-    n = x.shape[0]
-    m = nu.shape[0]
-    PHt = P @ H.T
-    S = H @ PHt + R
-    for i in range(m):
-        for j in range(i):
-            a = 0.5 * (S[i, j] + S[j, i])
-            S[i, j] = a
-            S[j, i] = a
-    for i in range(m):
-        if not np.isfinite(nu[i]):
-            return x.copy(), P.copy(), np.nan, False
-    L, ok = cholesky_nb(S)
+    K, S, nis, ok = kalman_gain_nb(P, H, R, nu, consider)
     if not ok:
         return x.copy(), P.copy(), np.nan, False
-    K = np.empty((n, m))
-    for r in range(n):
-        kr = backward_nb(L, forward_nb(L, PHt[r, :].copy()))
-        for c in range(m):
-            K[r, c] = 0.0 if consider[r] else kr[c]
-    w = forward_nb(L, nu)
-    nis = 0.0
-    for i in range(m):
-        nis += w[i] * w[i]
-    IKH = np.eye(n) - K @ H
-    Pn = IKH @ P @ IKH.T + K @ R @ K.T
-    xn = x + K @ nu
-    for i in range(n):
-        if not np.isfinite(xn[i]):
-            return x.copy(), P.copy(), np.nan, False
-        for j in range(n):
-            if not np.isfinite(Pn[i, j]):
-                return x.copy(), P.copy(), np.nan, False
-    symmetrize_nb(Pn)
+    xn, Pn, ok = joseph_apply_nb(x, P, nu, H, R, K)
+    if not ok:
+        return xn, Pn, np.nan, False
     return xn, Pn, nis, True
 
 
