@@ -363,11 +363,11 @@ def _flux_numpy(shape, sb, ob, areas=None, prm=None):
 
     sb, ob (N,3) body-frame unit vectors; ``areas`` (N,F) m² and ``prm`` (N,F,P) per-particle
     kernel arrays (Model 3) replace the shape's when given. The same formulas as
-    :mod:`lightcurve.photometry.kernels` (Cook–Torrance in the DESIGN.md form: Beckmann D,
+    `lightcurve.core.photometry` (Cook–Torrance in the DESIGN.md form: Beckmann D,
     G = min(1, 2(n̂·ĥ)(n̂·ô)/(ô·ĥ), 2(n̂·ĥ)(n̂·ŝ)/(ô·ĥ)), standard Fresnel with n from F0);
     returns None when a facet uses another BRDF.
     """
-    from ..photometry.kernels import COOK_TORRANCE, LAMBERT
+    from ..core.photometry import COOK_TORRANCE, LAMBERT
 
     n, areas0, ids, prm0 = shape.kernel_arrays()
     areas = areas0 if areas is None else areas
