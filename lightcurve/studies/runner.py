@@ -194,14 +194,10 @@ def write_run(out_dir, result: dict, study_hash: str) -> Path:
 
 def read_run(path) -> dict:
     """Read a run file written by :func:`write_run` (same keys as :func:`execute_task`)."""
-    import h5py
+    from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)
-    try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"cannot open run file: {exc}", file=path) from None
-    with h:
+    with open_hdf5(path) as h:
         if h.attrs.get("format") != RUN_FORMAT:
             raise InputError("not a study run file", file=path, field="format",
                              value=h.attrs.get("format"), allowed=RUN_FORMAT)
@@ -212,7 +208,7 @@ def read_run(path) -> dict:
         if out["status"] == "ok":
             out["metrics"] = json.loads(str(h.attrs["metrics_json"]))
             for name, _ in _ARRAYS:
-                out[name] = np.asarray(h[name])
+                out[name] = np.asarray(read_dataset(h, name, max_elements=10**9, file=path))
     return out
 
 
