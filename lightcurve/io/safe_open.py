@@ -37,7 +37,7 @@ from ..errors import InputError
 __all__ = ["open_regular", "read_bytes", "read_text", "check_regular", "open_hdf5",
            "read_dataset", "read_attr", "TOML_MAX_BYTES", "CSV_MAX_BYTES", "MESH_MAX_BYTES",
            "BRDF_MAX_BYTES", "ALBEDO_MAX_BYTES", "HDF5_MAX_BYTES", "HDF5_MAX_LINKS",
-           "HDF5_ALLOWED_FILTERS", "is_regular_file"]
+           "HDF5_ALLOWED_FILTERS", "is_regular_file", "track_inputs", "check_not_input"]
 
 MiB = 1024 * 1024
 #: TOML files (scenarios, shapes, materials, sites, CSS configurations and studies)
@@ -79,7 +79,41 @@ def _not_regular(path, mode, what):
                       allowed="a regular file")
 
 
-def _open_fd(path, max_bytes: int, what: str):
+#: (st_dev, st_ino) of the inputs read while :func:`track_inputs` is active (None: not tracking)
+_INPUTS: set | None = None
+
+
+@contextlib.contextmanager
+def track_inputs():
+    """Within the block, remember every file read through this module, so that
+    :func:`check_not_input` (called by :func:`lightcurve.io.atomic.atomic_path`) refuses to
+    replace one of them with an output. The command line runs every command inside it: an
+    output path that names an input file (``plot leo.h5 -o leo.h5``) is an InputError (exit
+    2) and the input is left as it was."""
+    global _INPUTS
+    old, _INPUTS = _INPUTS, set()
+    try:
+        yield
+    finally:
+        _INPUTS = old
+
+
+def check_not_input(path, field: str = "output") -> None:
+    """Raise InputError when ``path`` is a file read as an input while tracking (same file
+    by device and inode, so links and other spellings of the name count)."""
+    if not _INPUTS:
+        return
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return
+    if (st.st_dev, st.st_ino) in _INPUTS:
+        raise InputError("the output would overwrite an input file of this command",
+                         file=path, field=field, allowed="an output path that is not one of "
+                         "the inputs")
+
+
+def _open_fd(path, max_bytes: int, what: str, track: bool = True):
     """(fd, stat) of ``path`` opened read-only and checked on the descriptor (module doc)."""
     path = os.fspath(path)
     try:  # cheap first look by name: never even open a device or a FIFO
@@ -110,6 +144,8 @@ def _open_fd(path, max_bytes: int, what: str):
     except BaseException:
         os.close(fd)
         raise
+    if track and _INPUTS is not None:
+        _INPUTS.add((st.st_dev, st.st_ino))
     return fd, st
 
 
@@ -122,7 +158,7 @@ def check_regular(path, *, max_bytes: int, what: str = "file") -> os.stat_result
     return st
 
 
-def open_regular(path, *, max_bytes: int, what: str = "file"):
+def open_regular(path, *, max_bytes: int, what: str = "file", track: bool = True):
     """Open ``path`` for binary reading after the checks of the module docstring.
 
     Returns a buffered binary file object (close it, e.g. ``with open_regular(...) as fh``).
@@ -135,7 +171,7 @@ def open_regular(path, *, max_bytes: int, what: str = "file"):
         Missing file, not a regular file (FIFO, device, socket, folder), unreadable, or larger
         than ``max_bytes``; the message names the file and the limit.
     """
-    fd, _ = _open_fd(path, max_bytes, what)
+    fd, _ = _open_fd(path, max_bytes, what, track)
     return os.fdopen(fd, "rb")
 
 
@@ -156,19 +192,21 @@ def _read_fd(fd, path, max_bytes, what) -> bytes:
     return b"".join(chunks)
 
 
-def read_bytes(path, *, max_bytes: int, what: str = "file") -> bytes:
-    """The whole content of a regular file of at most ``max_bytes`` (module docstring)."""
-    fd, _ = _open_fd(path, max_bytes, what)
+def read_bytes(path, *, max_bytes: int, what: str = "file", track: bool = True) -> bytes:
+    """The whole content of a regular file of at most ``max_bytes`` (module docstring).
+    ``track=False`` for the program's own state files (not inputs, see :func:`track_inputs`)."""
+    fd, _ = _open_fd(path, max_bytes, what, track)
     try:
         return _read_fd(fd, os.fspath(path), max_bytes, what)
     finally:
         os.close(fd)
 
 
-def read_text(path, *, max_bytes: int, what: str = "file", encoding: str = "utf-8") -> str:
+def read_text(path, *, max_bytes: int, what: str = "file", encoding: str = "utf-8",
+              track: bool = True) -> str:
     """:func:`read_bytes` decoded; invalid text is an InputError naming the byte offset.
     ``encoding="utf-8-sig"`` drops a leading byte-order mark."""
-    raw = read_bytes(path, max_bytes=max_bytes, what=what)
+    raw = read_bytes(path, max_bytes=max_bytes, what=what, track=track)
     try:
         return raw.decode(encoding)
     except UnicodeDecodeError as exc:
@@ -256,7 +294,8 @@ def _audit_hdf5(h, path, max_links):
 
 
 @contextlib.contextmanager
-def open_hdf5(path, *, max_bytes: int = HDF5_MAX_BYTES, max_links: int = HDF5_MAX_LINKS):
+def open_hdf5(path, *, max_bytes: int = HDF5_MAX_BYTES, max_links: int = HDF5_MAX_LINKS,
+              track: bool = True):
     """Open an untrusted HDF5 file read-only; yields the ``h5py.File`` (module docstring).
 
     Use as ``with open_hdf5(p) as h: x = read_dataset(h, "t", max_elements=..., file=p)``.
@@ -270,7 +309,7 @@ def open_hdf5(path, *, max_bytes: int = HDF5_MAX_BYTES, max_links: int = HDF5_MA
     """
     import h5py
 
-    fh = open_regular(path, max_bytes=max_bytes, what="HDF5 file")
+    fh = open_regular(path, max_bytes=max_bytes, what="HDF5 file", track=track)
     try:
         try:
             h = h5py.File(fh, "r")

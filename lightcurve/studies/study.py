@@ -162,6 +162,29 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
+    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
+        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
+        in execution order: scenario keys sorted, then run index, then the cells sharing that
+        scenario key in grid order — runs that share a simulated lightcurve (common random
+        numbers) come back to back. The same set as :meth:`tasks`."""
+        n = self.runs if runs is None else int(runs)
+        opts = tuple(sorted(self.options.items()))
+        groups: dict = {}
+        for c in self.cells:
+            groups.setdefault(c.scenario_key, []).append(c)
+        for key in sorted(groups):
+            cells = groups[key]
+            tags = [c.tag for c in cells]
+            for i in range(n):
+                for c, tag in zip(cells, tags):
+                    if ids_only:
+                        yield f"{tag}_r{i:05d}"
+                        continue
+                    f = self.scenario_files[(c.dynamics, c.sites)]
+                    txt = self.scenario_texts[(c.dynamics, c.sites)]
+                    s, fs = run_seeds(self.seed, c, i)
+                    yield RunTask(c, i, s, fs, txt, str(f), opts)
+
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
