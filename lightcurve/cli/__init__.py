@@ -1,7 +1,7 @@
 """The ``lightcurve`` command line.
 
 One module per subcommand group (``sites``, ``shapes``, ``simulate``/``plot``/``demo``, ``css``,
-``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``selfcheck``); each has a
+``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``, ``selfcheck``); each has a
 ``register(subparsers)`` function and thin handlers that parse arguments, call the library and
 print. Shared option types live in :mod:`lightcurve.cli._args`. Exit codes: 0 success,
 1 run-time failure, 2 bad usage or bad input (one clear line; the traceback only with
@@ -24,6 +24,7 @@ from . import (
     css,
     diagnose,
     invert,
+    recordings,
     reflection,
     selfcheck,
     shapes,
@@ -35,7 +36,7 @@ __all__ = ["main", "build_parser"]
 
 _REGISTRARS = (selfcheck.register, sites.register, shapes.register, simulate.register,
                css.register, invert.register, diagnose.register, compare.register,
-               reflection.register)
+               reflection.register, recordings.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

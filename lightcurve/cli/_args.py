@@ -13,7 +13,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input"]
+__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input", "csv_floats",
+           "add_model_options", "initial_q", "initial_omega_rad_s"]
 
 
 def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
@@ -86,3 +87,61 @@ def output_not_input(output, *inputs, option: str = "-o/--output") -> None:
             raise InputError("the output would overwrite an input file of this command",
                              file=output, field=option, value=str(inp),
                              allowed="an output path that is not one of the inputs")
+def csv_floats(text, option, n=None):
+    """Comma-separated finite numbers from a CLI value (exactly ``n`` when given)."""
+    out = []
+    for x in csv_list(text, option):
+        try:
+            v = float(x)
+        except ValueError:
+            v = float("nan")
+        if not np.isfinite(v):
+            raise InputError("not a finite number", field=option, value=x)
+        out.append(v)
+    if n is not None and len(out) != n:
+        raise InputError(f"expected {n} comma-separated numbers", field=option, value=text)
+    return tuple(out)
+
+
+def initial_q(text, option="--initial-q"):
+    """A unit quaternion ``q1,q2,q3,q4`` (scalar first, inertial→body) from the CLI.
+
+    Values whose norm is within 1e-3 of one are normalised (four typed decimals are rarely
+    exactly unit); anything else is refused.
+    """
+    q = np.asarray(csv_floats(text, option, 4))
+    nq = float(np.linalg.norm(q))
+    if abs(nq - 1.0) > 1e-3:
+        raise InputError("not a unit quaternion", field=option, value=text,
+                         allowed="q1,q2,q3,q4 (scalar first) with norm 1 (to 1e-3)")
+    return tuple(float(x) for x in q / nq)
+
+
+def initial_omega_rad_s(text, option="--initial-omega-deg-s"):
+    """A body rate ``wx,wy,wz`` given in deg/s on the CLI, returned in rad/s."""
+    w = np.radians(csv_floats(text, option, 3))
+    if np.any(np.abs(w) > np.radians(3600.0)):
+        raise InputError("body rate out of range", field=option, value=text,
+                         allowed="|w| <= 3600 deg/s per axis")
+    return tuple(float(x) for x in w)
+
+
+def add_model_options(p, *, shape=True, library=True, sites=True) -> None:
+    """The model-input options, spelled the same in every command.
+
+    ``--shape NAME|FILE.toml`` (a shape replacing the one the file carries), ``--library DIR``
+    and ``--sites DIR`` (repeatable extra shape-library and observatory folders, searched
+    before the bundled ones). Values land in ``args.shape``, ``args.library``, ``args.sites``.
+    """
+    if shape:
+        p.add_argument("--shape", default=None, metavar="NAME|FILE.toml",
+                       help="shape to model with instead of the one the file carries (a "
+                       "library name, looked up in --library folders first, or a shape TOML)")
+    if library:
+        p.add_argument("--library", action="append", default=None, metavar="DIR",
+                       help="extra shape library folder (repeatable; searched before the "
+                       "bundled shapes/)")
+    if sites:
+        p.add_argument("--sites", action="append", default=None, metavar="DIR",
+                       help="extra observatory folder of site TOML files (repeatable; "
+                       "searched before the bundled observatories/)")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._args import SEED, output_not_input
+from ._args import SEED, add_model_options, output_not_input
 
 __all__ = ["register"]
 
@@ -22,7 +22,13 @@ def _cmd_simulate(args) -> int:
     output_not_input(args.output, args.scenario)
     if args.plot:
         output_not_input(Path(args.output).with_suffix(".png"), args.scenario, option="--plot")
-    scen = load_scenario(args.scenario, library_dirs=args.library, site_dirs=args.sites)
+    shape = None
+    if args.shape is not None:
+        from ..photometry import load_shape
+
+        shape = load_shape(args.shape, library_dirs=args.library)
+    scen = load_scenario(args.scenario, library_dirs=args.library, site_dirs=args.sites,
+                         shape=shape)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         lc, counts = simulate(scen, seed=args.seed, return_counts=True)
@@ -106,15 +112,13 @@ def register(sub) -> None:
         "simulate", help="simulate a lightcurve from a scenario TOML",
         description="Simulate apparent magnitudes of a faceted spacecraft seen from one or more "
         "ground sites (Bernard 2021 ch. 5, consistent form) and write the HDF5 lightcurve "
-        "(docs/formats.md) atomically.")
+        "(docs/formats.md) atomically. The file carries the resolved shape, so later commands "
+        "need no --library.")
     p.add_argument("scenario", help="scenario TOML file (see docs/formats.md and pipelines/)")
     p.add_argument("-o", "--output", required=True, help="output HDF5 file")
     p.add_argument("--seed", type=SEED, default=None, help="override [scenario].seed")
     p.add_argument("--plot", action="store_true", help="also write OUTPUT.png")
-    p.add_argument("--library", action="append", default=None, metavar="DIR",
-                   help="extra shape library folder (repeatable)")
-    p.add_argument("--sites", action="append", default=None, metavar="DIR",
-                   help="extra observatory folder (repeatable)")
+    add_model_options(p)
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("plot", help="plot a lightcurve HDF5 file to PNG",

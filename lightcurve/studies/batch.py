@@ -103,6 +103,7 @@ def execute_invert_task(task: InvertTask) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res["estimate"] = invert(curve, task.method, **dict(task.options))
+        res["estimate"].source_file = str(task.file)
     except InputError as exc:
         res.update(status="failed", error=str(exc), error_kind="input")
     except Exception as exc:  # noqa: BLE001 - one failing file must not stop the batch

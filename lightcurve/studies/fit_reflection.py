@@ -503,13 +503,16 @@ _LEVELS = (0.005, 0.025, 0.16, 0.5, 0.84, 0.975, 0.995)
 def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets=None, kinds=KINDS,
                    prior_frac=0.1, walkers=None, seed=0, block=500, max_steps=20_000,
                    min_steps=1000, tau_factor=50.0, identify_ratio=0.5, n_predictive=200,
-                   truth=None, allow_unconverged=False, progress=None) -> ReflectionFit:
+                   truth=None, allow_unconverged=False, progress=None,
+                   library_dirs=None) -> ReflectionFit:
     """Sample the posterior of facet reflection parameters (module docstring).
 
     Parameters
     ----------
     curve : Lightcurve
-    shape : Shape, str or None — default ``curve.attrs["shape"]``.
+    shape : Shape, str or None — default the shape the file carries, else
+        ``curve.attrs["shape"]`` (:meth:`Lightcurve.resolve_shape`; ``library_dirs`` are extra
+        shape-library folders for a named shape).
     attitude : {"truth", "estimate"} — use ``curve.truth_q`` or ``estimate.q`` (an
         :class:`~lightcurve.filters.result.Estimate` at the curve's times, or its file path).
         The attitude is held fixed: an estimate's own uncertainty is *not* marginalised, so the
@@ -532,16 +535,8 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     InputError — bad inputs (no truth attitude, mismatched estimate, unknown facet…).
     """
     from ..estimation.mcmc import sample_until_converged
-    from ..photometry import load_shape
 
-    if shape is None:
-        name = (curve.attrs or {}).get("shape", "")
-        if not name:
-            raise InputError("the lightcurve names no shape (attrs['shape']); give one",
-                             field="attrs.shape")
-        shape = load_shape(str(name))
-    elif isinstance(shape, str):
-        shape = load_shape(shape)
+    shape = curve.resolve_shape(shape, library_dirs=library_dirs)
     if attitude == "truth":
         if not curve.has_truth:
             raise InputError("the lightcurve has no truth attitude; use --attitude estimate",
