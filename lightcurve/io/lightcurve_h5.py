@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..report.views import LightcurveViews
 from .atomic import atomic_path
 
 __all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
@@ -22,8 +23,8 @@ __all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
 FORMAT_VERSION = 1
 
 
-@dataclass
-class Lightcurve:
+@dataclass(repr=False)
+class Lightcurve(LightcurveViews):
     """Apparent-magnitude time series with its observation geometry.
 
     Attributes (N measurements, K sites)

@@ -63,13 +63,16 @@ def utc_times(epoch_utc, t_s):
     return np.where(np.isfinite(t), out, np.datetime64("NaT"))
 
 
-def utc_axis(ax, label="UTC"):
-    """Format ``ax``'s x axis for datetimes (concise ticks) and label it."""
+def utc_axis(ax, label="UTC", offset=True):
+    """Format ``ax``'s x axis for datetimes (concise ticks) and label it.
+
+    ``offset`` shows the date below the ticks (turn it off on all but the bottom panels).
+    """
     import matplotlib.dates as mdates
 
     loc = mdates.AutoDateLocator(minticks=3, maxticks=8)
     ax.xaxis.set_major_locator(loc)
-    ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(loc, show_offset=True))
+    ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(loc, show_offset=offset))
     if label:
         ax.set_xlabel(label)
 
