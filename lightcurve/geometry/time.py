@@ -128,7 +128,7 @@ def parse_epoch(epoch_utc) -> datetime:
             raise InputError("not a date-time (NaT)", field="epoch_utc", value=str(epoch_utc))
         us = int(epoch_utc.astype("datetime64[us]").astype("int64"))
         dt = datetime(1970, 1, 1, tzinfo=timezone.utc) + timedelta(microseconds=us)
-    elif _is_time(epoch_utc) or _is_astropy_time(epoch_utc):
+    elif _is_skyfield_time(epoch_utc) or _is_astropy_time(epoch_utc):
         dt = _time_object_to_datetime(epoch_utc)
     elif isinstance(epoch_utc, str):
         text = epoch_utc.strip()
@@ -221,8 +221,14 @@ def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(pos, dtype=float).reshape(3, -1).T)
 
 
+def _is_skyfield_time(x) -> bool:
+    return type(x).__name__ == "Time" and hasattr(x, "tt") and hasattr(x, "ts")
+
+
 def _is_time(x) -> bool:
-    return type(x).__name__ == "Time" and hasattr(x, "tt")
+    """True for a skyfield ``Time`` *array* (the explicit-times form of the geometry
+    functions, ``t_s`` ignored); a scalar ``Time`` is an epoch like any other."""
+    return _is_skyfield_time(x) and np.ndim(x.tt) > 0
 
 
 def sun_position_gcrs(epoch_utc, t_s=0.0, *, light_time: bool = True) -> np.ndarray:
@@ -230,9 +236,9 @@ def sun_position_gcrs(epoch_utc, t_s=0.0, *, light_time: bool = True) -> np.ndar
 
     Parameters
     ----------
-    epoch_utc : str or datetime or skyfield Time
-        Scenario epoch (ISO 8601 UTC). A skyfield ``Time`` array may be passed instead, in
-        which case ``t_s`` is ignored.
+    epoch_utc : str, datetime, numpy.datetime64, skyfield or astropy Time
+        Scenario epoch (:func:`parse_epoch`). A skyfield ``Time`` *array* may be passed
+        instead, in which case ``t_s`` is ignored.
     t_s : float or array (N,)
         Seconds since the epoch.
     light_time : bool

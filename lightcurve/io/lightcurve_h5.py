@@ -66,6 +66,10 @@ class Lightcurve(LightcurveViews):
     attrs: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if not isinstance(self.epoch_utc, str):  # datetime, numpy.datetime64, skyfield/astropy Time
+            from ..geometry.time import epoch_iso
+
+            self.epoch_utc = epoch_iso(self.epoch_utc)
         self.validate()
 
     # ------------------------------------------------------------------------------------
