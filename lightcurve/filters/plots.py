@@ -276,35 +276,11 @@ def estimate_figure(est, curve=None, title=None):
 
     # ---- row 4 (truth only): errors against the truth --------------------------------------
     if truth:
-        ea = est.att_error_deg
-        s3a = 3 * est.att_sigma_deg
-        a = axis(r_err, 0)
-        for j, n in enumerate("xyz"):
-            a.plot(x, ea[:, j], color=f"C{j}", lw=1, label=f"δθ_{n}")
-            a.plot(x, s3a[:, j], color=f"C{j}", lw=0.6, ls=":")
-            a.plot(x, -s3a[:, j], color=f"C{j}", lw=0.6, ls=":")
-        a.plot([], [], color="0.3", ls=":", lw=0.6, label="±3σ")
-        lim = np.nanpercentile(np.abs(np.concatenate([ea[len(ea) // 5:].ravel(),
-                                                      s3a[len(ea) // 5:].ravel()])), 99) * 1.6
-        if np.isfinite(lim) and lim > 0:
-            a.set_ylim(-lim, lim)
-        a.set_ylabel("attitude error [deg]")
-        a.legend(fontsize=7, ncol=4, loc="upper right")
-        a.set_title("errors against the truth", loc="left", fontsize=9)
-        ew = np.degrees(est.omega_error_rad_s)
-        s3w = np.degrees(3 * est.omega_sigma_rad_s)
-        a = axis(r_err, 1)
-        for j, n in enumerate("xyz"):
-            a.plot(x, ew[:, j], color=f"C{j}", lw=1, label=f"δω_{n}")
-            a.plot(x, s3w[:, j], color=f"C{j}", lw=0.6, ls=":")
-            a.plot(x, -s3w[:, j], color=f"C{j}", lw=0.6, ls=":")
-        a.plot([], [], color="0.3", ls=":", lw=0.6, label="±3σ")
-        lim = np.nanpercentile(np.abs(np.concatenate([ew[len(ew) // 5:].ravel(),
-                                                      s3w[len(ew) // 5:].ravel()])), 99) * 1.6
-        if np.isfinite(lim) and lim > 0:
-            a.set_ylim(-lim, lim)
-        a.set_ylabel("rate error [deg/s]")
-        a.legend(fontsize=7, ncol=4, loc="upper right")
+        _error_panel(axis(r_err, 0), x, est.att_error_deg, 3 * est.att_sigma_deg, "δθ",
+                     "attitude error [deg]")
+        ax_all[-1].set_title("errors against the truth", loc="left", fontsize=9)
+        _error_panel(axis(r_err, 1), x, np.degrees(est.omega_error_rad_s),
+                     np.degrees(3 * est.omega_sigma_rad_s), "δω", "rate error [deg/s]")
         a = axis(r_err, 2)
         if est.nees is not None and np.any(np.isfinite(est.nees)):
             from scipy.stats import chi2
@@ -336,6 +312,22 @@ def estimate_figure(est, curve=None, title=None):
     fig.suptitle(title or _title(est, sp, eul, eul_s, frac_in, epoch), fontsize=10,
                  ha="left", x=0.01)
     return fig
+
+
+def _error_panel(a, x, err, s3, sym, ylabel):
+    """Per-axis errors against the truth with the filter's ±3σ (dotted), y range from the
+    last 80 % of the run (the first epochs' large errors would flatten the rest)."""
+    for j, n in enumerate("xyz"):
+        a.plot(x, err[:, j], color=f"C{j}", lw=1, label=f"{sym}_{n}")
+        a.plot(x, s3[:, j], color=f"C{j}", lw=0.6, ls=":")
+        a.plot(x, -s3[:, j], color=f"C{j}", lw=0.6, ls=":")
+    a.plot([], [], color="0.3", ls=":", lw=0.6, label="±3σ")
+    k = len(err) // 5
+    lim = np.nanpercentile(np.abs(np.concatenate([err[k:].ravel(), s3[k:].ravel()])), 99) * 1.6
+    if np.isfinite(lim) and lim > 0:
+        a.set_ylim(-lim, lim)
+    a.set_ylabel(ylabel)
+    a.legend(fontsize=7, ncol=4, loc="upper right")
 
 
 def _title(est, sp, eul, eul_s, frac_in, epoch):
