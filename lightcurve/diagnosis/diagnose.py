@@ -32,6 +32,7 @@ import numpy as np
 
 from .baseline import bic_gain, fit_baseline, fit_terms
 from .candidates import params_to_json, score_candidates
+from ..report.views import DiagnosisViews
 from .residuals import consistency, find_segments
 
 __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIMING_EFFECTS",
@@ -40,8 +41,8 @@ __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIM
 TIMING_EFFECTS = ("light_time", "clock_offset", "exposure_smearing")
 
 
-@dataclass
-class Diagnosis:
+@dataclass(repr=False)
+class Diagnosis(DiagnosisViews):
     """Everything :func:`~.report.write_report` needs."""
 
     problem: object

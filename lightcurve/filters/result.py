@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import rotations as rot
 from ..io.atomic import atomic_path
+from ..report.views import EstimateViews
 
 __all__ = ["Estimate", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
            "FLAG_RESAMPLED", "FLAG_NIS", "FLAG_OUTLIER", "FLAG_INFLATED", "FLAG_GATE_RELEASED",
@@ -49,8 +50,8 @@ FLAG_BELOW_HORIZON = 1024
 _FAIL = FLAG_REFUSED | FLAG_COLLAPSE
 
 
-@dataclass
-class Estimate:
+@dataclass(repr=False)
+class Estimate(EstimateViews):
     """Result of one filter run (module docstring for meanings and units).
 
     Attributes

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..report.views import LightcurveViews
 from .atomic import atomic_path
 
 __all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
@@ -22,8 +23,8 @@ __all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
 FORMAT_VERSION = 1
 
 
-@dataclass
-class Lightcurve:
+@dataclass(repr=False)
+class Lightcurve(LightcurveViews):
     """Apparent-magnitude time series with its observation geometry.
 
     Attributes (N measurements, K sites)
@@ -75,6 +76,10 @@ class Lightcurve:
     shape: object = None
 
     def __post_init__(self):
+        if not isinstance(self.epoch_utc, str):  # datetime, numpy.datetime64, skyfield/astropy Time
+            from ..geometry.time import epoch_iso
+
+            self.epoch_utc = epoch_iso(self.epoch_utc)
         self.validate()
 
     # ------------------------------------------------------------------------------------
@@ -393,6 +398,8 @@ def read_lightcurve(path) -> Lightcurve:
             kw["camera_names"] = None if cams is None else [
                 c.decode() if isinstance(c, bytes) else str(c) for c in np.atleast_1d(cams)]
             if "shape" in h:
+                import h5py
+
                 from .shape_h5 import read_shape
 
                 if not isinstance(h["shape"], h5py.Group):
