@@ -50,4 +50,5 @@ def register(sub) -> None:
                    help="discard stored runs of a different (changed) study instead of refusing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     add_model_options(p, shape=False)
-    p.set_defaults(func=_cmd_compare)
+    p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
+                   "run the same command again to resume")

@@ -32,6 +32,7 @@ import numpy as np
 
 from .baseline import bic_gain, fit_baseline, fit_terms
 from .candidates import params_to_json, score_candidates
+from ..report.views import DiagnosisViews
 from .residuals import consistency, find_segments
 
 __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIMING_EFFECTS",
@@ -40,8 +41,8 @@ __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIM
 TIMING_EFFECTS = ("light_time", "clock_offset", "exposure_smearing")
 
 
-@dataclass
-class Diagnosis:
+@dataclass(repr=False)
+class Diagnosis(DiagnosisViews):
     """Everything :func:`~.report.write_report` needs."""
 
     problem: object
@@ -214,11 +215,11 @@ def load_model_scenario(path, *, library_dirs=None, site_dirs=None, shape=None):
     from ..studies.scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
+    doc, text = load_toml(path, with_text=True)
     diag = doc.pop("diagnosis", None)
     had_effects = bool(doc.pop("effects", None))
-    sc = parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"),
-                        library_dirs=library_dirs, site_dirs=site_dirs, shape=shape)
+    sc = parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                        site_dirs=site_dirs, shape=shape)
     opts = {}
     if diag is not None:
         sec = Section(diag, file=path, name="diagnosis")

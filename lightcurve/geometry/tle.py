@@ -20,7 +20,7 @@ A TLE is a mean-element fit valid near its epoch: SGP4 errors grow by roughly a 
 day. :func:`check_element_age` warns (:class:`ElementAgeWarning`) when observations lie more
 than :data:`MAX_AGE_DAYS` from the element epoch.
 
-Hardening: the file is read through :func:`lightcurve.io._reader.read_text_capped` (regular
+Hardening: the file is read through :func:`lightcurve.io.safe_open.read_text` (regular
 files only, :data:`MAX_BYTES`), at most :data:`MAX_SETS` element sets, XML with a DOCTYPE or
 entity declarations is refused; every problem is an :class:`~lightcurve.errors.InputError`
 naming the file and the line or object.
@@ -210,10 +210,10 @@ def load_element_sets(path) -> list:
         An unreadable or special file, a file above :data:`MAX_BYTES`, a malformed TLE line
         (naming the line), a missing OMM field (naming the record), no element set at all.
     """
-    from ..io._reader import read_text_capped
+    from ..io.safe_open import read_text
 
     path = Path(path)
-    text = read_text_capped(path, max_bytes=MAX_BYTES, what="element-set file")
+    text = read_text(path, max_bytes=MAX_BYTES, what="element-set file")
     head = text.lstrip()[:1]
     first = text.lstrip().splitlines()[0] if text.strip() else ""
     if head in ("[", "{"):

@@ -70,7 +70,7 @@ Row handling (documented, counted in ``Lightcurve.attrs``):
   site, an object without element set) raises :class:`~lightcurve.errors.InputError` naming
   the file, the line number and the column.
 
-Hardening: the file is read through :func:`lightcurve.io._reader.read_text_capped` (regular
+Hardening: the file is read through :func:`lightcurve.io.safe_open.read_text` (regular
 files only, at most :data:`MAX_CSV_BYTES`), at most :data:`MAX_ROWS` data rows, fields longer
 than the csv module's limit are refused with the line number.
 """
@@ -88,6 +88,7 @@ import numpy as np
 
 from ..errors import InputError
 from .lightcurve_h5 import Lightcurve
+from .safe_open import CSV_MAX_BYTES, read_text
 from .tomlio import Section
 
 __all__ = ["RecordingSpec", "recording_spec_from_section", "read_recording", "read_recordings",
@@ -96,7 +97,7 @@ __all__ = ["RecordingSpec", "recording_spec_from_section", "read_recording", "re
 #: Accepted ``time_format`` values: ISO 8601 UTC text, Unix seconds (UTC), MJD and JD (UTC).
 TIME_FORMATS = ("iso", "unix_s", "mjd_utc", "jd_utc")
 #: largest recording read (bytes)
-MAX_CSV_BYTES = 256 * 1024 * 1024
+MAX_CSV_BYTES = CSV_MAX_BYTES
 #: most data rows in one recording
 MAX_ROWS = 2_000_000
 _UNITS = {"m": 1.0, "km": 1000.0}
@@ -294,9 +295,8 @@ def _as_spec(spec) -> RecordingSpec:
 # ----------------------------------------------------------------------------------------
 def _read_rows(path: Path, spec: RecordingSpec):
     """(header or None, list of (line_no, fields)) with comments and blank lines removed."""
-    from ._reader import read_text_capped
-
-    text = read_text_capped(path, max_bytes=MAX_CSV_BYTES, what="recording")
+    # a regular file of at most CSV_MAX_BYTES (no FIFO, device or endless file)
+    text = read_text(path, max_bytes=CSV_MAX_BYTES, what="CSV recording", encoding="utf-8-sig")
     header = None
     rows = []
     for no, line in enumerate(text.splitlines(), start=1):
@@ -306,9 +306,9 @@ def _read_rows(path: Path, spec: RecordingSpec):
             continue
         try:
             fields = [f.strip() for f in next(csv.reader([line], delimiter=spec.delimiter))]
-        except csv.Error as exc:
-            raise InputError(f"line {no}: cannot split the line: {exc}", file=path,
-                             field=f"line {no}") from None
+        except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+            raise InputError(f"unreadable CSV line: {exc}", file=path, field=f"line {no}",
+                             allowed=f"fields of at most {csv.field_size_limit()} characters") from None
         if spec.header and header is None:
             header = (no, fields)
             continue

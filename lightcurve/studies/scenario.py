@@ -151,19 +151,24 @@ def load_scenario(path, library_dirs=None, site_dirs=None, *, shape=None) -> Sce
     ``[shape]`` (whose keys are still validated), e.g. the shape a lightcurve file carries.
     """
     path = Path(path)
-    doc = load_toml(path)
-    return parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"),
-                          library_dirs=library_dirs, site_dirs=site_dirs, shape=shape)
+    doc, text = load_toml(path, with_text=True)
+    return parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                          site_dirs=site_dirs, shape=shape)
 
 
 def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs=None,
-                   site_dirs=None, *, shape=None, sites=None) -> Scenario:
+                   site_dirs=None, *, embedded: bool = False, shape=None,
+                   sites=None) -> Scenario:
     """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`.
 
     Parameters
     ----------
     library_dirs, site_dirs : optional
         Extra shape-library and observatory folders (searched before the bundled ones).
+    embedded : bool
+        True for a scenario read from inside a data file (the ``scenario`` attribute of a
+        lightcurve HDF5 file): it may name a library shape only, never a mesh or shape file by
+        path, so a received file cannot make the program read an arbitrary file.
     shape : Shape, optional
         A resolved shape used instead of loading ``[shape]`` (its keys are still validated;
         ``areas_m2`` is then not applied: the given shape is final).
@@ -218,6 +223,11 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
 
     sh = root.section("shape")
     base = Path(str(file)).parent if file and not str(file).startswith("<") else Path.cwd()
+    if embedded and (sh.has("mesh") or sh.has("materials")):
+        raise InputError("a scenario stored in a data file may not name mesh or material "
+                         "files", file=file, field="shape.mesh" if sh.has("mesh") else
+                         "shape.materials", allowed="a library shape name (shape.name); give "
+                         "the model scenario as a file instead")
     if sh.has("mesh"):
         mesh = base / sh.str("mesh")
         materials = base / sh.str("materials")
@@ -229,7 +239,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     given_shape = shape is not None
     if not given_shape:
         try:
-            shape = load_shape(spec, library_dirs=library_dirs)
+            shape = load_shape(spec, library_dirs=library_dirs, library_only=embedded)
         except InputError:
             raise
         except (FileNotFoundError, KeyError) as exc:
@@ -394,9 +404,9 @@ def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, si
     src = str(file) if file is not None else "<lightcurve>"
     if scenario is not None:
         path = Path(scenario)
-        doc = load_toml(path)
-        text = path.read_text(encoding="utf-8")
+        doc, text = load_toml(path, with_text=True)   # read once (regular file, size cap)
         fname = path
+        embedded = False
     else:
         text = getattr(curve, "scenario_toml", "") or ""
         if not text.strip():
@@ -404,6 +414,7 @@ def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, si
                              file=src, field="scenario")
         fname = f"{src}:scenario"
         doc = loads_toml(text, file=fname)
+        embedded = True      # from inside a data file: library shapes only, no file paths
     for key in drop:
         doc.pop(key, None)
     lla = np.asarray(curve.site_lla_deg_m, float).reshape(-1, 3)
@@ -414,5 +425,5 @@ def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, si
         except InputError:
             continue
     return parse_scenario(doc, file=fname, text=text, library_dirs=library_dirs,
-                          site_dirs=site_dirs, sites=known,
+                          site_dirs=site_dirs, sites=known, embedded=embedded,
                           shape=shape if shape is not None else getattr(curve, "shape", None))

@@ -17,8 +17,8 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "formats.md"
 
 
 def example(name):
-    """The code block after ``<!-- example: name -->`` in docs/formats.md."""
-    m = re.search(rf"<!-- example: {re.escape(name)} -->\s*```\w*\n(.*?)```", DOC.read_text(), re.S)
+    """The code block after ``<!-- cli-example: name -->`` in docs/formats.md."""
+    m = re.search(rf"<!-- cli-example: {re.escape(name)} -->\s*```\w*\n(.*?)```", DOC.read_text(), re.S)
     assert m, f"example {name!r} missing from docs/formats.md"
     return m.group(1)
 
