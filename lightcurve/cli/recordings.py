@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import add_model_options, number
+from ._args import add_model_options, add_output, add_quiet, number
 
 __all__ = ["register", "output_paths", "find_passes"]
 
@@ -282,9 +282,9 @@ def register(sub) -> None:
         "HDF5 per object and band, carrying the model scenario and its shape so that every "
         "later command works on it without further options.")
     p.add_argument("recording", metavar="RECORDING.csv", help="the CSV recording")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.h5",
-                   help="output file (one object and band), or the stem of OUT.<object>.h5 "
-                   "files (several), or an existing folder")
+    add_output(p, what="file", required=True,
+               help="output file OUT.h5 (one object and band), or the stem of "
+               "OUT.<object>.h5 files (several), or an existing folder")
     p.add_argument("--scenario", action="append", default=None, metavar="[OBJECT=]MODEL.toml",
                    help="model scenario (shape, attitude, sites, epoch, [recording] columns); "
                    "OBJECT=FILE gives one object its own (repeatable)")
@@ -299,8 +299,7 @@ def register(sub) -> None:
     p.add_argument("--unlit", choices=("skip", "keep"), default=None,
                    help="rows with the object in the Earth's shadow: skip (default) or keep "
                    "(default keep when the scenario ignores the eclipse)")
-    p.add_argument("-q", "--quiet", action="store_true", help="accepted for consistency; "
-                   "import prints one line per written file")
+    add_quiet(p, help="accepted for consistency (import prints one line per written file)")
     add_model_options(p)
     p.set_defaults(func=_cmd_import)
 
@@ -324,7 +323,7 @@ def register(sub) -> None:
                    help="the site is dark when the Sun is below this altitude, deg (default -12)")
     p.add_argument("--step-s", type=number(0.1, 600.0), default=10.0,
                    help="sampling step within a pass, s (default 10)")
-    p.add_argument("-o", "--output", default=None, metavar="FILE.csv", help="write CSV here")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_output(p, what="file", help="write the CSV to this file instead of stdout")
+    add_quiet(p)
     add_model_options(p, shape=False, library=False)
     p.set_defaults(func=_cmd_passes)
