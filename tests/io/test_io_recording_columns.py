@@ -133,3 +133,11 @@ def test_special_files_and_size_caps(tmp_path, monkeypatch):
     g = _write(tmp_path, [HEAD, f'{WHEN},6.0,0.05,"{"x" * 140_000}",40,100,1e6'], "long.csv")
     with pytest.raises(InputError, match="line 2"):
         read_recording(g)
+
+
+def test_a_csv_given_as_lightcurve_says_import_it(tmp_path):
+    from lightcurve.io.lightcurve_h5 import read_lightcurve
+
+    f = _write(tmp_path, [HEAD, f"{WHEN},6.0,0.05,{GEOM}"])
+    with pytest.raises(InputError, match="lightcurve import"):
+        read_lightcurve(f)
