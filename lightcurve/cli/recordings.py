@@ -149,6 +149,8 @@ def _after(start, seconds) -> str:
 
 #: longest time span ``lightcurve passes`` searches (days)
 MAX_PASS_SPAN_DAYS = 31.0
+#: most samples evaluated in one pass (bounded memory: ~1 kB per sample in the geometry)
+MAX_PASS_SAMPLES = 1_000_000
 
 
 def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twilight_deg=-12.0,
@@ -161,7 +163,9 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
     at least partly sunlit (:func:`lightcurve.geometry.eclipse.lit_fraction` > 0, the
     package's conical shadow) and the Sun is below ``twilight_deg`` at the site. Passes with no
     visible sample are left out. A pass already in progress at ``start`` (or still at ``end``)
-    is cut there.
+    is cut there; an object above the limit during the whole span (no rise or set, e.g. a
+    geostationary one) is one pass from ``start`` to ``end``. More than
+    :data:`MAX_PASS_SAMPLES` samples in one pass is an InputError naming ``--step-s``.
 
     Returns
     -------
@@ -184,6 +188,10 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
         sat = es.satellite()
         times, events = sat.find_events(topos, t0, t1, altitude_degrees=float(min_elevation_deg))
         passes, cur = [], None
+        if len(events) == 0:  # no rise or set: above the limit all the time (e.g. GEO), or never
+            alt = (sat - topos).at(t0).altaz()[0].degrees
+            if alt >= min_elevation_deg:
+                passes.append({"rise": start, "culm": None, "set": end})
         for t, e in zip(times, events):
             if e == 0:
                 cur = {"rise": t.utc_datetime(), "culm": None}
@@ -204,6 +212,11 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
             dur = (ps["set"] - ps["rise"]).total_seconds()
             if dur <= 0:
                 continue
+            if dur / step_s > MAX_PASS_SAMPLES:
+                raise InputError(f"a pass of {es.label} lasts {dur:.0f} s: too many samples at "
+                                 f"this step", field="--step-s", value=step_s,
+                                 allowed=f">= {dur / MAX_PASS_SAMPLES:.3g} s "
+                                 f"(at most {MAX_PASS_SAMPLES} samples per pass)")
             tt = np.unique(np.concatenate([np.arange(0.0, dur, float(step_s)), [dur]]))
             epoch = ps["rise"].strftime("%Y-%m-%dT%H:%M:%S.%fZ")
             r, _ = es.positions(epoch, tt)

@@ -164,3 +164,22 @@ def test_passes_match_a_brute_force_skyfield_search(tmp_path):
         for s, e in mine:
             inside = [vis[k] for k, g in enumerate(grid) if s <= g <= e]
             assert not inside or any(inside) or (e - s).total_seconds() < step, (name, s, e)
+
+
+def test_an_object_above_the_horizon_all_day_is_one_pass(tmp_path):
+    """A geostationary object (a = 42 164 km, i ≈ 0) over Arizona has no rise or set: one pass
+    spanning the search, whose visible part is the night (skyfield: find_events finds nothing)."""
+    from lightcurve.cli.recordings import find_passes
+    from lightcurve.geometry.sites import get_site
+
+    (l1, l2), _ = _lines(91111, a_km=42164.0, e=1e-4, i=0.05, raan=0.0, argp=0.0, M=90.0)
+    f = tmp_path / "geo.tle"
+    f.write_text(f"GEO\n{l1}\n{l2}\n")
+    rows = find_passes(load_element_sets(f), get_site("mount_lemmon"), EPOCH,
+                       EPOCH + timedelta(days=1), step_s=60.0)
+    assert len(rows) == 1 and rows[0]["rise_utc"] == "2022-03-21T02:00:00Z"
+    assert rows[0]["set_utc"] == "2022-03-22T02:00:00Z" and rows[0]["max_elevation_deg"] > 10
+    assert 4 * 3600 < rows[0]["visible_s"] < 14 * 3600     # one night, not the whole day
+    with pytest.raises(InputError, match="--step-s"):
+        find_passes(load_element_sets(f), get_site("mount_lemmon"), EPOCH,
+                    EPOCH + timedelta(days=1), step_s=0.05)
