@@ -141,3 +141,15 @@ def test_a_csv_given_as_lightcurve_says_import_it(tmp_path):
     f = _write(tmp_path, [HEAD, f"{WHEN},6.0,0.05,{GEOM}"])
     with pytest.raises(InputError, match="lightcurve import"):
         read_lightcurve(f)
+
+
+def test_scenario_band_sets_the_sun_magnitude():
+    from lightcurve._paths import data_dir
+    from lightcurve.studies.scenario import parse_scenario
+
+    text = (data_dir("pipelines") / "default.toml").read_text()
+    sc = parse_scenario(text.replace("[measurement]", '[measurement]\nband = "g"'), file="<t>")
+    assert sc.measurement.sun_mag == sun_magnitude("g") and sc.measurement.band == "g"
+    with pytest.raises(InputError, match="not both"):
+        parse_scenario(text.replace("[measurement]", '[measurement]\nband = "g"\nsun_mag = -26.0'),
+                       file="<t>")
