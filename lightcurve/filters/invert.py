@@ -39,11 +39,12 @@ def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
     ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and ``inertia_kg_m2`` when set. ``{}`` when the
     file has no scenario.
 
-    A complete scenario goes through the scenario loader
+    A complete scenario (a ``[scenario]`` table with its ``epoch_utc``, as ``simulate`` and
+    ``import`` store) goes through the scenario loader
     (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as the
-    resolved shape); a text holding only an ``[attitude]`` table (synthetic curves, files
-    of earlier versions) has those four keys validated with the loader's ranges. Invalid
-    content is an :class:`InputError`, never silently ignored.
+    resolved shape); any other text (synthetic test curves holding only an ``[attitude]``
+    table) has those four keys validated with the loader's ranges. Invalid content is an
+    :class:`InputError`, never silently ignored.
     """
     text = getattr(curve, "scenario_toml", "") or ""
     if not text.strip():
@@ -52,7 +53,7 @@ def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
 
     src = (curve.attrs or {}).get("file") or "<lightcurve>"
     doc = loads_toml(text, file=f"{src}:scenario")
-    if "scenario" in doc:
+    if isinstance(doc.get("scenario"), dict) and "epoch_utc" in doc["scenario"]:
         from ..studies.scenario import scenario_from_lightcurve
 
         at = scenario_from_lightcurve(curve, src, shape=shape, library_dirs=library_dirs,
