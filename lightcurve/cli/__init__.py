@@ -1,14 +1,15 @@
 """The ``lightcurve`` command line.
 
 One module per subcommand group (``sites``, ``shapes``, ``simulate``/``plot``/``demo``, ``css``,
-``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``, ``selfcheck``); each has a
-``register(subparsers)`` function and thin handlers that parse arguments, call the library and
-print. Shared option types live in :mod:`lightcurve.cli._args`. Exit codes: 0 success,
-1 run-time failure, 2 bad usage or bad input (one clear line; the traceback only with
-``--debug``), 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP (stored results kept;
-one line saying how to resume, :mod:`lightcurve.process`). Every command runs with its
-inputs tracked (:func:`lightcurve.io.safe_open.track_inputs`): an output that would replace
-one of its inputs is refused (exit 2).
+``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``,
+``selfcheck``); each has a ``register(subparsers)`` function and thin handlers that parse
+arguments, call the library and print. Shared option types live in
+:mod:`lightcurve.cli._args`. Exit codes: 0 success, 1 run-time failure, 2 bad usage or bad
+input (one clear line; the traceback only with ``--debug``), 130 / 143 / 129 interrupted by
+SIGINT / SIGTERM / SIGHUP (stored results kept; one line saying how to resume,
+:mod:`lightcurve.process`). Every command runs with its inputs tracked
+(:func:`lightcurve.io.safe_open.track_inputs`): an output that would replace one of its inputs
+is refused (exit 2).
 """
 
 from __future__ import annotations

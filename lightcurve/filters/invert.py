@@ -35,20 +35,42 @@ ATTITUDE_MODES = ("estimate", "truth")
 
 
 def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
-    """The ``[attitude]`` of the scenario stored in the file, through the validated scenario
-    loader (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as
-    the resolved shape): keys ``dynamics``, ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and
-    ``inertia_kg_m2`` when the scenario sets it. ``{}`` when the file has no scenario."""
-    if not (getattr(curve, "scenario_toml", "") or "").strip():
-        return {}
-    from ..studies.scenario import scenario_from_lightcurve
+    """The ``[attitude]`` of the scenario stored in the file, validated: keys ``dynamics``,
+    ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and ``inertia_kg_m2`` when set. ``{}`` when the
+    file has no scenario.
 
-    at = scenario_from_lightcurve(curve, (curve.attrs or {}).get("file"), shape=shape,
-                                  library_dirs=library_dirs, site_dirs=site_dirs).attitude
-    out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
-           "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
-    if at.inertia_kg_m2 is not None:
-        out["inertia_kg_m2"] = at.inertia_kg_m2
+    A complete scenario (a ``[scenario]`` table with its ``epoch_utc``, as ``simulate`` and
+    ``import`` store) goes through the scenario loader
+    (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as the
+    resolved shape); any other text (synthetic test curves holding only an ``[attitude]``
+    table) has those four keys validated with the loader's ranges. Invalid content is an
+    :class:`InputError`, never silently ignored.
+    """
+    text = getattr(curve, "scenario_toml", "") or ""
+    if not text.strip():
+        return {}
+    from ..io.tomlio import Section, loads_toml
+
+    src = (curve.attrs or {}).get("file") or "<lightcurve>"
+    doc = loads_toml(text, file=f"{src}:scenario")
+    if isinstance(doc.get("scenario"), dict) and "epoch_utc" in doc["scenario"]:
+        from ..studies.scenario import scenario_from_lightcurve
+
+        at = scenario_from_lightcurve(curve, src, shape=shape, library_dirs=library_dirs,
+                                      site_dirs=site_dirs).attitude
+        out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
+               "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
+        if at.inertia_kg_m2 is not None:
+            out["inertia_kg_m2"] = at.inertia_kg_m2
+        return out
+    sec = Section(doc.get("attitude", {}), file=f"{src}:scenario", name="attitude")
+    out = {"dynamics": sec.str("dynamics", "controlled",
+                               choices=("controlled", "uncontrolled", "law")),
+           "acs_sigma_deg": sec.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+           "eta_sigma_deg_s2": sec.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0)}
+    J = sec.matrix("inertia_kg_m2", None, shape=(3, 3))
+    if J is not None:
+        out["inertia_kg_m2"] = J
     return out
 
 
@@ -299,7 +321,7 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
 
 def attach_measurements(est, curve, model) -> None:
     """Record what a real-data plot of ``est`` needs (:class:`Estimate` fields): the epoch,
-    the source file, the measured magnitudes, their σ and sites, and ``mag_post`` — the
+    the source file, the measured magnitudes, their σ and sites, and ``predicted_mag`` — the
     measurement model's magnitude at the posterior attitude of every epoch (nominal shape,
     no bias states; +inf where no light reaches the observer)."""
     est.epoch_utc = str(curve.epoch_utc)
@@ -313,4 +335,4 @@ def attach_measurements(est, curve, model) -> None:
     for k in range(len(curve)):
         if np.all(np.isfinite(q[k])):
             post[k] = float(model.predict_q(q[k], k)[0])
-    est.mag_post = post
+    est.predicted_mag = post

@@ -83,11 +83,12 @@ class Estimate(EstimateViews):
     source_file : str — the lightcurve file inverted ('' if unknown)
     mag, mag_sigma : (N,) measured magnitudes and their 1σ (mag) or None
     site : (N,) int site index of every epoch, ``site_names`` the site ids, or None
-    mag_post : (N,) model magnitude at the posterior attitude of every epoch (mag; nominal
+    predicted_mag : (N,) model magnitude at the posterior attitude of every epoch (mag; nominal
         shape, no bias states; +inf where no light reaches the observer) or None
 
-    Derived: :attr:`mag_pred` = ``mag − innovations`` (the prior prediction ŷ used by the
-    update) and :attr:`nis` = ``ν² / S`` (normalised innovation squared, χ²₁ when consistent).
+    Derived: :attr:`prior_predicted_mag` = ``mag − innovations`` (the prior prediction ŷ used
+    by the update) and :attr:`nis` = ``ν² / S`` (normalised innovation squared, χ²₁ when
+    consistent).
     """
 
     method: str
@@ -123,13 +124,13 @@ class Estimate(EstimateViews):
     mag_sigma: np.ndarray | None = None
     site: np.ndarray | None = None
     site_names: list | None = None
-    mag_post: np.ndarray | None = None
+    predicted_mag: np.ndarray | None = None
 
     def __len__(self):
         return int(self.t.shape[0])
 
     @property
-    def mag_pred(self) -> np.ndarray | None:
+    def prior_predicted_mag(self) -> np.ndarray | None:
         """(N,) prior predicted magnitude ``ŷ = y − ν`` (mag; NaN where no update)."""
         if self.mag is None:
             return None
@@ -259,8 +260,8 @@ class Estimate(EstimateViews):
                                     ("refl_p_sigma", "xi, a, m dimensionless; A m^2"),
                                     ("mag", "mag, measured"), ("mag_sigma", "mag, 1 sigma"),
                                     ("site", "index into site_names"),
-                                    ("mag_post", "mag, model at the posterior attitude"),
-                                    ("mag_pred", "mag, prior prediction y - innovation"),
+                                    ("predicted_mag", "mag, model at the posterior attitude"),
+                                    ("prior_predicted_mag", "mag, prior prediction y - innovation"),
                                     ("nis", "innovation^2 / innovation_var")):
                     v = getattr(self, name)
                     if v is None:
@@ -302,7 +303,7 @@ def read_estimate(path) -> Estimate:
                         "innovations", "innovation_var", "n_eff", "flags", "att_error_deg",
                         "omega_error_rad_s", "nees", "bias", "bias_sigma", "refl_z",
                         "refl_z_sigma", "refl_p", "refl_p_sigma", "mag", "mag_sigma", "site",
-                        "mag_post")}
+                        "predicted_mag")}
         kw["epoch_utc"] = str(h.attrs.get("epoch_utc", ""))
         kw["source_file"] = str(h.attrs.get("source_file", ""))
         if "site_names_json" in h.attrs:

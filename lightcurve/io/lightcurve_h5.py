@@ -92,6 +92,11 @@ class Lightcurve(LightcurveViews):
         return self.truth_q is not None
 
     @property
+    def camera_index(self) -> np.ndarray | None:
+        """Alias of :attr:`camera` (per-row camera index, or None)."""
+        return self.camera
+
+    @property
     def obj_to_sun_unit(self) -> np.ndarray:
         """(N,3) unit vector from the object to the Sun, ECI."""
         d = self.r_sun_eci_m - self.r_obj_eci_m
@@ -407,7 +412,12 @@ def read_lightcurve(path) -> Lightcurve:
                 kw["shape"] = read_shape(h["shape"], file=path)
             else:
                 kw["shape"] = None
-    except InputError:
+    except InputError as exc:
+        if exc.bare_message.startswith("not a readable HDF5") and \
+                path.suffix.lower() in (".csv", ".txt", ".tsv", ".dat"):
+            raise InputError("not an HDF5 lightcurve: a CSV recording is imported first "
+                             "('lightcurve import RECORDING.csv -o OUT.h5 --scenario MODEL.toml', "
+                             "docs/formats.md)", file=path) from None
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py: damaged file
         raise InputError(f"corrupted or unexpected HDF5 content: {exc}", file=path) from None

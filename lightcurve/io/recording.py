@@ -948,7 +948,7 @@ def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=N
         missing = want - set(rows.obj)
         if missing:
             raise InputError("object not in the recording", file=path, field="object",
-                             value=sorted(missing)[0], allowed=", ".join(dict.fromkeys(rows.obj)))
+                             value=min(missing), allowed=", ".join(dict.fromkeys(rows.obj)))
         groups = {k: v for k, v in groups.items() if k[0] in want}
     base_epoch = spec.epoch_utc or (scenario.epoch_utc if scenario is not None else None)
     if base_epoch is None:

@@ -141,9 +141,9 @@ def execute_task(task: RunTask) -> dict:
            "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
            "status": "ok", "error": ""}
     try:
+        dirs = (tuple(getattr(task, "library_dirs", ())), tuple(getattr(task, "site_dirs", ())))
         lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
-                         int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
-                         tuple(getattr(task, "site_dirs", ())))
+                         int(task.sim_seed), *(dirs if any(dirs) else ()))
         opts = dict(task.options)
         kw = {}
         if c.filter == "bpf" and "particles" in opts:

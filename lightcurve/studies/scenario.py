@@ -82,7 +82,8 @@ class MeasurementSpec:
     ``ignore_eclipse``: compute magnitudes as if the object were sunlit (thesis cases);
     ``min_elevation_deg``: lowest usable object elevation; ``require_dark_site`` with
     ``twilight_deg``: measure only when the Sun is below that altitude at the site;
-    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74).
+    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74); ``band``: a band of
+    :data:`lightcurve.photometry.bands.SUN_MAGNITUDES` setting ``sun_mag`` ('' = not given).
     """
 
     r_percent: float = 1.0
@@ -91,6 +92,7 @@ class MeasurementSpec:
     require_dark_site: bool = True
     twilight_deg: float = -12.0
     sun_mag: float = -26.74
+    band: str = ""
 
 
 @dataclass
@@ -342,6 +344,15 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         twilight_deg=me.float("twilight_deg", -12.0, min=-90.0, max=10.0),
         sun_mag=me.float("sun_mag", -26.74, min=-30.0, max=-20.0),
     )
+    band = me.str("band", None)
+    if band is not None:  # the Sun's magnitude of that band (lightcurve.photometry.bands)
+        from ..photometry.bands import sun_magnitude
+
+        if me.has("sun_mag"):
+            raise InputError("give measurement.band or measurement.sun_mag, not both", file=file,
+                             field="measurement.band", value=band)
+        meas.sun_mag = sun_magnitude(band, file=file, field="measurement.band")
+        meas.band = band
     me.check_unknown()
 
     rec = root.section("recording", None)

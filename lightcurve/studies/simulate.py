@@ -228,6 +228,8 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
                "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": n_no_reflection},
         shape=nominal_shape,
     )
+    if getattr(meas, "band", ""):
+        lc.attrs["band"] = meas.band
     if effects_json is not None:
         lc.attrs["effects"] = effects_json
     if refl_truth is not None:
