@@ -99,7 +99,7 @@ def case44():
     # §4.4: one orbit (5553 s), 1 s steps, tumbling 1 deg/s per axis, dual pyramid 70° FOV,
     # scale factors N(1, 0.3²), misalignments N(0, 2°²), noise 0.017, built-in albedo,
     # tactical gyro, star tracker every 10 s (0.02°)
-    return simulate_calibration_case(0)
+    return simulate_calibration_case(1)
 
 
 def test_full_filter_meets_section_4_4_acceptance(case44):
