@@ -33,7 +33,7 @@ eq. 3.51-3.52 (§3.2.2.2: "the traditional, non-optimal, version of the ECKF is 
     P_x⁺ = P_x − K W Kᵀ,  L⁺ = (I − K H) L,  Λ⁺ = (I − K H) Λ − K J B_ν   (eq. 3.52)
 
 with J from eq. 3.57f.  Measurement consistency (§3.2.3): for a sensor whose predicted Sun lies
-within γ of its visibility boundary (field of view, or for the dual pyramid the structure
+within γ of its visibility boundary (inside or outside) (field of view, or for the dual pyramid the structure
 horizon, whichever is nearer along the great circle through the Sun), γ = the 3σ misalignment
 offset of eq. 3.61 plus 3σ of the Sun-direction angle of eq. 3.62, the innovation variance gets
 the maximum error of eq. 3.63, ``(|d̂| Ĉ_κ {cos(ψ_b − min(ψ_b, γ)) + σ_Vα + σ_V})²``.
@@ -254,32 +254,35 @@ def thesis_update_nb(d, P, L, Lam, Beta, Bnu, y, normals, az, el, cos_fov, horiz
     for a in range(m):
         i = idx[a]
         J[a, 3 * N + i] = nd                      # V_αβ: |d̂| Ĉ_κ
+        th, ph = az[i], el[i]
         if inview[a]:
-            th, ph = az[i], el[i]
             J[a, i] = H[a, 0] * d[0] + H[a, 1] * d[1] + H[a, 2] * d[2]
             J[a, N + i] = np.cos(ph) * (-d[0] * np.sin(th) + d[1] * np.cos(th))
             J[a, 2 * N + i] = (-(d[0] * np.cos(th) + d[1] * np.sin(th)) * np.sin(ph)
                                + d[2] * np.cos(ph))
-            # §3.2.3 consistency: near the visibility boundary, add the maximum error
-            ci = H[a, 0] * u[0] + H[a, 1] * u[1] + H[a, 2] * u[2]
-            ang = np.arccos(min(1.0, max(-1.0, ci)))
-            psi_b = min(np.arccos(min(1.0, max(-1.0, cos_fov[i]))),
-                        _boundary_angle(normals[i], horizon[i], u))
-            cs = prm[9]
-            # eq. 3.61 with cs × σ misalignments
-            gm = np.arccos(min(1.0, np.cos(cs * smis) * np.cos(ph) * np.cos(ph + cs * smis)
-                               + np.sin(ph) * np.sin(ph + cs * smis)))
-            # eq. 3.62: angle of d̂ from c = n̂_i, first-order variance J_γ P J_γᵀ
-            den = np.sqrt(max(1e-12, 1.0 - ci * ci))
-            Jg = (u * ci - H[a]) / (den * nd)
-            vg = 0.0
-            for p in range(3):
-                for q in range(3):
-                    vg += Jg[p] * P[p, q] * Jg[q]
-            gamma = gm + cs * np.sqrt(max(vg, 0.0))
-            if psi_b - ang < gamma:
-                emax = nd * (np.cos(psi_b - min(psi_b, gamma)) + prm[11] + sig_v)
-                R[a, a] += emax * emax
+        # §3.2.3 consistency: within γ of the visibility boundary (either side), add the
+        # maximum error of eq. 3.63
+        ci = H[a, 0] * u[0] + H[a, 1] * u[1] + H[a, 2] * u[2]
+        ang = np.arccos(min(1.0, max(-1.0, ci)))
+        psi_b = min(np.arccos(min(1.0, max(-1.0, cos_fov[i]))),
+                    _boundary_angle(normals[i], horizon[i], u))
+        cs = prm[9]
+        # eq. 3.61 with cs × σ misalignments
+        gm = np.arccos(min(1.0, np.cos(cs * smis) * np.cos(ph) * np.cos(ph + cs * smis)
+                           + np.sin(ph) * np.sin(ph + cs * smis)))
+        # eq. 3.62 (Appendix D): first-order variance of the angle between d̂ and c = n̂_i,
+        # J_γ = (u (cᵀu) − c)ᵀ / (|d̂| √(1 − (cᵀu)²)) — the 1/|d̂| of the derivative is
+        # missing from the printed eq. D.7
+        den = np.sqrt(max(1e-12, 1.0 - ci * ci))
+        Jg = (u * ci - H[a]) / (den * nd)
+        vg = 0.0
+        for p in range(3):
+            for q in range(3):
+                vg += Jg[p] * P[p, q] * Jg[q]
+        gamma = gm + cs * np.sqrt(max(vg, 0.0))
+        if abs(psi_b - ang) < gamma:
+            emax = nd * (np.cos(psi_b - min(psi_b, gamma)) + prm[11] + sig_v)
+            R[a, a] += emax * emax
     # W (eq. 3.47)
     PHt = P @ H.T
     LamJt = Lam @ J.T
