@@ -554,7 +554,8 @@ def _f(x):
 def load_study(path) -> StudySpec:
     """Read a study TOML (module docstring); :class:`InputError` on bad input."""
     path = Path(path)
-    doc = Section(load_toml(path), file=path)
+    raw, text = load_toml(path, with_text=True)
+    doc = Section(raw, file=path)
     st = doc.section("study")
     sc = doc.section("scenario")
     spec = StudySpec(
@@ -587,7 +588,7 @@ def load_study(path) -> StudySpec:
         variants=_list("variants", spec.variants, VARIANTS),
         gyros=_list("gyros", spec.gyros, _GYROS),
         duration_s=sc.float("duration_s", 6000.0, min=10.0, max=86400.0), albedo=alb,
-        text=path.read_text(encoding="utf-8"), source=str(path))
+        text=text, source=str(path))
     sc.check_unknown()
     sim = doc.section("simulation", None)
     if sim is not None:
