@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._args import SEED, number, output_not_input
+import argparse
+
+from ._args import SEED, add_executors, add_output, add_quiet, number, output_not_input
 
 __all__ = ["register"]
 
@@ -112,7 +114,7 @@ def _cmd_css_study(args) -> int:
     summary = run_study(spec, out_dir, runs=args.runs, workers=args.workers,
                         scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
                         progress=not args.quiet)
-    print(f"{spec.name}: {summary['verdict']}")
+    print(f"{spec.name}: {summary['verdict']['text']}")
     print(f"{'estimator':>9} {'variant':>7} {'gyro':>12} {'runs':>5} {'p99 lvl':>8} "
           f"{'thesis':>7} {'>15 max min/orb':>15}")
     for c in summary["cases"]:
@@ -191,17 +193,13 @@ def register(sub) -> None:
         "15/30 deg per orbit. Finished runs are kept under DIR/runs and skipped on restart.")
     st.add_argument("pipeline", help="study TOML file")
     st.add_argument("--runs", type=number(1, 100000, integer=True), help="override the number of runs")
-    st.add_argument("-o", "--output", "--out", dest="output",
-                    help="output folder (default <study name>-report); --out is a deprecated alias")
-    ex = st.add_mutually_exclusive_group()
-    ex.add_argument("--workers", type=number(1, 1024, integer=True),
-                    help="worker processes (default: the number of cores; 1 runs inline)")
-    ex.add_argument("--dask-local", type=number(1, 1024, integer=True),
-                    help="start a local Dask cluster with W worker processes")
-    ex.add_argument("--scheduler", help="address of an existing Dask scheduler (tcp://host:port)")
+    add_output(st, what="folder", help="output folder; finished runs are kept there and "
+               "skipped on restart (default <study name>-report)")
+    st.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
+    add_executors(st)
     st.add_argument("--force", action="store_true",
                     help="discard stored runs of a different study in the output folder")
-    st.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_quiet(st)
     st.set_defaults(func=_cmd_css_study)
 
     # --- calibration, fault detection, VMM/SMM, Sun models (handlers in

@@ -446,9 +446,11 @@ def summarize(spec: StudySpec, out_dir, *, runs=None) -> dict:
     return summary
 
 
-def _verdict(spec, cases) -> str:
-    """One line: thesis-variant p99 levels against the thesis's numbers (±25 %)."""
+def _verdict(spec, cases) -> dict:
+    """One line, ``{"level", "text"}``: thesis-variant p99 levels against the thesis's numbers
+    (±25 %); ok when all agree, warn otherwise."""
     parts = []
+    all_ok = True
     for c in cases:
         if c["variant"] != "thesis" or c.get("thesis_p99_deg") is None:
             continue
@@ -463,7 +465,11 @@ def _verdict(spec, cases) -> str:
             agree = abs(lv / th - 1.0) <= 0.25
             parts.append(f"{c['estimator'].upper()} {lv:.2f}° vs {th:g}° "
                          f"({'within' if agree else 'outside'} ±25 %)")
-    return "; ".join(parts) if parts else "no thesis reference number for this experiment"
+        all_ok &= bool(agree)
+    if not parts:
+        return {"level": "warn", "text": "no thesis reference number for this experiment"}
+    return {"level": "ok" if all_ok else "warn",
+            "text": "thesis variant vs the thesis's 99th percentile: " + "; ".join(parts)}
 
 
 def write_report(spec: StudySpec, summary: dict, out_dir) -> Path:
@@ -520,13 +526,7 @@ def write_report(spec: StudySpec, summary: dict, out_dir) -> Path:
         axes[0, 0].set_ylabel("Sun-direction error (deg)")
         axes[0, 0].legend(fontsize=7, loc="upper right")
         figs.append((f"Error envelopes, gyro {gyro}", figure_to_data_uri(fig)))
-    parts = ["<!DOCTYPE html><html><head><meta charset='utf-8'>",
-             f"<title>{html.escape(spec.name)}</title><style>"
-             "body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
-             "td,th{border:1px solid #bbb;padding:3px 6px;font-size:13px}</style></head><body>",
-             f"<h1>{html.escape(spec.name)}</h1>",
-             f"<p><b>Verdict:</b> {html.escape(summary['verdict'])}</p>",
-             f"<p>{summary['runs']} runs per case, {summary['failures']} failed; configuration "
+    parts = [f"<p>{summary['runs']} runs per case, {summary['failures']} failed; configuration "
              f"{html.escape(spec.configuration)}, {'controlled' if spec.controlled else 'tumbling'}, "
              f"truth albedo {html.escape(spec.albedo)}; time axis: time with at least one "
              f"directly lit sensor (O'Keefe §3.3.1); p99 level: median of the p99 envelope "
@@ -538,8 +538,12 @@ def write_report(spec: StudySpec, summary: dict, out_dir) -> Path:
     parts.append("<h2>Values the text leaves open (our choices)</h2><ul>")
     parts += [f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>"
               for k, v in ok.OPEN_CHOICES.items()]
-    parts.append("</ul></body></html>")
-    atomic_write_text(out / "report.html", "\n".join(parts) + "\n")
+    parts.append("</ul>")
+    from ..report.style import page_html
+
+    v = summary["verdict"]
+    atomic_write_text(out / "report.html",
+                      page_html(spec.name, (v["level"], v["text"]), "\n".join(parts)))
     return out
 
 

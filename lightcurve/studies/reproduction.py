@@ -164,8 +164,9 @@ def css_section(study_dirs) -> str:
         if s is None:
             lines += ["", "Not run yet.", ""]
             continue
+        v = s["verdict"]["text"] if isinstance(s["verdict"], dict) else s["verdict"]
         lines += ["", f"{s['runs']} runs per case (thesis: 1000), truth albedo `{s['albedo']}`, "
-                  f"{s['failures']} failed runs.  Verdict: {s['verdict']}", ""]
+                  f"{s['failures']} failed runs.  Verdict: {v}", ""]
         lines += _table(s)
         lines.append("")
     lines += ["### Tables 3.1, 4.1–4.5, 5.1–5.2", "",

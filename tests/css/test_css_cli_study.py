@@ -86,6 +86,7 @@ def test_study_load_run_resume_report(tmp_path, capsys):
     assert data["cases"][0]["thesis_p99_deg"] == 4.0
     html = (out / "report.html").read_text()
     assert "Verdict:" in html and "data:image/png;base64," in html
+    assert data["verdict"]["level"] in ("ok", "warn") and "thesis variant" in data["verdict"]["text"]
     runs = sorted(p.name for p in (out / "runs").glob("*.npz"))
     assert len(runs) == 2 * 2 * 2  # controlled: one task per run, variant and estimator
     mtimes = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.npz")}
