@@ -44,10 +44,25 @@ def _cmd_css_simulate(args) -> int:
     from dataclasses import replace as _replace
 
     fp = _replace(fp, albedo_model=args.filter_albedo != "none")
-    sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
-                  duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
-                  albedo=_css_albedo(args.albedo), filter_params=fp,
-                  filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
+    if args.variant is not None:
+        # O'Keefe (2015) §2.4 set-up (60° FOV, structure horizon, 2 Hz / 10 Hz, J2-J6 orbit,
+        # TOMS albedo when the data folder is there) with the thesis or robust estimators
+        from ..css.experiments import thesis_scenario
+
+        if args.config not in ("dual_pyramid", "cube"):
+            from ..errors import InputError
+
+            raise InputError("--variant runs the thesis set-up: dual_pyramid or cube only",
+                             field="--config", value=args.config, allowed="dual_pyramid, cube")
+        sc = thesis_scenario(args.config, args.estimator, variant=args.variant, gyro=gyro,
+                             controlled=args.controlled, duration_s=args.duration_s,
+                             albedo="toms" if args.albedo == "builtin" else _css_albedo(args.albedo))
+        css = sc.css
+    else:
+        sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
+                      duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
+                      albedo=_css_albedo(args.albedo), filter_params=fp,
+                      filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
     r = simulate(sc, args.seed)
     m = settled_mask(r.t, r.lit, args.settle_s)
     e = r.error_deg[m]
@@ -156,6 +171,10 @@ def register(sub) -> None:
                    help="gyro grade (Table 2.3: inertial, intermediate, moderate, low; generic: "
                    "rate, tactical, navigation), or none for gyro-less operation (default tactical)")
     s.add_argument("--controlled", action="store_true", help="run the sun-pointing controller")
+    s.add_argument("--variant", choices=("thesis", "robust"), default=None,
+                   help="simulate O'Keefe's own set-up (§2.4: 60° FOV, structure horizon, 2 Hz CSS, "
+                   "10 Hz gyro, J2-J6 orbit, TOMS albedo) with the thesis's estimators and "
+                   "controller (thesis) or ours (robust); default: the generic set-up below")
     s.add_argument("--duration-s", type=number(0.0, 366 * 86400.0, lo_open=True), default=1800.0, help="duration, s (default 1800)")
     s.add_argument("--dt-s", type=number(1e-3, 60.0), default=0.5, help="sample and control step, s (default 0.5)")
     s.add_argument("--epoch", default="2015-03-01T00:00:00Z", help="epoch, ISO 8601 UTC")
