@@ -26,11 +26,13 @@ import warnings
 
 import numpy as np
 
-from .baseline import bic_gain, fit_terms, param_layout, prior_bounds, typical_params
+from .baseline import (GRID_PARAMS, bic_gain, fit_terms, held_names, param_layout, prior_bounds,
+                       typical_params)
 from ..physics.registry import Effect
 from .fast import diagnosis_effect
 
-__all__ = ["score_candidates", "signature_matrix", "candidate_starts", "params_to_json"]
+__all__ = ["score_candidates", "signature_matrix", "candidate_starts", "params_to_json",
+           "held_values"]
 
 #: linearised start: effect → (parameter, transform of the regression coefficient)
 _LINEAR = {"extinction": ("k_mag_per_airmass", "id"), "zero_point": ("offset_mag", "id"),
@@ -103,11 +105,12 @@ def candidate_starts(effect, problem, ctx, z, S, b, rng) -> list[dict]:
         lo, hi = prior_bounds(spec)
         vals = np.sqrt(np.maximum(b, 0.0)) if how == "sqrt" else b
         vals = np.clip(vals, lo, hi)
-        if spec.per == "site":
-            if vals.size == problem.ctx.n_sites:
+        if spec.per in ("site", "camera"):
+            n = problem.ctx.n_sites if spec.per == "site" else problem.ctx.n_cameras
+            if vals.size == n:
                 starts.append({pname: vals})
             elif vals.size == 1:
-                starts.append({pname: np.full(problem.ctx.n_sites, float(vals[0]))})
+                starts.append({pname: np.full(n, float(vals[0]))})
         elif vals.size:
             starts.append({pname: float(vals[0])})
     names = effect.param_names()
@@ -155,8 +158,8 @@ def params_to_json(fit, problem, effect_index: int) -> dict:
     for s in eff.params:
         v = params[s.name]
         if np.ndim(v):
-            if s.per == "site" and problem.kind == "magnitude":
-                keys = problem.site_names
+            if s.per in ("site", "camera") and problem.kind == "magnitude":
+                keys = problem.site_names if s.per == "site" else problem.channel_names
             else:
                 keys = [str(k) for k in range(len(v))]
             out[s.name] = {"unit": s.unit, "per": s.per, "values": {
@@ -198,13 +201,18 @@ def _quick_starts(effect, problem, starts, base_fit):
 
 
 def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
+    """Best fit over the integer/grid values (stage 1: all; refinement: the best only).
+
+    Stage 1 records the profile ``[(grid values, χ²)]`` in ``rec["_profiles"]`` (for the
+    profile-likelihood identification of grid parameters)."""
     best = None
     grid = _grid_values(eff, problem)
+    gnames = {s.name for s in eff.params if s.integer or s.name in GRID_PARAMS}
     if around is not None and len(grid) > 1:
         # refine only at the best grid point of stage 1
-        fx = {k: v for k, v in around.terms[0][1].items() if k in {s.name for s in eff.params
-                                                                  if s.integer or s.name == "t_start_s"}}
+        fx = {k: v for k, v in around.terms[0][1].items() if k in gnames}
         grid = [fx]
+    profile = []
     for fixed in grid:
         try:
             f = fit_terms(problem, [eff], [[s] for s in starts], theta0=base_fit.theta,
@@ -212,9 +220,18 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
         except Exception as exc:
             rec.setdefault("errors", []).append(f"{type(exc).__name__}: {exc}")
             continue
+        if fixed:
+            profile.append((dict(fixed), float(f.chi2)))
         if best is None or f.chi2 < best.chi2:
             best = f
+    if around is None and len(grid) > 1:
+        rec["_profiles"] = profile
     return best
+
+
+def held_values(effect, params) -> dict:
+    """The values of the parameters fits hold fixed (integer, grid, held) in ``params``."""
+    return {k: v for k, v in params.items() if k in held_names(effect)}
 
 
 def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: int = 60,
@@ -292,8 +309,7 @@ def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: 
             continue
         best = rec["_fit"]
         rec.pop("_t")
-        rec.pop("_starts")
-        rec.pop("_eff")
+        rec["_fixed"] = held_values(rec["_eff"], best.terms[0][1])
         k = best.n_effect_params
         dof = max(problem.n - best.n_params, 1)
         rec.update(applicable=True, reason="",

@@ -130,7 +130,7 @@ def run_case(effect, seed, **diag_kw):
         warnings.simplefilter("ignore")
         lc = simulate(replace(sc, effects=table), seed=seed)
     prob = magnitude_problem(lc, sc.shape, free=[], label=f"{effect}-{seed}")
-    d = diagnose(prob, cross_validation=False, **diag_kw)
+    d = diagnose(prob, **diag_kw)
     js = d.summary()
     ranked = [c["name"] for c in js["candidates"] if c.get("applicable")]
     return {"effect": effect, "seed": seed, "n": js["n"], "verdict": js["verdict"],

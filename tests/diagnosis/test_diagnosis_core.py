@@ -99,10 +99,18 @@ def test_bic_gain_is_the_gaussian_profile_likelihood_bic():
 def test_prior_bounds_and_safe_typical_params():
     from lightcurve.physics import get_effect
 
+    # fit bounds: the prior's support widened by a quarter of its span on each side
     ext = get_effect("extinction")
-    assert prior_bounds(ext.params[0]) == (0.1, 0.4)          # uniform prior support
+    assert prior_bounds(ext.params[0]) == pytest.approx((0.1 - 0.075, 0.4 + 0.075))
     co = get_effect("clock_offset")
-    assert prior_bounds(co.params[0]) == (-2.0, 2.0)          # signed uniform: [-b, b]
+    assert prior_bounds(co.params[0]) == pytest.approx((-3.0, 3.0))   # signed uniform: [-b, b] + 1
+    # log-uniform: widened in log space, (b/a)**0.25 = 2 for 20..320
+    gl = {p.name: p for p in get_effect("specular_glint").params}
+    lo, hi = prior_bounds(gl["exponent"])
+    assert lo * hi == pytest.approx(20.0 * 500.0) and hi / lo == pytest.approx((500 / 20) ** 1.5)
+    # the allowed range clips: penumbra's shadow height cannot go below 0 m
+    pen = get_effect("penumbra")
+    assert prior_bounds(pen.params[0]) == pytest.approx((0.0, 62.5e3))
     # azimuth prior uniform(-180, 180): typical value 0 (the registry's method raises here)
     tp = typical_params(get_effect("specular_glint"))
     assert tp["az_deg"] == 0.0 and tp["exponent"] == 100.0
