@@ -255,7 +255,7 @@ def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: 
         rec = {"name": name}
         t_start = None
         try:
-            eff = diagnosis_effect(name)
+            eff = diagnosis_effect(name, problem.ctx)
         except Exception as exc:  # pragma: no cover - registry problems
             rec.update(applicable=False, reason=f"cannot create: {exc}")
             out.append(rec)

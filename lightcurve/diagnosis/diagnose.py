@@ -16,8 +16,9 @@ Steps (:func:`diagnose`):
 5. greedy search by held-out gain (:mod:`.selection`): each remaining candidate is fitted
    jointly with the model so far — in-sample and fold by fold — and the one with the largest
    held-out gain G is added if G > ``min_gain`` and its parameters are identified
-   (:mod:`.identify`); an unidentified candidate that would have been chosen is reported as
-   "fits, but unidentifiable with these data". A fixable parameter (``ParamSpec.fixable``,
+   (:mod:`.identify`). When the candidate with the largest G is not identified, it is
+   reported as "fits, but unidentifiable with these data" and the search stops: naming a
+   lesser, identified candidate would present an inferior explanation as the answer. A fixable parameter (``ParamSpec.fixable``,
    e.g. the penumbra's atmospheric shadow height) that the data do not identify is held at its
    reference value and the candidate refitted before it is judged;
 6. verdict: ``consistent`` when the baseline already explains the recording, ``mismatch``
@@ -265,6 +266,7 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
         ok = [r for r in recs if r.get("applicable") and np.isfinite(r.get("gain", np.nan))]
         ok.sort(key=lambda r: -r["gain"])
         pick = None
+        top = ok[0] if ok else None
         for r in ok:
             if r["gain"] <= min_gain:
                 r["decision"] = "held-out gain too small" if fo is not None else "ΔBIC too small"
@@ -275,9 +277,12 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
                     unidentified.append({"name": r["name"], "step": step, "gain": r["gain"],
                                          "reasons": r["identification"]["reasons"]})
                 continue
-            if pick is None:
+            if pick is None and r is top:
                 pick = r
                 r["decision"] = "added"
+            elif pick is None:
+                # the best explanation is not identifiable: a lesser one would mislead
+                r["decision"] = f"not named: {top['name']} explains more but is unidentifiable"
             else:
                 r["decision"] = "smaller held-out gain than " + pick["name"]
         steps.append({"step": step, "base": list(chosen), "records": recs})

@@ -3,10 +3,13 @@
 A *group* is a unit of data that must be held out as a whole because its measurements share
 errors a model could learn from one part and "predict" in another: an object (one satellite),
 a night, a camera, a pass (a run of measurements without gaps), or a contiguous block of time.
-Groups are sorted by their first time stamp and dealt into ``k`` folds of consecutive groups
-with nearly equal numbers of measurements (so a fold is a contiguous stretch of nights,
-passes or time — the model is always asked to predict data from another stretch than the one
-it was fitted on). Every measurement is held out exactly once.
+Groups are sorted by their first time stamp and dealt round-robin into ``k`` folds (group j
+goes to fold j mod k), so every fold spans the whole recording — all seasons, the whole pass —
+while no group is ever split between training and held-out data. Contiguous time blocks are
+cut ``BLOCKS_PER_FOLD`` per fold: a localised effect (one shadow crossing, a few flashes) then
+has held-out *and* training data in every fold, as it must to be predicted at all, and each
+held-out block is still a contiguous stretch whose neighbours' correlated errors do not
+reach into it beyond its edges. Every measurement is held out exactly once.
 
 Which grouping (:func:`make_folds` with ``by="auto"``): objects when the recording has two or
 more, else nights, else passes, else contiguous time blocks. Cameras (and sites) are only
@@ -32,11 +35,13 @@ __all__ = ["Folds", "make_folds", "available_groupings", "GROUPINGS", "PASS_GAP_
 PASS_GAP_S = 300.0
 #: default number of folds
 DEFAULT_FOLDS = 5
+#: contiguous time blocks per fold (``blocks`` grouping)
+BLOCKS_PER_FOLD = 4
 #: grouping names accepted by :func:`make_folds` (besides "auto")
 GROUPINGS = ("objects", "nights", "passes", "cameras", "sites", "blocks")
 _METHOD = {"objects": "leave-objects-out", "nights": "leave-nights-out",
            "passes": "leave-passes-out", "cameras": "leave-cameras-out",
-           "sites": "leave-sites-out", "blocks": "contiguous time blocks"}
+           "sites": "leave-sites-out", "blocks": "leave-time-blocks-out"}
 _UNIT = {"objects": "object", "nights": "night", "passes": "pass", "cameras": "camera",
          "sites": "site", "blocks": "time block"}
 _PLURAL = {"pass": "passes"}
@@ -65,7 +70,7 @@ class Folds:
         unit = _UNIT[self.grouping]
         units = _PLURAL.get(unit, unit + "s")
         return (f"{self.method}: {self.n_groups} {unit if self.n_groups == 1 else units} "
-                f"in {self.n_folds} folds of consecutive {units}")
+                f"dealt in time order into {self.n_folds} folds")
 
     def as_dict(self) -> dict:
         return {"grouping": self.grouping, "method": self.method, "n_groups": int(self.n_groups),
@@ -127,16 +132,13 @@ def available_groupings(problem) -> dict:
 
 
 def _deal(groups, t, k):
-    """Assign groups to k folds of consecutive groups (by first time) with ~equal counts."""
+    """Assign groups round-robin, in order of their first time, to k folds."""
     gids, inv = np.unique(groups, return_inverse=True)
     first = np.full(gids.size, np.inf)
     np.minimum.at(first, inv, np.asarray(t, float))
     order = np.argsort(first, kind="stable")
-    counts = np.bincount(inv, minlength=gids.size)[order]
-    cum = np.cumsum(counts) - 0.5 * counts
-    fold_of_sorted = np.minimum((cum / counts.sum() * k).astype(np.int64), k - 1)
     fold = np.empty(gids.size, np.int64)
-    fold[order] = fold_of_sorted
+    fold[order] = np.arange(gids.size) % k
     # renumber so that every label 0..k'-1 is used
     used, lab = np.unique(fold[inv], return_inverse=True)
     return lab, used.size
@@ -166,7 +168,10 @@ def make_folds(problem, by: str = "auto", k: int = DEFAULT_FOLDS, min_per_fold: 
                 "passes": "a single pass", "blocks": "a single time stamp"}[by]
         return None, f"no {_METHOD[by]} cross-validation possible: the recording has {what}"
     if by == "blocks":
-        groups = _blocks(problem.t, k)
+        nb = BLOCKS_PER_FOLD * k
+        while nb > k and problem.n / nb < max(min_per_fold, 3):
+            nb -= k
+        groups = _blocks(problem.t, nb)
     else:
         groups = avail[by]
     n_groups = int(np.unique(groups).size)

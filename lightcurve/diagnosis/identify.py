@@ -13,21 +13,31 @@ An effect is *named* only when every parameter the data constrain is identified;
    sd (uniform: span/√12; log-uniform: the same in ln x, compared with sd/x; signed uniform:
    √((a² + ab + b²)/3); normal: its sd) — the data, not the prior, set the value;
 3. **detected** (amplitudes, i.e. parameters with a ``null`` value at which the effect
-   vanishes): |x − null| > ``DETECTION_SIGMAS`` sd;
+   vanishes): |x − null| > ``DETECTION_SIGMAS`` sd; for a parameter with one value per site,
+   camera or sensor the vector as a whole — the Wald statistic dᵀΣ⁻¹d of d = x − null over
+   its constrained components exceeds the χ²(k) quantile of the same two-sided level (95.45 %)
+   — since a misalignment or scale factor that is zero on some sensors is still detected on
+   the others;
 4. **not degenerate**: |correlation| with every other fitted parameter (baseline and other
-   effects) below ``MAX_CORRELATION``.
+   effects) below ``MAX_CORRELATION`` (0.999).
 
 Parameters the data do not touch at all (zero Jacobian column: a per-site value of a site
 without measurements, a sensor that never sees the Sun) cannot change any prediction; they
 are listed as "no data" and do not block naming. Integer and grid parameters (a CSS sensor
 index, a fault time) are identified by their profile likelihood over the enumerated values:
-the best value must beat every other sensor by Δχ² > ``GRID_DELTA_CHI2_INTEGER`` and every
-time more than one grid step away by Δχ² > ``GRID_DELTA_CHI2_STEP``.
+the best value must beat every other sensor by Δχ² > ``GRID_DELTA_CHI2_INTEGER``; a step
+time is identified when its profile rises by Δχ² > ``GRID_DELTA_CHI2_STEP`` somewhere on the
+grid, and reported as the interval of grid times within that Δχ² of the best (a fault of a
+sensor that did not see the Sun for a while can only be dated to that while).
 
 The limits are chosen once here (not tuned per case): 0.001 of the interval is a value the
 optimiser's bound handling leaves only when pinned; a posterior at most half the prior's
-width means the data carry at least 4× the prior's information; 2σ detection and |ρ| < 0.95
-are the conventional levels.
+width means the data carry at least 4× the prior's information; 2σ is the conventional
+detection level. A correlation inflates the marginal sd, which criterion 2 already judges
+(two parameters can both be well determined and correlated at 0.99, e.g. a glint's azimuth
+and elevation seen along one arc); |ρ| ≥ 0.999 flags the near-exact degeneracies where only a
+combination is determined and the linearised covariance itself cannot be trusted (an
+amplitude traded against a zero point, area against exponent of an unresolved lobe).
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import stats
 
 from .baseline import prior_support
 
@@ -45,7 +56,7 @@ __all__ = ["identify_term", "identify_free", "AT_BOUND_FRACTION", "MAX_POSTERIOR
 AT_BOUND_FRACTION = 1e-3
 MAX_POSTERIOR_TO_PRIOR_SD = 0.5
 DETECTION_SIGMAS = 2.0
-MAX_CORRELATION = 0.95
+MAX_CORRELATION = 0.999
 GRID_DELTA_CHI2_INTEGER = 10.0
 GRID_DELTA_CHI2_STEP = 4.0
 
@@ -75,7 +86,7 @@ def _corr(fit):
     return np.where(np.isfinite(c), c, 0.0)
 
 
-def _check_entry(fit, i, corr, prior_scale, in_log, null):
+def _check_entry(fit, i, corr, prior_scale, in_log, null, joint=False):
     x = float(fit.x[i])
     lo, hi = float(fit.lo[i]), float(fit.hi[i])
     sd = float(fit.sd[i]) if fit.sd is not None else float("nan")
@@ -94,7 +105,7 @@ def _check_entry(fit, i, corr, prior_scale, in_log, null):
         rec["posterior_to_prior_sd"] = post / prior_scale if prior_scale > 0 else None
         if post > MAX_POSTERIOR_TO_PRIOR_SD * prior_scale:
             reasons.append(f"posterior sd {post / prior_scale:.2g}× the prior's")
-        if null is not None and not abs(x - null) > DETECTION_SIGMAS * sd:
+        if null is not None and not joint and not abs(x - null) > DETECTION_SIGMAS * sd:
             reasons.append(f"within {DETECTION_SIGMAS:g} sd of {null:g} (no effect)")
     if corr is not None:
         row = np.abs(corr[i].copy())
@@ -122,15 +133,27 @@ def identify_term(fit, effect_index: int, profiles=None) -> dict:
     eff, params = fit.terms[effect_index]
     corr = _corr(fit)
     out, reasons = {}, []
+    vectors = {}
     for i, (owner, spec, comp) in enumerate(fit.owners):
         if owner != effect_index:
             continue
         psd, in_log = prior_sd(spec)
-        rec = _check_entry(fit, i, corr, psd, in_log, spec.null)
+        rec = _check_entry(fit, i, corr, psd, in_log, spec.null, joint=comp is not None)
         label = fit.names[i].split(".", 1)[1] if "." in fit.names[i] else fit.names[i]
         out[label] = rec
         if not rec["ok"]:
             reasons.append(f"{label}: {rec['status']}")
+        if comp is not None and spec.null is not None and not (fit.dead is not None and fit.dead[i]):
+            vectors.setdefault(spec.name, (spec.null, []))[1].append(i)
+    for name, (null, idx) in vectors.items():
+        w, k = _wald(fit, idx, null)
+        need = float(stats.chi2.ppf(stats.chi2.cdf(DETECTION_SIGMAS ** 2, 1), k))
+        out[f"{name} (all)"] = rec = {"value": None, "sd": None, "wald": w, "wald_limit": need,
+                                      "ok": bool(w > need)}
+        rec["status"] = "detected" if rec["ok"] else (
+            f"consistent with {null:g} everywhere (Wald {w:.3g} ≤ {need:.3g}, no effect)")
+        if not rec["ok"]:
+            reasons.append(f"{name}: {rec['status']}")
     for name, why in (getattr(eff, "diagnosis_hold", {}) or {}).items():
         out[name] = {"value": _scalar(params.get(name)), "sd": None, "ok": True,
                      "status": f"held: {why}"}
@@ -163,6 +186,16 @@ def identify_free(fit, names) -> dict:
     return {"identified": not reasons, "params": out, "reasons": reasons}
 
 
+def _wald(fit, idx, null):
+    """Wald statistic dᵀΣ⁻¹d of the entries ``idx`` of ``fit.x`` against ``null``, and k."""
+    d = fit.x[idx] - null
+    if fit.cov is None:
+        return float("nan"), len(idx)
+    S = fit.cov[np.ix_(idx, idx)]
+    w = float(d @ np.linalg.pinv(S) @ d)
+    return w, len(idx)
+
+
 def _scalar(v):
     if v is None:
         return None
@@ -186,15 +219,20 @@ def _grid_identification(eff, params, profiles):
         if spec.integer:
             others = [c for g, c in profiles if float(g[name]) != float(best_v)]
             need = GRID_DELTA_CHI2_INTEGER
-        else:
-            ib = int(np.argmin(np.abs(np.asarray(vals) - float(best_v))))
-            far = {v for j, v in enumerate(vals) if abs(j - ib) >= 2}
-            others = [c for g, c in profiles if float(g[name]) in far]
-            need = GRID_DELTA_CHI2_STEP
-        gap = (min(others) - best_c2) if others else float("inf")
-        ok = gap > need
+            gap = (min(others) - best_c2) if others else float("inf")
+            ok = gap > need
+            recs.append({"name": name, "value": float(best_v), "sd": None, "ok": ok,
+                         "profile_delta_chi2": float(gap) if math.isfinite(gap) else None,
+                         "status": "identified" if ok else
+                         f"profile likelihood flat: Δχ² {gap:.3g} ≤ {need:g} to other values"})
+            continue
+        prof = {v: min(c for g, c in profiles if float(g[name]) == v) for v in vals}
+        rise = max(prof.values()) - best_c2
+        inside = [v for v in vals if prof[v] - best_c2 <= GRID_DELTA_CHI2_STEP]
+        ok = rise > GRID_DELTA_CHI2_STEP
         recs.append({"name": name, "value": float(best_v), "sd": None, "ok": ok,
-                     "profile_delta_chi2": float(gap) if math.isfinite(gap) else None,
-                     "status": "identified" if ok else
-                     f"profile likelihood flat: Δχ² {gap:.3g} ≤ {need:g} to other values"})
+                     "interval": [float(min(inside)), float(max(inside))] if inside else None,
+                     "status": (f"identified within [{min(inside):.6g}, {max(inside):.6g}]"
+                                if ok else f"profile likelihood flat over the whole grid "
+                                f"(Δχ² ≤ {GRID_DELTA_CHI2_STEP:g})")})
     return recs

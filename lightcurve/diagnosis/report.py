@@ -189,7 +189,8 @@ def verdict_line(d) -> str:
 def _param_phrases(rec, units):
     out = []
     for k, v in rec.get("identification", {}).get("params", {}).items():
-        if str(v.get("status", "")).startswith("held") or v.get("status") == "no data":
+        if str(v.get("status", "")).startswith("held") or v.get("status") == "no data" \
+                or v.get("value") is None:
             continue
         unit = units.get(k.split("[", 1)[0], "")
         out.append(f"{k} = {fmt_value(v.get('value'), v.get('sd'), unit, v.get('ok', True))}")

@@ -24,10 +24,10 @@ The held-out RMS (magnitudes or output units) and Pearson R are reported beside 
 registry effect, and the surface refit of :mod:`.surface`) is fitted jointly with the model
 so far, on all the data (in-sample χ²/dof, ΔBIC) and fold by fold (held-out χ²/dof, RMS, G);
 the candidate with the largest G is added when G > ``min_gain`` (10: a held-out likelihood
-ratio of e⁵ ≈ 150) *and* its parameters are identified (:mod:`.identify`); a candidate with
-the largest G that is not identified is reported as "fits, but unidentifiable with these
-data" and the next best is considered. The search stops when the model is consistent with
-the noise, when no candidate qualifies, or after ``max_effects`` additions.
+ratio of e⁵ ≈ 150) *and* its parameters are identified (:mod:`.identify`); when the
+candidate with the largest G is not identified it is reported as "fits, but unidentifiable
+with these data" and nothing further is named. The search stops when the model is
+consistent with the noise, when no candidate qualifies, or after ``max_effects`` additions.
 """
 
 from __future__ import annotations

@@ -48,6 +48,10 @@ MU_EARTH_M3_S2 = 3.986004418e14
 """Earth gravitational parameter (WGS84/EGM96), m³/s²."""
 
 
+#: unscaled CSS albedo signals by geometry/grid/sensor hash (:meth:`CSSContext.albedo_signal`)
+_ALBEDO_CACHE: dict = {}
+
+
 def rotate_z(v, angle_rad):
     """Rotate vectors (N,3) actively about +z by ``angle_rad`` (N,) (right-handed)."""
     v = np.asarray(v, float)
@@ -487,14 +491,38 @@ class CSSContext:
         return replace(self, **changes)
 
     def albedo_signal(self) -> np.ndarray:
-        """Albedo irradiance on each (true) sensor, (K,S), units of solar irradiance (eq. 2.15)."""
+        """Albedo irradiance on each (true) sensor, (K,S), units of solar irradiance (eq. 2.15).
+
+        The unscaled signal depends only on the geometry, the grid and the sensors' normals,
+        fields of view and horizons; it is cached (a few recent sets), so fits of the albedo
+        scale or of other effects do not repeat the Earth-grid sums.
+        """
+        K, S = len(self), self.n_sensors
+        if self.albedo_grid is None:
+            return np.zeros((K, S))
+        import hashlib
+
+        normals, cos_fov, _, hor = self.array.kernel_args(False)
+        h = hashlib.blake2b(digest_size=16)
+        for a in (self.t, self.q, self.r_eci_m, self.sun_eci_unit, normals, cos_fov, hor,
+                  self.albedo_grid.rho_area_m2, self.albedo_grid.centers_m):
+            h.update(np.ascontiguousarray(a, float).tobytes())
+        h.update(self.epoch_utc.encode())
+        key = h.hexdigest()
+        hit = _ALBEDO_CACHE.get(key)
+        if hit is None:
+            hit = self._albedo_signal_unscaled()
+            if len(_ALBEDO_CACHE) >= 16:
+                _ALBEDO_CACHE.pop(next(iter(_ALBEDO_CACHE)))
+            _ALBEDO_CACHE[key] = hit
+        return hit * self.albedo_scale
+
+    def _albedo_signal_unscaled(self) -> np.ndarray:
         from ..css.albedo import albedo_on_sensors_nb, earth_rotation_angle
         from ..rotations import quat_rotate_inv
 
         K, S = len(self), self.n_sensors
         out = np.zeros((K, S))
-        if self.albedo_grid is None:
-            return out
         g = self.albedo_grid
         theta = earth_rotation_angle(self.epoch_utc, self.t)
         normals, cos_fov, _, hor = self.array.kernel_args(False)
@@ -507,7 +535,7 @@ class CSSContext:
             out[i] = albedo_on_sensors_nb(g.centers_m, g.normals, g.rho_area_m2, r_e, s_e,
                                           np.ascontiguousarray(n_e), cos_fov,
                                           np.ascontiguousarray(h_e))
-        return out * self.albedo_scale
+        return out
 
     def voltages(self) -> np.ndarray:
         """Noise-free outputs (K,S) of the sensors with the switched-on effects."""
