@@ -239,9 +239,9 @@ def explanation(d) -> str:
     for i, name in enumerate(d.chosen):
         c, r = by[name], recs.get(name, {})
         desc = c.get("description", name)
-        body = desc.split(":", 1)[1].strip() if ":" in desc else desc
-        txt += ("The most likely missing physics is " if i == 0 else "It also needs ") + f"{name} — " \
-            + body[0].lower() + body[1:]
+        head, body = (x.strip() for x in desc.split(":", 1)) if ":" in desc else (name, desc)
+        txt += ("The most likely missing physics is " if i == 0 else "It also needs ") \
+            + f"{head[0].lower() + head[1:]} ({name}): " + body[0].lower() + body[1:]
         ph = _param_phrases(r, _units(d, name))
         if ph:
             txt += f" Fitted: {ph}."

@@ -203,8 +203,8 @@ def lit_fraction(r_obj, r_sun, extra_m=0.0):
 
 
 def airmass(h):
-    """Kasten & Young (1989)."""
-    hd = np.degrees(h)
+    """Kasten & Young (1989); NaN below −6.07995° (outside the formula's range)."""
+    hd = np.maximum(np.degrees(h), -6.0)
     return 1.0 / (np.sin(h) + 0.50572 * (hd + 6.07995) ** -1.6364)
 
 

@@ -303,3 +303,15 @@ def run_case(case, seed, **kw):
             "held_out_chi2_per_n": final_held, "unidentified": [u["name"] for u in js["unidentified"]],
             "named_unidentified": named_unidentified, "truth": truth, "json": js,
             "wall_s": js["timings_s"].get("total_s")}
+
+
+def single_flash_case(seed, exponent=300.0):
+    """A glint seen in one flash only: the lit two-site LEO pass with its slow tumble (the
+    body turns once in ~14 min, the pass lasts 13 min), a narrow lobe (``exponent``) whose
+    normal bisects Sun and observer at one epoch. Returns (problem, truth)."""
+    rng = np.random.default_rng(20_000 + seed)
+    geo, shape, t = scenario("lit2")
+    az, el = _bisector(geo, rng, t[40:120])
+    p = {"az_deg": az, "el_deg": el, "area_m2": 0.5, "exponent": float(exponent)}
+    rec = G.record(geo, shape, t, [{"specular_glint": p} for _ in geo.sites], rng)
+    return magnitude_problem(rec, "lit2", f"single-flash-{seed}"), p
