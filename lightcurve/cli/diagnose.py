@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ._args import SEED, csv_list, number
+from ._args import SEED, add_model_options, csv_list, number
 
 __all__ = ["register"]
 
@@ -16,7 +16,8 @@ def _cmd_diagnose(args) -> int:
     if args.apply is not None:
         from ..diagnosis.transfer import apply_fit, write_transfer_report
 
-        tr = apply_fit(args.apply, args.recording, args.scenario)
+        tr = apply_fit(args.apply, args.recording, args.scenario, shape=args.shape,
+                       library_dirs=args.library, site_dirs=args.sites)
         jp, hp = write_transfer_report(tr, args.output)
         for r in tr.rows:
             ok = "" if r["transfers"] is None else ("  transfers" if r["transfers"] else "  does NOT transfer")
@@ -38,7 +39,8 @@ def _cmd_diagnose(args) -> int:
                            exclude=[e.strip() for e in (args.exclude or "").split(",") if e.strip()],
                            folds=folds, n_folds=args.folds, cv_report=tuple(groups[1:]),
                            progress=say, max_effects=args.max_effects, min_gain=args.min_gain,
-                           seed=args.seed)
+                           seed=args.seed, shape=args.shape, library_dirs=args.library,
+                           site_dirs=args.sites)
     jpath, hpath = write_report(d, args.output)
     js = d.summary()
     print(js["verdict_line"])
@@ -78,7 +80,8 @@ def register(sub) -> None:
     p.add_argument("--scenario", default=None, metavar="MODEL.toml",
                    help="the model (scenario TOML; its [effects] are switched off; an optional "
                    "[diagnosis] table sets free/exclude/max_effects/min_gain). Default for HDF5: "
-                   "the file's own scenario. For a CSS recording: optionally a CSS sensor "
+                   "the file's own scenario (with the shape and sites the file carries). For a "
+                   "CSS recording: optionally a CSS sensor "
                    "configuration TOML (the model's nominal sensors; default: the file's)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     p.add_argument("--apply", default=None, metavar="FIT.json",
@@ -102,4 +105,5 @@ def register(sub) -> None:
                    help="held-out gain G needed to add an effect (default 10)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the random fit starts (default 0)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    add_model_options(p)
     p.set_defaults(func=_cmd_diagnose)

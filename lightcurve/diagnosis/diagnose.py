@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..report.views import DiagnosisViews
 from .baseline import bic_gain, fit_baseline, fit_terms
 from .candidates import params_to_json, score_candidates
 from .folds import DEFAULT_FOLDS, make_folds
@@ -55,9 +56,10 @@ TIMING_EFFECTS = ("light_time", "clock_offset", "exposure_smearing")
 SURFACE = "surface"
 
 
-@dataclass
-class Diagnosis:
-    """Everything :func:`~.report.write_report` needs."""
+@dataclass(repr=False)
+class Diagnosis(DiagnosisViews):
+    """Everything :func:`~.report.write_report` needs (views: short repr, ``_repr_html_``,
+    ``to_pandas("candidates" | "segments")``)."""
 
     problem: object
     verdict: str
@@ -82,6 +84,18 @@ class Diagnosis:
         from .report import diagnosis_json
 
         return diagnosis_json(self)
+
+    def to_pandas(self, table="candidates"):
+        """``"candidates"``: one row per candidate (:func:`~.report.candidates_table`: first
+        step's in-sample and held-out numbers, identified, decision); ``"segments"``: the time
+        spans, sites and geometry regimes tested."""
+        if table != "candidates":
+            return super().to_pandas(table)
+        from ..report.views import require_pandas
+        from .report import candidates_table
+
+        pd = require_pandas()
+        return pd.DataFrame(candidates_table(self.summary())).set_index("name")
 
 
 def _in_sample(problem, fit, ref_fit):
@@ -347,12 +361,13 @@ def _scheme(fo, b, f):
 # ----------------------------------------------------------------------------------------
 # from files
 # ----------------------------------------------------------------------------------------
-def load_model_scenario(path):
+def load_model_scenario(path, *, library_dirs=None, site_dirs=None, shape=None):
     """Load a scenario TOML for diagnosis: the scenario with its ``[effects]`` switched off
     (the model whose missing physics is being looked for) and the ``[diagnosis]`` table, if
     any (keys ``free`` (list of words, see :func:`~.problem.parse_free`), ``exclude`` (effect
     names, or "surface", not to propose), ``max_effects`` (1 or 2), ``min_gain`` (> 0)).
-    Returns ``(scenario, options)``."""
+    Returns ``(scenario, options)``. ``library_dirs``/``site_dirs``: extra shape-library and
+    observatory folders; ``shape``: a resolved Shape replacing the scenario's ``[shape]``."""
     from pathlib import Path
 
     from ..errors import InputError
@@ -361,10 +376,11 @@ def load_model_scenario(path):
     from ..studies.scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
+    doc, text = load_toml(path, with_text=True)
     diag = doc.pop("diagnosis", None)
     had_effects = bool(doc.pop("effects", None))
-    sc = parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"))
+    sc = parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                        site_dirs=site_dirs, shape=shape)
     opts = {}
     if diag is not None:
         sec = Section(diag, file=path, name="diagnosis")
@@ -387,60 +403,67 @@ def load_model_scenario(path):
     return sc, opts
 
 
-def load_problem(recording, scenario=None, *, free=None, exclude=()):
+def load_problem(recording, scenario=None, *, free=None, exclude=(), shape=None,
+                 library_dirs=None, site_dirs=None):
     """The diagnosis problem of a magnitude recording file and the model it is checked against.
 
-    ``recording``: our lightcurve HDF5 (model = the file's own scenario or ``scenario``;
-    attitude = the file's truth, else the scenario's) or a CSV recording (needs ``scenario``;
-    attitude = the scenario's law or noise-free dynamics). ``free``: comma-separated words
-    (:func:`~.problem.parse_free`), default ``none`` (the surface refit is a candidate, not a
-    default). Returns ``(problem, skip_reasons, options, notes)``.
+    ``recording``: our lightcurve HDF5 (model = the file's own scenario — with the shape and
+    sites the file carries — or ``scenario``; attitude = the file's truth, else the model's
+    attitude from the scenario epoch) or a CSV recording (needs ``scenario``; attitude = the
+    scenario's law or noise-free dynamics). ``free``: comma-separated words
+    (:func:`~.problem.parse_free`), default ``none``: refitting the object's surfaces is a
+    candidate that competes on held-out gain (:mod:`.surface`), never silently on. ``shape``
+    (a Shape, library name or shape TOML) replaces the model's shape; ``library_dirs`` /
+    ``site_dirs`` are extra shape-library and observatory folders. Files without truth that
+    give exposure times are modelled with the model's body rates, so the timing effects are
+    evaluated for them. A file with a photometric band (``attrs["band"]``) is modelled with
+    that band's Sun magnitude (``attrs["sun_mag"]``). Returns ``(problem, skip_reasons,
+    options, notes)``.
     """
     from pathlib import Path
 
     from ..errors import InputError
-    from ..studies.scenario import parse_scenario
+    from ..studies.evaluate import model_attitude
+    from ..studies.scenario import scenario_from_lightcurve
     from .problem import magnitude_problem, parse_free
 
     recording = Path(recording)
     opts = {}
-    sc = None
     notes = []
-    if scenario is not None:
-        sc, opts = load_model_scenario(scenario)
+    if shape is not None and not hasattr(shape, "n_facets"):
+        from ..photometry import load_shape
+
+        shape = load_shape(str(shape), library_dirs=library_dirs)
     if recording.suffix.lower() in (".h5", ".hdf5"):
         from ..io.lightcurve_h5 import read_lightcurve
 
         lc = read_lightcurve(recording)
-        if sc is None:
-            if not lc.scenario_toml:
-                raise InputError("the file has no embedded scenario: give --scenario", file=recording)
-            from ..io.tomlio import loads_toml
-
-            doc = loads_toml(lc.scenario_toml, file=f"{recording}:scenario")
-            doc.pop("effects", None)
-            doc.pop("diagnosis", None)
-            sc = parse_scenario(doc, file=str(recording))
+        if scenario is not None:
+            sc, opts = load_model_scenario(scenario, library_dirs=library_dirs,
+                                           site_dirs=site_dirs, shape=shape)
+        else:
+            sc = scenario_from_lightcurve(lc, recording, drop=("effects", "diagnosis"),
+                                          library_dirs=library_dirs, site_dirs=site_dirs,
+                                          shape=shape)
         q = lc.truth_q
         omega = lc.truth_omega_rad_s
         if q is None:
-            from ..studies.evaluate import model_attitude
-
-            q = model_attitude(sc, lc)
-            omega = None
+            q, omega = model_attitude(sc, lc, return_omega=True)
     else:
-        if sc is None:
+        if scenario is None:
             raise InputError("a CSV recording needs --scenario MODEL.toml (shape, attitude, sites)",
                              file=recording)
+        sc, opts = load_model_scenario(scenario, library_dirs=library_dirs, site_dirs=site_dirs,
+                                       shape=shape)
         from ..io.recording import read_recording
-        from ..studies.evaluate import model_attitude
 
         # rows in the Earth's full shadow are kept (counted, warned) for shadow/clock effects
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            lc = read_recording(recording, sc, unlit="keep")
-        q = model_attitude(sc, lc)
-        omega = None
+            lc = read_recording(recording, sc, unlit="keep", site_dirs=site_dirs)
+        q, omega = model_attitude(sc, lc, return_omega=True)
+    if not lc.has_truth and (lc.exposure_s is None or not np.any(np.isfinite(lc.exposure_s))):
+        omega = None  # no exposure times: the timing effects stay off (docstring)
     words = parse_free(free if free is not None else opts.get("free", "none"), sc.shape)
     skip = {}
     if omega is None:
@@ -449,7 +472,8 @@ def load_problem(recording, scenario=None, *, free=None, exclude=()):
                           "rate and the object's velocity, unknown for this recording")
     for name in list(exclude) + list(opts.get("exclude", [])):
         skip[name] = "excluded by the user"
-    prob = magnitude_problem(lc, sc.shape, q=q, omega=omega, sun_mag=sc.measurement.sun_mag,
+    sun_mag = float(lc.attrs["sun_mag"]) if "band" in (lc.attrs or {}) else sc.measurement.sun_mag
+    prob = magnitude_problem(lc, sc.shape, q=q, omega=omega, sun_mag=sun_mag,
                              ignore_eclipse=sc.measurement.ignore_eclipse, free=words,
                              label=recording.name)
     if sc.measurement.ignore_eclipse:
@@ -464,7 +488,7 @@ def load_problem(recording, scenario=None, *, free=None, exclude=()):
 
 def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progress=None,
                        folds="auto", n_folds=DEFAULT_FOLDS, cv_report=(), max_effects=None,
-                       min_gain=None, seed=0):
+                       min_gain=None, seed=0, shape=None, library_dirs=None, site_dirs=None):
     """Diagnose a recording file against a model (:func:`load_problem`; a CSS recording,
     detected from the file, goes to :func:`diagnose_css_recording`). Returns a
     :class:`Diagnosis`."""
@@ -477,7 +501,9 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
         return diagnose_css_recording(recording, scenario, free=free, exclude=exclude,
                                       progress=progress, max_effects=max_effects,
                                       min_gain=min_gain, seed=seed, folds=folds, n_folds=n_folds)
-    prob, skip, opts, notes = load_problem(recording, scenario, free=free, exclude=exclude)
+    prob, skip, opts, notes = load_problem(recording, scenario, free=free, exclude=exclude,
+                                           shape=shape, library_dirs=library_dirs,
+                                           site_dirs=site_dirs)
     d = diagnose(prob, progress=progress, folds=folds, n_folds=n_folds, cv_report=cv_report,
                  skip_reasons=skip, max_effects=max_effects or opts.get("max_effects", 2),
                  min_gain=min_gain or opts.get("min_gain", MIN_GAIN), seed=seed)

@@ -45,8 +45,8 @@ import numpy as np
 
 from ..io.atomic import atomic_write_text
 
-__all__ = ["diagnosis_json", "explanation", "verdict_line", "write_report", "fmt_value",
-           "utc_times", "model_json"]
+__all__ = ["diagnosis_json", "explanation", "verdict_line", "verdict_level", "write_report",
+           "fmt_value", "model_json", "candidates_table"]
 
 
 def _f(x):
@@ -186,6 +186,34 @@ def verdict_line(d) -> str:
     return "Mismatch: none of the known effects explains it on held-out data."
 
 
+def verdict_level(d) -> str:
+    """``ok`` (consistent), ``warn`` (mismatch, missing physics named) or ``fail`` (mismatch,
+    nothing can be named) — the colours of :func:`lightcurve.report.style.verdict_html`."""
+    if d.verdict == "consistent":
+        return "ok"
+    return "warn" if d.chosen else "fail"
+
+
+def candidates_table(js) -> list:
+    """One flat row per candidate: the numbers of its first evaluated step (in-sample and
+    held out side by side), whether it is identified, and the decision."""
+    rows = []
+    for c in js["candidates"]:
+        r = {"name": c["name"], "kind": c["kind"], "applicable": c["applicable"],
+             "reason": c.get("reason", "")}
+        st = next((s for s in c["steps"] if s.get("applicable")), None)
+        if st is not None:
+            r.update({"step": st["step"], "chi2_dof_in_sample": st["in_sample"].get("chi2_dof"),
+                      "rms_in_sample": st["in_sample"].get("rms"),
+                      "delta_bic_in_sample": st["in_sample"].get("delta_bic"),
+                      "rms_held_out": st.get("held_out", {}).get("rms"),
+                      "chi2_per_n_held_out": st.get("held_out", {}).get("chi2_per_n"),
+                      "gain_held_out": st.get("held_out", {}).get("gain"),
+                      "identified": st["identified"], "decision": st.get("decision", "")})
+        rows.append(r)
+    return rows
+
+
 def _param_phrases(rec, units):
     out = []
     for k, v in rec.get("identification", {}).get("params", {}).items():
@@ -294,27 +322,10 @@ def diagnosis_json(d) -> dict:
 
 
 # ----------------------------------------------------------------------------------------
-def utc_times(epoch_utc, t):
-    """numpy datetime64[ms] (UTC) of ``t`` seconds after ``epoch_utc`` (for time axes)."""
-    from ..geometry.time import parse_epoch
-
-    e = np.datetime64(parse_epoch(epoch_utc).replace(tzinfo=None), "ms")
-    return e + (np.asarray(t, float) * 1000.0).round().astype("timedelta64[ms]")
-
-
 def _png(fig) -> str:
     from ..report.html import figure_to_data_uri
 
     return figure_to_data_uri(fig).split(",", 1)[1]
-
-
-def _time_axis(ax, x):
-    import matplotlib.dates as mdates
-
-    loc = mdates.AutoDateLocator(maxticks=8)
-    ax.xaxis.set_major_locator(loc)
-    ax.xaxis.set_major_formatter(mdates.ConciseDateFormatter(loc))
-    ax.set_xlabel("UTC")
 
 
 def _figures(d):
@@ -322,6 +333,8 @@ def _figures(d):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from ..report.style import figsize, utc_axis, utc_times
 
     p = d.problem
     figs = []
@@ -333,7 +346,7 @@ def _figures(d):
     rf = fp.y - d.final_fit.pred
     lim = np.nanpercentile(np.abs(np.r_[rb, rf][np.isfinite(np.r_[rb, rf])]), 99.5) * 1.1 \
         if np.any(np.isfinite(rb)) else 1.0
-    fig, axes = plt.subplots(2, 1, figsize=(9, 4.8), sharex=True, sharey=True, dpi=100)
+    fig, axes = plt.subplots(2, 1, figsize=figsize(10, 5), sharex=True, sharey=True, dpi=100)
     names = p.channel_names if p.kind == "magnitude" else p.site_names
     chan = p.channel if p.kind == "magnitude" else p.site
     for ax, r, title in ((axes[0], rb, "model as given"),
@@ -347,7 +360,10 @@ def _figures(d):
         ax.set_title(title, fontsize=9)
         ax.set_ylim(-lim, lim)
     if epoch:
-        _time_axis(axes[1], x)
+        utc_axis(axes[0], label=None, offset=False)
+        utc_axis(axes[1])
+    else:
+        axes[1].set_xlabel("t, s since the start")
     if 1 < len(names) <= 8:
         axes[0].legend(fontsize=7, ncol=min(len(names), 4))
     fig.tight_layout()
@@ -366,7 +382,7 @@ def _figures(d):
             continue
         if not np.any(np.isfinite(S)) or np.nanstd(S) == 0:
             continue
-        fig, ax = plt.subplots(1, 2, figsize=(9, 3.2), sharey=True, dpi=100)
+        fig, ax = plt.subplots(1, 2, figsize=figsize(10, 3.4), sharey=True, dpi=100)
         ax[0].plot(S, rb, ".", ms=3)
         ax[0].set_title("model as given", fontsize=9)
         ax[1].plot(S, rf, ".", ms=3, color="C2")
@@ -380,7 +396,7 @@ def _figures(d):
     # held-out gain of every candidate at the first step (when there is one)
     recs = [r for r in _best_step1(d) if np.isfinite(r.get("gain", np.nan))]
     if recs and d.folds is not None:
-        fig, ax = plt.subplots(figsize=(9, 0.35 * len(recs) + 1.2), dpi=100)
+        fig, ax = plt.subplots(figsize=figsize(10, 0.35 * len(recs) + 1.2), dpi=100)
         g = np.array([r["gain"] for r in recs])
         col = ["C2" if r.get("decision") == "added" else ("C1" if not r.get("identified") else "0.6")
                for r in recs]
@@ -466,16 +482,12 @@ def write_report(d, out_dir) -> tuple[Path, Path]:
         f"<td>{'yes' if s['systematic'] else ''}</td></tr>" for s in js["segments"][:15])
     scale = js["segments"][0].get("scale", 1.0) if js["segments"] else 1.0
     tim = " · ".join(f"{k.replace('_s', '')} {v:.1f} s" for k, v in js["timings_s"].items() if v is not None)
+    from ..report.style import page_html
+
     b, f = js["baseline"], js["final"]
-    page = f"""<!DOCTYPE html>
-<html><head><meta charset="utf-8"><title>Diagnosis: {html.escape(js['recording'])}</title>
-<style>body{{font-family:sans-serif;max-width:980px;margin:1.5em auto;line-height:1.4}}
-table{{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:2px 6px}}
-tr.p td{{border-top:none;color:#555;font-size:0.9em}}.v{{font-size:1.25em;font-weight:bold;padding:0.4em;
-background:{'#e8f5e9' if js['verdict'] == 'consistent' else '#fff3e0'}}}.s{{color:#555;font-size:0.85em}}
-img{{max-width:100%}}</style></head><body>
-<p class="v">{html.escape(js['verdict_line'])}</p>
-<h1>Model-mismatch diagnosis</h1>
+    css = ("<style>tr.p td{border-top:none;color:#555;font-size:0.9em;text-align:left}"
+           ".s{color:#555;font-size:0.85em}</style>")
+    body = f"""{css}
 <p>Recording: {html.escape(js['recording'])} ({js['n']} measurements).</p>
 <p>{html.escape(js['explanation'])}</p>
 <table><tr><th></th><th>χ²/dof</th><th>RMS, {unit}</th><th>consistent with noise</th></tr>
@@ -488,7 +500,7 @@ img{{max-width:100%}}</style></head><body>
 <h2>Candidates</h2>
 <p class=s>Each candidate fitted jointly with the model so far: in-sample (all data) and held out
 (fold by fold). An effect is named when its held-out gain G exceeds 10 and its parameters are
-identified (not at a bound, posterior well inside the prior, detected, |correlation| &lt; 0.95).</p>
+identified (not at a bound, posterior well inside the prior, detected, |correlation| &lt; 0.999).</p>
 <table><tr><th>candidate</th><th>χ²/dof in</th><th>RMS in</th><th>ΔBIC in</th><th>RMS held out</th>
 <th>G held out</th><th>folds better</th><th>identified</th><th>decision</th></tr>
 {_cand_rows(js, d)}</table>
@@ -498,8 +510,9 @@ identified (not at a bound, posterior well inside the prior, detected, |correlat
 {segs}</table>
 <h2>Notes</h2><ul>{''.join(f'<li>{html.escape(n)}</li>' for n in js['notes'])}</ul>
 <p class=s>Run time: {html.escape(tim)}.</p>
-</body></html>
 """
+    page = page_html(f"Model-mismatch diagnosis: {js['recording']}", (verdict_level(d), js["verdict_line"]),
+                     body)
     hpath = out / "report.html"
     atomic_write_text(hpath, page)
     return jpath, hpath

@@ -160,12 +160,16 @@ def _stats(problem, pred):
             "r": _pearson(problem.y, pred), "n_unpredicted": int(np.sum(~ok))}
 
 
-def apply_fit(fit_file, recording, scenario=None) -> Transfer:
-    """Predict ``recording`` with the model of ``fit_file`` (module docstring)."""
+def apply_fit(fit_file, recording, scenario=None, *, shape=None, library_dirs=None,
+              site_dirs=None) -> Transfer:
+    """Predict ``recording`` with the model of ``fit_file`` (module docstring); the model of
+    the recording is loaded as :func:`~.diagnose.load_problem` does (``scenario``, ``shape``,
+    ``library_dirs``, ``site_dirs`` as there)."""
     from .diagnose import load_problem
 
     model = read_fit(fit_file)
-    prob, _skip, _opts, notes = load_problem(recording, scenario, free="none")
+    prob, _skip, _opts, notes = load_problem(recording, scenario, free="none", shape=shape,
+                                             library_dirs=library_dirs, site_dirs=site_dirs)
     tr = Transfer(recording=Path(recording).name, fit_file=str(fit_file), n=prob.n)
     tnotes = []
     terms = _effect_terms(model, prob, fit_file, tnotes)

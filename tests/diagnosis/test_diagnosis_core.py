@@ -173,7 +173,7 @@ def test_cli_diagnose_writes_json_and_selfcontained_html(tmp_path):
     assert cv["possible"] and cv["selection"]["grouping"] == "blocks"
     assert cv["schemes"][0]["final"]["rms"] < cv["schemes"][0]["baseline"]["rms"]
     html = (out / "report.html").read_text()
-    assert html.index(js["verdict_line"][:20]) < html.index("<h1>")     # verdict first
+    assert html.index("Verdict:") < html.index("<h2>")                  # verdict at the top
     assert "UTC" in html and html.count("data:image/png;base64,") >= 2
     assert "http://" not in html and "https://" not in html and "<script" not in html
     # the fitted model applied unchanged to a recording without the offset: it does not
