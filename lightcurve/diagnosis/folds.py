@@ -36,7 +36,7 @@ PASS_GAP_S = 300.0
 #: default number of folds
 DEFAULT_FOLDS = 5
 #: contiguous time blocks per fold (``blocks`` grouping)
-BLOCKS_PER_FOLD = 4
+BLOCKS_PER_FOLD = 10
 #: grouping names accepted by :func:`make_folds` (besides "auto")
 GROUPINGS = ("objects", "nights", "passes", "cameras", "sites", "blocks")
 _METHOD = {"objects": "leave-objects-out", "nights": "leave-nights-out",
