@@ -75,8 +75,10 @@ def register(sub) -> None:
         "transfers (DIR/transfer.json, DIR/transfer.html). A coarse-sun-sensor recording (HDF5 "
         "from 'css simulate', detected from the file) is diagnosed against its sensors' direct-Sun "
         "model with the css_* effects.")
-    p.add_argument("recording", help="lightcurve HDF5 file, CSS recording HDF5, or a CSV recording "
-                   "(needs --scenario)")
+    p.add_argument("recording", nargs="+",
+                   help="lightcurve HDF5 file, CSS recording HDF5, or a CSV recording (needs "
+                   "--scenario); several lightcurve files (one object each, as 'lightcurve "
+                   "import' writes them) are diagnosed together, and objects can be held out")
     p.add_argument("--scenario", default=None, metavar="MODEL.toml",
                    help="the model (scenario TOML; its [effects] are switched off; an optional "
                    "[diagnosis] table sets free/exclude/max_effects/min_gain). Default for HDF5: "

@@ -405,6 +405,46 @@ def load_model_scenario(path, *, library_dirs=None, site_dirs=None, shape=None):
 
 def load_problem(recording, scenario=None, *, free=None, exclude=(), shape=None,
                  library_dirs=None, site_dirs=None):
+    """The diagnosis problem of one magnitude recording file — or of several, one object each
+    (a list of paths: :func:`~.problem.combine_problems`, so that objects can be held out) —
+    and the model it is checked against. Returns ``(problem, skip_reasons, options, notes)``;
+    :func:`_load_one` documents the single-file case."""
+    from pathlib import Path
+
+    from .problem import combine_problems, parse_free, with_free_words
+
+    if isinstance(recording, (str, Path)):
+        return _load_one(recording, scenario, free=free, exclude=exclude, shape=shape,
+                         library_dirs=library_dirs, site_dirs=site_dirs)
+    recs = [Path(r) for r in recording]
+    if len(recs) == 1:
+        return _load_one(recs[0], scenario, free=free, exclude=exclude, shape=shape,
+                         library_dirs=library_dirs, site_dirs=site_dirs)
+    loaded = [_load_one(r, scenario, free="none", exclude=exclude, shape=shape,
+                        library_dirs=library_dirs, site_dirs=site_dirs) for r in recs]
+    probs = [x[0] for x in loaded]
+    names = []
+    for r in recs:
+        nm = r.stem
+        while nm in names:
+            nm += "'"
+        names.append(nm)
+    prob = combine_problems(probs, names)
+    skip = {}
+    for x in loaded:
+        skip.update(x[1])
+    opts = loaded[0][2]
+    words = parse_free(free if free is not None else opts.get("free", "none"), prob.ctx.shape)
+    prob = with_free_words(prob, words)
+    notes = [f"{len(recs)} recordings, one object each: {', '.join(names)} (times from "
+             f"{prob.ctx.epoch_utc})",
+             f"free baseline parameters: {', '.join(p.name for p in prob.free) or 'none'}"]
+    notes += [n for x in loaded for n in x[3] if not n.startswith("free baseline")][:5]
+    return prob, skip, opts, notes
+
+
+def _load_one(recording, scenario=None, *, free=None, exclude=(), shape=None,
+              library_dirs=None, site_dirs=None):
     """The diagnosis problem of a magnitude recording file and the model it is checked against.
 
     ``recording``: our lightcurve HDF5 (model = the file's own scenario — with the shape and
@@ -489,16 +529,21 @@ def load_problem(recording, scenario=None, *, free=None, exclude=(), shape=None,
 def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progress=None,
                        folds="auto", n_folds=DEFAULT_FOLDS, cv_report=(), max_effects=None,
                        min_gain=None, seed=0, shape=None, library_dirs=None, site_dirs=None):
-    """Diagnose a recording file against a model (:func:`load_problem`; a CSS recording,
-    detected from the file, goes to :func:`diagnose_css_recording`). Returns a
-    :class:`Diagnosis`."""
+    """Diagnose a recording file (or several, one object each) against a model
+    (:func:`load_problem`; a CSS recording, detected from the file, goes to
+    :func:`diagnose_css_recording`). Returns a :class:`Diagnosis`."""
     from pathlib import Path
 
+    from ..errors import InputError
     from .css_recording import is_css_recording
 
-    recording = Path(recording)
-    if is_css_recording(recording):
-        return diagnose_css_recording(recording, scenario, free=free, exclude=exclude,
+    recs = [recording] if isinstance(recording, (str, Path)) else list(recording)
+    css = [is_css_recording(Path(r)) for r in recs]
+    if any(css):
+        if len(recs) > 1:
+            raise InputError("CSS recordings are diagnosed one at a time", field="recording",
+                             value=", ".join(map(str, recs)))
+        return diagnose_css_recording(Path(recs[0]), scenario, free=free, exclude=exclude,
                                       progress=progress, max_effects=max_effects,
                                       min_gain=min_gain, seed=seed, folds=folds, n_folds=n_folds)
     prob, skip, opts, notes = load_problem(recording, scenario, free=free, exclude=exclude,

@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["FreeParam", "Problem", "Z_NONFINITE", "magnitude_problem", "css_problem",
-           "parse_free", "recording_columns", "clipped_gaussian_mean", "clipped_gaussian_sd"]
+           "parse_free", "recording_columns", "combine_problems", "with_free_words", "clipped_gaussian_mean", "clipped_gaussian_sd"]
 
 #: Standardised residual assigned to a non-finite prediction (e.g. an epoch put in umbra).
 Z_NONFINITE = 30.0
@@ -431,6 +431,107 @@ def recording_columns(lc):
             raise InputError(f"{idx} must index {names} for every row", field=idx)
         out += [i, [str(x) for x in nm]]
     return tuple(out)
+
+
+def _union(names_list):
+    out = []
+    for names in names_list:
+        for n in names:
+            if n not in out:
+                out.append(n)
+    return out
+
+
+def combine_problems(problems, object_names) -> Problem:
+    """One magnitude problem of several recordings, one object each (``lightcurve import``
+    writes one file per object): rows concatenated, times rebased onto the first recording's
+    epoch, sites and cameras merged by name, and ``object`` = the recording's index (named
+    ``object_names``), so that objects can be held out (:mod:`.folds`). The recordings must
+    share the model (shape, Sun magnitude, eclipse handling) and have no free baseline
+    parameters yet (:func:`with_free_words` adds them for the merged channels).
+    """
+    from dataclasses import replace as _replace
+
+    from ..geometry.time import parse_epoch
+    from ..physics import ModelContext
+
+    problems = list(problems)
+    if len(problems) == 1:
+        return _replace(problems[0], object=np.zeros(len(problems[0].ctx), np.int64),
+                        object_names=list(object_names))
+    p0 = problems[0]
+    for k, p in enumerate(problems):
+        if p.kind != "magnitude" or p.free:
+            raise ValueError("combine_problems takes magnitude problems without free parameters")
+        c, c0 = p.ctx, p0.ctx
+        same = (c.shape.n_facets == c0.shape.n_facets
+                and np.allclose(c.shape.normals_body, c0.shape.normals_body)
+                and np.allclose(c.shape.areas_m2, c0.shape.areas_m2)
+                and all(np.allclose(c.shape.param_table[key], c0.shape.param_table[key], equal_nan=True)
+                        for key in c0.shape.param_table) and set(c.shape.param_table) == set(c0.shape.param_table))
+        if not same:
+            raise InputError("the recordings are modelled with different shapes; diagnose them "
+                             "separately or give one --scenario/--shape", field="recording",
+                             value=object_names[k])
+        if c.sun_mag != c0.sun_mag or c.ignore_eclipse != c0.ignore_eclipse:
+            raise InputError("the recordings use different Sun magnitudes (bands) or eclipse "
+                             "handling", field="recording", value=object_names[k])
+        if c.attitude_fn is not None or c.orbit_fn is not None:
+            raise ValueError("cannot combine contexts with attitude/orbit callables")
+    e0 = parse_epoch(p0.ctx.epoch_utc)
+    shifts = [(parse_epoch(p.ctx.epoch_utc) - e0).total_seconds() for p in problems]
+    sites = _union([p.site_names for p in problems])
+    chans = _union([p.channel_names for p in problems])
+    has_cam = any(p.camera is not None for p in problems)
+
+    def cat(get):
+        vals = [get(p) for p in problems]
+        if any(v is None for v in vals):
+            return None
+        return np.concatenate([np.asarray(v) for v in vals])
+
+    site_map = [np.array([sites.index(n) for n in p.site_names], np.int64) for p in problems]
+    ctx_site = np.concatenate([m[p.ctx.site_index] for m, p in zip(site_map, problems)])
+    cam_ctx = None
+    if has_cam:
+        cam_ctx = np.concatenate([np.array([chans.index(n) for n in p.channel_names], np.int64)
+                                  [p.ctx.camera_index_rows] for p in problems])
+    omega = cat(lambda p: p.ctx.omega)
+    ctx = ModelContext(epoch_utc=p0.ctx.epoch_utc,
+                       t=np.concatenate([p.ctx.t + s for p, s in zip(problems, shifts)]),
+                       site_index=ctx_site, site_names=sites, shape=p0.ctx.shape,
+                       q=cat(lambda p: p.ctx.q), omega=omega,
+                       r_obj_eci_m=cat(lambda p: p.ctx.r_obj_eci_m),
+                       v_obj_eci_m_s=cat(lambda p: p.ctx.v_obj_eci_m_s),
+                       r_site_eci_m=cat(lambda p: p.ctx.r_site_eci_m),
+                       r_sun_eci_m=cat(lambda p: p.ctx.r_sun_eci_m),
+                       elevation_rad=cat(lambda p: p.ctx.elevation_rad), sun_mag=p0.ctx.sun_mag,
+                       ignore_eclipse=p0.ctx.ignore_eclipse,
+                       camera_index=cam_ctx, camera_names=chans if has_cam else None)
+    offs = np.cumsum([0] + [len(p.ctx) for p in problems[:-1]])
+    obj = np.concatenate([np.full(len(p.ctx), k, np.int64) for k, p in enumerate(problems)])
+    night = None
+    if all(p.night is not None for p in problems):
+        night = np.concatenate([np.asarray(p.night) for p in problems])
+    return Problem("magnitude", ctx, cat(lambda p: p.y), cat(lambda p: p.sigma),
+                   np.concatenate([p.t + s for p, s in zip(problems, shifts)]),
+                   np.concatenate([m[p.site] for m, p in zip(site_map, problems)]),
+                   np.concatenate([p.epoch_index + o for p, o in zip(problems, offs)]),
+                   sites, [], elevation_rad=cat(lambda p: p.elevation_rad),
+                   phase_rad=cat(lambda p: p.phase_rad), shadow_margin=cat(lambda p: p.shadow_margin),
+                   night=night, label=", ".join(p.label for p in problems), object=obj,
+                   object_names=list(object_names),
+                   camera=cam_ctx, camera_names=chans if has_cam else None)
+
+
+def with_free_words(problem, words) -> Problem:
+    """``problem`` with the free baseline parameters of ``words`` (:func:`parse_free`) for
+    its shape and photometric channels; a free zero point excludes the zero_point effect."""
+    free = _free_params(list(words), problem.ctx.shape, problem.channel_names)
+    ex = tuple(problem.exclude) + (("zero_point",) if "zero_point" in words else ())
+    from dataclasses import replace as _replace
+
+    return _replace(problem, free=free, exclude=ex)
 
 
 def css_problem(ctx, y, sigma, *, label="", censored_at_zero=False) -> Problem:

@@ -268,8 +268,11 @@ def explanation(d) -> str:
         c, r = by[name], recs.get(name, {})
         desc = c.get("description", name)
         head, body = (x.strip() for x in desc.split(":", 1)) if ":" in desc else (name, desc)
+        label = head[0].lower() + head[1:]
+        if label.replace("-", " ") != name.replace("_", " "):
+            label += f" ({name})"
         txt += ("The most likely missing physics is " if i == 0 else "It also needs ") \
-            + f"{head[0].lower() + head[1:]} ({name}): " + body[0].lower() + body[1:]
+            + f"{label}: " + body[0].lower() + body[1:]
         ph = _param_phrases(r, _units(d, name))
         if ph:
             txt += f" Fitted: {ph}."
@@ -433,7 +436,8 @@ def _cand_rows(js, d):
             units = _units(d, c["name"])
             par = "; ".join(f"{k} = {fmt_value(v.get('value') if not isinstance(v.get('value'), list) else None, v.get('sd'), units.get(k.split('[', 1)[0], ''), v.get('status') in ('identified', 'no data'))}"
                             for k, v in s["params"].items()
-                            if not str(v.get("status", "")).startswith("held") and v.get("status") != "no data")
+                            if not str(v.get("status", "")).startswith("held") and v.get("status") != "no data"
+                            and v.get("value") is not None)
             idt = "yes" if s["identified"] else "no"
 
             def g(x, f="{:.3g}"):

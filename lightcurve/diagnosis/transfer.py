@@ -170,7 +170,8 @@ def apply_fit(fit_file, recording, scenario=None, *, shape=None, library_dirs=No
     model = read_fit(fit_file)
     prob, _skip, _opts, notes = load_problem(recording, scenario, free="none", shape=shape,
                                              library_dirs=library_dirs, site_dirs=site_dirs)
-    tr = Transfer(recording=Path(recording).name, fit_file=str(fit_file), n=prob.n)
+    recs = [recording] if isinstance(recording, (str, Path)) else list(recording)
+    tr = Transfer(recording=", ".join(Path(r).name for r in recs), fit_file=str(fit_file), n=prob.n)
     tnotes = []
     terms = _effect_terms(model, prob, fit_file, tnotes)
     fprob, theta = _free_theta(model, prob, fit_file, tnotes)
