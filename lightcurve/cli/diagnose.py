@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ._args import SEED, add_model_options, csv_list, number
+from ._args import add_model_options, add_output, add_quiet, add_seed, csv_list, number
 
 __all__ = ["register"]
 
@@ -85,7 +85,8 @@ def register(sub) -> None:
                    "the file's own scenario (with the shape and sites the file carries). For a "
                    "CSS recording: optionally a CSS sensor "
                    "configuration TOML (the model's nominal sensors; default: the file's)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    add_output(p, required=True, help="output folder (diagnosis.json and report.html, or "
+               "transfer.json and transfer.html with --apply)")
     p.add_argument("--apply", default=None, metavar="FIT.json",
                    help="apply the fitted model of this diagnosis.json unchanged to RECORDING and "
                    "report, component by component, whether it transfers (nothing is refitted)")
@@ -105,7 +106,7 @@ def register(sub) -> None:
                    help="number of cross-validation folds (default 5)")
     p.add_argument("--min-gain", type=number(0, None, lo_open=True), default=None,
                    help="held-out gain G needed to add an effect (default 10)")
-    p.add_argument("--seed", type=SEED, default=0, help="seed of the random fit starts (default 0)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    add_seed(p, help="seed of the random fit starts")
+    add_quiet(p)
     add_model_options(p)
     p.set_defaults(func=_cmd_diagnose)
