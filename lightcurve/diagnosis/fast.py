@@ -35,11 +35,17 @@ class EclipsePenumbra(Penumbra):
 
 
 class CachedEarthshine(Earthshine):
-    """Earthshine with cached cell geometry (module docstring); same name and parameters."""
+    """Earthshine with cached cell geometry (module docstring); same name and parameters.
+
+    The sunlit, visible cells of every epoch are cached by the epoch's own geometry (object
+    and Sun position, time), so the subsets of a cross-validation reuse them."""
+
+    _ROWS_MAX = 10_000
 
     def __init__(self, **options):
         super().__init__(**options)
         self._cells = {}
+        self._rows = {}
 
     def _key(self, ctx, st):
         h = hashlib.blake2b(digest_size=16)
@@ -55,10 +61,18 @@ class CachedEarthshine(Earthshine):
         key = self._key(ctx, st)
         if key not in self._cells:
             grid = self.grid()
-            theta = earth_rotation_angle(ctx.epoch_utc, ctx.t + st.dt_obj)
+            tt = ctx.t + st.dt_obj
+            theta = earth_rotation_angle(ctx.epoch_utc, tt)
+            if len(self._rows) > self._ROWS_MAX:
+                self._rows.clear()
             dirs, ratio, owner = [], [], []
             for i in range(len(ctx)):
-                d, r = earthshine_cells(grid, st.r_obj[i], st.r_sun[i], theta[i])
+                rk = (ctx.epoch_utc, st.r_obj[i].tobytes(), st.r_sun[i].tobytes(), float(tt[i]))
+                hit = self._rows.get(rk)
+                if hit is None:
+                    hit = earthshine_cells(grid, st.r_obj[i], st.r_sun[i], theta[i])
+                    self._rows[rk] = hit
+                d, r = hit
                 dirs.append(d)
                 ratio.append(r)
                 owner.append(np.full(r.size, i, np.int64))
