@@ -105,9 +105,10 @@ def _measured(est, curve):
 
 
 def _fitted(est, curve):
-    pred = getattr(est, "predicted_mag", None)
+    pred = getattr(est, "mag_post", None)   # model magnitude at the posterior attitude
     if pred is not None:
-        return np.asarray(pred, float)
+        pred = np.asarray(pred, float)
+        return np.where(np.isfinite(pred), pred, np.nan)
     if curve is None or len(curve) != len(est):
         return None
     try:
