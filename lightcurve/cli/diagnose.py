@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._args import SEED, add_model_options, number
+from ._args import add_model_options, add_output, add_quiet, add_seed, number
 
 __all__ = ["register"]
 
@@ -46,7 +46,8 @@ def register(sub) -> None:
                    "the file's own scenario (with the shape and sites the file carries). For a "
                    "CSS recording: optionally a CSS sensor "
                    "configuration TOML (the model's nominal sensors; default: the file's)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    add_output(p, what="folder", required=True,
+               help="output folder (diagnosis.json, report.html)")
     p.add_argument("--free", default=None,
                    help="free baseline parameters: none | zero_point | reflection | BRDF parameter "
                    "names, comma separated (default: none for HDF5 with truth, reflection for CSV)")
@@ -54,7 +55,7 @@ def register(sub) -> None:
     p.add_argument("--max-effects", type=number(1, 2, integer=True), default=None,
                    help="at most this many effects in the final model (1 or 2; default 2)")
     p.add_argument("--no-cv", action="store_true", help="skip the leave-one-night-out cross-validation")
-    p.add_argument("--seed", type=SEED, default=0, help="seed of the random fit starts (default 0)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    add_seed(p, default=0, help="seed of the random fit starts")
+    add_quiet(p, help="no progress messages")
     add_model_options(p)
     p.set_defaults(func=_cmd_diagnose)
