@@ -106,7 +106,7 @@ def register(sub) -> None:
                    help="number of cross-validation folds (default 5)")
     p.add_argument("--min-gain", type=number(0, None, lo_open=True), default=None,
                    help="held-out gain G needed to add an effect (default 10)")
-    add_seed(p, help="seed of the random fit starts")
-    add_quiet(p)
+    add_seed(p, default=0, help="seed of the random fit starts")
+    add_quiet(p, help="no progress messages")
     add_model_options(p)
     p.set_defaults(func=_cmd_diagnose)

@@ -5,15 +5,34 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._args import (SEED, add_model_options, csv_ints, csv_list, initial_omega_rad_s, initial_q,
-                    number)
+from ._args import (add_executors, add_model_options, add_output, add_plot, add_quiet, add_seed,
+                    csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+                    refuse_inapplicable)
 
 __all__ = ["register"]
+
+
+#: options that only one filter uses (``--method``)
+METHOD_OPTIONS = {"particles": {"bpf"}, "roughening": {"bpf"}, "resampling": {"bpf"},
+                  "rejuvenation": {"bpf"}, "ess_threshold": {"bpf"}, "device": {"bpf"},
+                  "alpha": {"ukf"}, "beta": {"ukf"}, "kappa": {"ukf"}}
+#: options that only some reflection models use (``--reflection``)
+REFLECTION_OPTIONS = {"reflection_params": {"model3"}, "reflection_facets": {"model3"},
+                      "reflection_frac": {"random-walk", "model1", "model2", "model3"},
+                      "attitude_known": {"random-walk", "model1", "model2", "model3"}}
+
+
+def _refuse_inapplicable_options(args) -> None:
+    """An option the chosen filter, reflection model or gate ignores is an input error."""
+    refuse_inapplicable(args, "method", METHOD_OPTIONS)
+    refuse_inapplicable(args, "reflection", REFLECTION_OPTIONS)
+    refuse_inapplicable(args, "gate", {"gate_false_alarm": {"auto", "reject", "inflate"}})
 
 
 def _cmd_invert(args) -> int:
     from ..studies.batch import expand_inputs, invert_files
 
+    _refuse_inapplicable_options(args)
     n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
     start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
     if args.initial_q is not None:
@@ -83,19 +102,14 @@ def register(sub) -> None:
     p.add_argument("files", nargs="+", metavar="FILE.h5",
                    help="lightcurve HDF5 file(s) or glob patterns (expanded here, so quoted "
                    "patterns work; a pattern matching nothing is an error)")
-    ex = p.add_mutually_exclusive_group()
-    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None,
-                    help="local process-pool size (default: one per CPU, at most one per file; "
-                    "1 runs in this process)")
-    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
-    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None, metavar="W",
-                    help="start a Dask LocalCluster with W worker processes")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_executors(p, workers_help="local process-pool size (default: one per CPU, at most one "
+                  "per file; 1 runs in this process)")
+    add_quiet(p, help="no progress bar")
     p.add_argument("--method", choices=("mekf", "ukf", "bpf"), default="ukf",
                    help="filter (default: ukf)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
+    add_output(p, what="folder", required=True)
+    add_seed(p, default=0, help="random seed of the initial-estimate perturbation and of the "
+             "particle filter")
     p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3)")
     p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
@@ -115,7 +129,8 @@ def register(sub) -> None:
     p.add_argument("--roughening", type=number(0.0), default=0.2,
                    help="BPF roughening constant G (Bernard table 7.9; used with --rejuvenation "
                    "separate; default 0.2)")
-    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic")
+    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic",
+                   help="BPF resampling scheme (default systematic)")
     p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
                    help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
                    "the whole state with the Musso et al. (2001) bandwidth; separate = the "
@@ -160,6 +175,6 @@ def register(sub) -> None:
     p.add_argument("--gate-false-alarm", type=number(0.0, 0.5, lo_open=True), default=1e-4,
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
-    p.add_argument("--plot", action="store_true", help="also write a PNG per file")
+    add_plot(p, help="also write the estimate figure (PNG) next to each result")
     p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
                    "listed in {output}/summary.json; run the command again on the others")

@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import SEED, add_model_options, csv_ints, csv_list, number, output_not_input
+from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_ints, csv_list, number,
+                    output_not_input, refuse_inapplicable)
 
 __all__ = ["register"]
 
@@ -18,6 +19,7 @@ def _cmd_fit_reflection(args) -> int:
     from ..io.paths import safe_output_path
     from ..studies.fit_reflection import ConvergenceError, fit_reflection
 
+    refuse_inapplicable(args, "attitude", {"estimate": {"estimate"}})
     if args.attitude == "estimate" and not args.estimate:
         raise InputError("--attitude estimate needs --estimate FILE.h5 (an 'invert' result)",
                          field="--estimate")
@@ -96,7 +98,8 @@ def register(sub) -> None:
                    help="step budget (default 40000)")
     p.add_argument("--tau-factor", type=number(1.0), default=50.0,
                    help="converged when steps >= factor x max autocorrelation time (default 50)")
-    p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    add_seed(p, default=0, help="random seed of the walkers")
+    add_output(p, what="folder", required=True,
+               help="output folder (STEM.reflection.json, corner and predictive plots)")
+    add_quiet(p, help="no progress lines")
     p.set_defaults(func=_cmd_fit_reflection)

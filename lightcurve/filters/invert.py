@@ -181,8 +181,7 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     P0 = np.diag([st_r ** 2] * 3 + [sw_r ** 2] * 3)
     meta = {"seed": int(seed), "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
             "dynamics": dyn_kind, "acs_sigma_deg": float(np.degrees(dyn.acs_sigma)),
-            "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", ""),
-            "epoch_utc": curve.epoch_utc}
+            "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", "")}
     if attitude == "truth":
         meta["attitude"] = "truth"
     return FilterProblem(model=model, dynamics=dyn, q0=q0, omega0=w0, P0=P0,

@@ -105,9 +105,10 @@ def _measured(est, curve):
 
 
 def _fitted(est, curve):
-    pred = getattr(est, "predicted_mag", None)
+    pred = getattr(est, "mag_post", None)   # model magnitude at the posterior attitude
     if pred is not None:
-        return np.asarray(pred, float)
+        pred = np.asarray(pred, float)
+        return np.where(np.isfinite(pred), pred, np.nan)
     if curve is None or len(curve) != len(est):
         return None
     try:
@@ -121,9 +122,9 @@ def _fitted(est, curve):
 def estimate_figure(est, curve=None, title=None):
     """The analyst figure of an :class:`~lightcurve.filters.result.Estimate` (module docstring).
 
-    ``curve`` is the lightcurve the estimate was computed from (for the measured and fitted
-    magnitudes and the UTC axis); without it those panels use what the estimate file stores.
-    Returns the matplotlib figure.
+    ``curve`` is the lightcurve the estimate was computed from (truth lines, sites); without it
+    the estimate's ``source_file`` is tried, and the panels use what the estimate stores.
+    ``title`` prefixes the key numbers. Returns the matplotlib figure.
     """
     plt = _fig()
     from matplotlib.gridspec import GridSpec
@@ -131,6 +132,10 @@ def estimate_figure(est, curve=None, title=None):
     from ..report.style import DPI, figsize, utc_axis
     from .derived import euler321_with_sigma, spin_axis
 
+    if curve is None:  # the file it came from, when it can be found (truth lines, sites)
+        from ..report.plot_any import source_lightcurve
+
+        curve = source_lightcurve(est)
     x, is_utc, epoch = _time_axis(est, curve)
     truth = est.att_error_deg is not None
     tq = tw = None
@@ -309,8 +314,8 @@ def estimate_figure(est, curve=None, title=None):
             elif id(a) in bottom:
                 a.set_xlabel("t − t₀ [s]")
         a.grid(True, alpha=0.3)
-    fig.suptitle(title or _title(est, sp, eul, eul_s, frac_in, epoch), fontsize=10,
-                 ha="left", x=0.01)
+    head = _title(est, sp, eul, eul_s, frac_in, epoch)
+    fig.suptitle(f"{title} · {head}" if title else head, fontsize=10, ha="left", x=0.01)
     return fig
 
 

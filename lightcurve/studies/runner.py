@@ -133,7 +133,7 @@ def execute_task(task: RunTask) -> dict:
     try:  # compile / load the kernels once per process, so that runtime_s times the filter only
         from ..warmup import warm_up
 
-        warm_up((c.filter,), reflection=c.reflection == "model3")
+        warm_up((c.filter,), dynamics=(c.dynamics,), reflection=c.reflection == "model3")
     except Exception:  # noqa: BLE001 - a failed warm-up only costs the timing
         pass
     t0 = time.perf_counter()
