@@ -21,6 +21,7 @@ from . import (
     css,
     diagnose,
     invert,
+    period,
     reflection,
     selfcheck,
     shapes,
@@ -31,8 +32,8 @@ from . import (
 __all__ = ["main", "build_parser"]
 
 _REGISTRARS = (selfcheck.register, sites.register, shapes.register, simulate.register,
-               css.register, invert.register, diagnose.register, compare.register,
-               reflection.register)
+               css.register, invert.register, period.register, diagnose.register,
+               compare.register, reflection.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
