@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ._args import number
+from ._args import add_output, number
 
 __all__ = ["register"]
 
@@ -60,8 +60,8 @@ def register(sub) -> None:
         "bisector. With -o DIR writes DIR/STEM.period.json and a periodogram PNG. The result "
         "seeds the rate prior of 'invert --initial global'.")
     p.add_argument("file", metavar="FILE.h5", help="lightcurve HDF5 file")
-    p.add_argument("-o", "--output", metavar="DIR", default=None,
-                   help="folder for the JSON summary and the periodogram PNG (default: print only)")
+    add_output(p, what="folder", help="folder for the JSON summary and the periodogram PNG "
+               "(default: print only)")
     p.add_argument("--min-period-s", type=number(0.0, lo_open=True), default=None,
                    help="shortest period searched, s (default 2.5 x the median cadence)")
     p.add_argument("--max-period-s", type=number(0.0, lo_open=True), default=None,
