@@ -107,6 +107,10 @@ class GlobalInitConfig:
     report_weight : float — the result is stated as ambiguous when at least this much posterior
         mass lies outside the heaviest mode (in other modes).
     max_modes : int — most modes listed and handed to the filter (heaviest first).
+    restarts : int — when the filter from the best mode is inconsistent with the data (NIS or
+        residual test of :meth:`lightcurve.filters.result.Estimate.consistency`), the search is
+        repeated with twice the particles, at most this many times; the attempt whose best
+        mode explains the window best is kept.
     min_sigma_theta_deg, min_sigma_omega_deg_s : floors of the hand-over 1σ.
     inflate : float ≥ 1 — factor on the modes' 1σ spread for the hand-over covariance.
     """
@@ -125,6 +129,7 @@ class GlobalInitConfig:
     min_mode_weight: float = 0.01
     report_weight: float = 0.05
     max_modes: int = 6
+    restarts: int = 1
     min_sigma_theta_deg: float = 2.0
     min_sigma_omega_deg_s: float = 0.05
     inflate: float = 2.0
@@ -134,7 +139,7 @@ class GlobalInitConfig:
                ("jumps", self.jumps, 0, 100),
                ("max_stages", self.max_stages, 1, 100_000),
                ("window_epochs", self.window_epochs, 5, 1_000_000),
-               ("max_modes", self.max_modes, 1, 100)]
+               ("max_modes", self.max_modes, 1, 100), ("restarts", self.restarts, 0, 5)]
         for name, v, lo, hi in chk:
             if int(v) != v or not lo <= v <= hi:
                 raise InputError("out of range", field=f"global.{name}", value=v,
@@ -205,8 +210,8 @@ class GlobalResult:
     ambiguous : True when ≥ ``report_weight`` of the posterior lies outside the heaviest mode.
     statement : one sentence for people (what the data say about the attitude).
     period : the PeriodResult that seeded the rate prior (or None).
-    stages, particles, runtime_s, window_rows : sampler facts; ``converged`` False when
-    β did not reach 1 within ``max_stages``.
+    stages, particles, runtime_s, window_rows : sampler facts of the kept attempt; ``converged``
+    False when β did not reach 1 within ``max_stages``; ``attempts`` = 1 + restarts made.
     """
 
     modes: list
@@ -220,12 +225,14 @@ class GlobalResult:
     window_rows: np.ndarray = field(repr=False)
     converged: bool = True
     acceptance: list = field(default_factory=list, repr=False)
+    attempts: int = 1
 
     def summary(self) -> dict:
         return {"ambiguous": bool(self.ambiguous), "statement": self.statement,
                 "n_modes": len(self.modes), "modes": [m.summary() for m in self.modes],
                 "stages": int(self.stages), "particles": int(self.particles),
-                "converged": bool(self.converged), "runtime_s": round(float(self.runtime_s), 3),
+                "converged": bool(self.converged), "attempts": int(self.attempts),
+                "runtime_s": round(float(self.runtime_s), 3),
                 "window_epochs": int(self.window_rows.size),
                 "period": None if self.period is None else self.period.summary()}
 
@@ -384,58 +391,8 @@ def _cluster(Q, W, ll, cfg):
     return groups
 
 
-def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, shape=None,
-                      dynamics=None, progress=None, filter_kwargs=None) -> GlobalResult:
-    """Estimate attitude and rate from a lightcurve with no initial guess (module docstring).
-
-    Parameters
-    ----------
-    curve : Lightcurve — the recording; its truth, if any, is never used by the estimator
-        (only to report errors afterwards).
-    method : {"mekf", "ukf", "bpf"} — the filter that takes over from every mode.
-    seed : int — seeds the sampler and the filters (reproducible).
-    config : GlobalInitConfig or None.
-    period : PeriodResult, "none" or None — the spin-period analysis seeding the rate prior
-        (None: computed here; "none": the broad prior only).
-    shape, dynamics : passed to :func:`lightcurve.filters.invert.build_problem`.
-    progress : callable(str) or None — one line per tempering stage.
-    filter_kwargs : dict — further keyword arguments of :func:`lightcurve.filters.invert.invert`
-        for the hand-over runs (e.g. ``particles`` for the BPF).
-
-    Returns
-    -------
-    GlobalResult
-    """
-    from ..filters.invert import METHODS, build_problem, invert
-
-    cfg = config or GlobalInitConfig()
-    if method not in METHODS:
-        raise InputError("unknown filter method", field="method", value=method,
-                         allowed=", ".join(METHODS))
-    t0 = time.perf_counter()
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x6C0B]))
-    # the problem (model + dynamics); the initial estimate it needs is a dummy here
-    problem = build_problem(curve, initial_q=[1.0, 0.0, 0.0, 0.0], initial_omega=[0.0, 0.0, 0.0],
-                            shape=shape, dynamics=dynamics)
-    rows = _window_rows(problem.model, cfg)
-    if rows.size < 5:
-        raise InputError("global initialisation needs at least 5 finite magnitudes in the "
-                         "window", field="mag", value=int(rows.size), allowed=">= 5")
-    if period is None:
-        try:
-            period = analyse_period(curve)
-        except InputError:
-            period = None
-    elif isinstance(period, str) and period == "none":
-        period = None
-    tt = np.asarray(problem.model.t, float)
-    dts = np.diff(tt[rows])
-    dt_med = float(np.median(dts[dts > 0])) if np.any(dts > 0) else 1.0
-    span = float(tt[rows[-1]] - tt[0]) or 1.0
-    prior = _rate_prior(period, span, dt_med, cfg.broad_weight)
-    win = _Window(problem, rows, cfg.nu)
-
-    N = int(cfg.particles)
+def _smc(win, prior, N, cfg, rng, progress):
+    """Tempered SMC over (q₀, ω₀) (module docstring) → Q, W, ll, stages, converged, β, acc."""
     Q = uniform_quaternions(N, rng)
     u = rng.standard_normal((N, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
@@ -481,7 +438,6 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
             ok = np.log(rng.random(N)) < log_r
             Q[ok], W[ok], ll[ok], lp[ok] = Qp[ok], Wp[ok], llp[ok], lpp[ok]
             acc.append(float(ok.mean()))
-        jacc = []
         for _ in range(int(cfg.jumps)):
             gi = rng.integers(1, G.shape[0], N)
             Qp = rot.quat_mult(G[gi], Q)
@@ -490,7 +446,6 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
             llp = win.loglik(Qp, Wp)
             ok = np.log(rng.random(N)) < beta * (llp - ll)   # |ω| unchanged: prior ratio 1
             Q[ok], W[ok], ll[ok] = Qp[ok], Wp[ok], llp[ok]
-            jacc.append(float(ok.mean()))
         am = float(np.mean(acc)) if acc else 0.0
         acc_hist.append(am)
         if am < 0.15:
@@ -502,9 +457,15 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
         if progress is not None:
             progress(f"stage {stages}: beta {beta:.3g}, acceptance {am:.2f}, "
                      f"step {math.degrees(s_q):.2g} deg")
+    return Q, W, ll, stages, converged, beta, acc_hist
 
+
+def _modes(Q, W, ll, cfg):
+    """Group the final cloud into modes → (list of GlobalMode (heaviest first, at most
+    ``max_modes``), every group holding ≥ ``min_mode_weight``)."""
+    N = Q.shape[0]
     groups = _cluster(Q, W, ll, cfg)
-    heavy = [g for g in groups if g.size / N >= cfg.min_mode_weight]
+    heavy = [g for g in groups if g.size / N >= cfg.min_mode_weight] or groups[:1]
     modes = []
     q_best = None
     for g in heavy[:cfg.max_modes]:
@@ -519,7 +480,16 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
         modes.append(GlobalMode(weight=g.size / N, q0=qm, omega0_rad_s=wm, att_sigma_deg=sa,
                                 omega_sigma_deg_s=sw, best_loglik=float(ll[g].max()),
                                 separation_deg=sep))
+    return modes, heavy
+
+
+def _hand_over(modes, curve, method, seed, cfg, shape, dynamics, filter_kwargs, library_dirs,
+               site_dirs, invert):
+    """Run the user's filter from every mode's mean with its inflated spread as 1σ."""
     fk = dict(filter_kwargs or {})
+    fk.setdefault("initial", "given")
+    fk.setdefault("library_dirs", library_dirs)
+    fk.setdefault("site_dirs", site_dirs)
     for m in modes:
         st = max(cfg.inflate * float(m.att_sigma_deg.max()), cfg.min_sigma_theta_deg)
         sw_ = max(cfg.inflate * float(m.omega_sigma_deg_s.max()), cfg.min_sigma_omega_deg_s)
@@ -527,6 +497,81 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
                             initial_omega=m.omega0_rad_s, sigma_theta_deg=min(st, 90.0),
                             sigma_omega_deg_s=sw_, shape=shape, dynamics=dynamics, **fk)
         m.estimate.meta["initial"] = "global"
+
+
+def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, shape=None,
+                      dynamics=None, progress=None, filter_kwargs=None, library_dirs=None,
+                      site_dirs=None) -> GlobalResult:
+    """Estimate attitude and rate from a lightcurve with no initial guess (module docstring).
+
+    Parameters
+    ----------
+    curve : Lightcurve — the recording; its truth, if any, is never used by the estimator
+        (only to report errors afterwards).
+    method : {"mekf", "ukf", "bpf"} — the filter that takes over from every mode.
+    seed : int — seeds the sampler and the filters (reproducible).
+    config : GlobalInitConfig or None.
+    period : PeriodResult, "none" or None — the spin-period analysis seeding the rate prior
+        (None: computed here; "none": the broad prior only).
+    shape, dynamics, library_dirs, site_dirs : passed to
+        :func:`lightcurve.filters.invert.build_problem` (the model).
+    progress : callable(str) or None — one line per tempering stage.
+    filter_kwargs : dict — further keyword arguments of :func:`lightcurve.filters.invert.invert`
+        for the hand-over runs (e.g. ``particles`` for the BPF).
+
+    Returns
+    -------
+    GlobalResult
+    """
+    from ..filters.invert import METHODS, build_problem, invert
+
+    cfg = config or GlobalInitConfig()
+    if method not in METHODS:
+        raise InputError("unknown filter method", field="method", value=method,
+                         allowed=", ".join(METHODS))
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x6C0B]))
+    # the problem (model + dynamics); the initial estimate it needs is a dummy here
+    problem = build_problem(curve, initial_q=[1.0, 0.0, 0.0, 0.0], initial_omega=[0.0, 0.0, 0.0],
+                            shape=shape, dynamics=dynamics, library_dirs=library_dirs,
+                            site_dirs=site_dirs)
+    shape = problem.model.shape       # resolved once: the hand-over runs use the same model
+    rows = _window_rows(problem.model, cfg)
+    if rows.size < 5:
+        raise InputError("global initialisation needs at least 5 finite magnitudes in the "
+                         "window", field="mag", value=int(rows.size), allowed=">= 5")
+    if period is None:
+        try:
+            period = analyse_period(curve)
+        except InputError:
+            period = None
+    elif isinstance(period, str) and period == "none":
+        period = None
+    tt = np.asarray(problem.model.t, float)
+    dts = np.diff(tt[rows])
+    dt_med = float(np.median(dts[dts > 0])) if np.any(dts > 0) else 1.0
+    span = float(tt[rows[-1]] - tt[0]) or 1.0
+    prior = _rate_prior(period, span, dt_med, cfg.broad_weight)
+    win = _Window(problem, rows, cfg.nu)
+
+    attempts = []
+    for attempt in range(int(cfg.restarts) + 1):
+        N = int(cfg.particles) * 2 ** attempt
+        Q, W, ll, stages, converged, beta, acc_hist = _smc(win, prior, N, cfg, rng, progress)
+        modes, heavy = _modes(Q, W, ll, cfg)
+        _hand_over(modes, curve, method, seed, cfg, shape, dynamics, filter_kwargs,
+                   library_dirs, site_dirs, invert)
+        attempts.append((modes, heavy, N, stages, converged, beta, acc_hist))
+        cons = modes[0].estimate.consistency()
+        if "nis_high" not in cons["flags"] and "residuals_high" not in cons["flags"]:
+            break
+        if progress is not None:
+            progress(f"the best mode's filter is inconsistent with the data (NIS mean "
+                     f"{cons['nis_mean']:.3g} > {cons['nis_band'][1]:.3g}): restarting with "
+                     f"{2 * N} particles")
+    # the attempt whose best mode explains the window best (a failed search finds a worse one)
+    modes, heavy, N, stages, converged, beta, acc_hist = max(
+        attempts, key=lambda a: a[0][0].best_loglik)
     best = modes[0]
     elsewhere = 1.0 - best.weight
     ambiguous = elsewhere >= cfg.report_weight and len(modes) > 1
@@ -542,9 +587,13 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
                      f"{2 * math.pi / max(np.linalg.norm(best.omega0_rad_s), 1e-300):.4g} s")
     if not converged:
         statement += f"; WARNING: the sampler stopped at beta {beta:.3g} < 1 (max_stages)"
+    cons = best.estimate.consistency()
+    if not cons["consistent"]:
+        statement += ("; WARNING: the filter from the best mode is not consistent with the data "
+                      f"({', '.join(cons['flags'])}) — treat this attitude as unconfirmed")
     res = GlobalResult(modes=modes, best=best.estimate, ambiguous=ambiguous,
                        statement=statement, period=period, stages=stages, particles=N,
                        runtime_s=time.perf_counter() - t0, window_rows=rows,
-                       converged=converged, acceptance=acc_hist)
+                       converged=converged, acceptance=acc_hist, attempts=len(attempts))
     best.estimate.meta["global_init"] = res.summary()
     return res
