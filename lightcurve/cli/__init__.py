@@ -25,6 +25,7 @@ from . import (
     css,
     diagnose,
     invert,
+    period,
     recordings,
     reflection,
     selfcheck,
@@ -36,8 +37,8 @@ from . import (
 __all__ = ["main", "build_parser", "iter_commands"]
 
 _REGISTRARS = (selfcheck.register, sites.register, shapes.register, simulate.register,
-               css.register, invert.register, diagnose.register, compare.register,
-               reflection.register, recordings.register)
+               css.register, invert.register, period.register, diagnose.register,
+               compare.register, reflection.register, recordings.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

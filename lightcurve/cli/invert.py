@@ -45,6 +45,21 @@ def _cmd_invert(args) -> int:
         start["library_dirs"] = tuple(args.library)
     if args.sites:
         start["site_dirs"] = tuple(args.sites)
+    start["initial"] = args.initial
+    if args.initial == "given" and args.initial_q is None:
+        from ..errors import InputError
+
+        raise InputError("--initial given needs --initial-q (and --initial-omega-deg-s)",
+                         field="--initial", value="given")
+    if args.global_particles is not None:
+        if args.initial not in ("global", "auto"):
+            from ..errors import InputError
+
+            raise InputError("--global-particles applies to the global initialisation only",
+                             field="--global-particles", allowed="--initial global or auto")
+        from ..acquisition.global_init import GlobalInitConfig
+
+        start["global_config"] = GlobalInitConfig(particles=args.global_particles)
     bar = n_files > 1 and not args.quiet
 
     def report(text, kind="info"):
@@ -92,9 +107,11 @@ def register(sub) -> None:
         "HDF5 per input plus DIR/summary.json (per file: method, final RSS attitude and rate "
         "error, final 3-sigma bounds, whether every component ended inside 3 sigma, "
         "divergence flag, runtime; or the error of a file that failed — the others go on). "
-        "The initial estimate is the file's truth perturbed by --sigma-theta-deg / "
-        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or, for recordings without "
-        "truth, --initial-q / --initial-omega-deg-s with those sigmas as their uncertainty. "
+        "The initial estimate (--initial) is the file's truth perturbed by --sigma-theta-deg / "
+        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or --initial-q / "
+        "--initial-omega-deg-s with those sigmas as their uncertainty, or — for a recording "
+        "with neither — the global initialisation, which needs no first guess and reports every "
+        "attitude mode the data allow. "
         "The shape is the one the file carries unless --shape is given. Many files run in "
         "parallel on "
         "the executors of 'compare' (process pool, Dask); the results do not depend on the "
@@ -114,6 +131,16 @@ def register(sub) -> None:
                    help="1-sigma initial attitude error per axis, deg (default 3)")
     p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
+    p.add_argument("--initial", choices=("auto", "truth", "given", "global"), default="auto",
+                   help="where the filter starts: truth = the file's truth perturbed by "
+                   "--sigma-theta-deg/--sigma-omega-deg-s (simulations, Bernard ch. 9); given = "
+                   "--initial-q/--initial-omega-deg-s; global = no first guess: attitude "
+                   "uniform over all rotations, rate from the spin-period analysis, a tempered "
+                   "Monte Carlo search for every attitude the data allow, then this filter "
+                   "from each (ambiguities are reported, not hidden). auto (default): given if "
+                   "--initial-q is set, else truth if the file has one, else global")
+    p.add_argument("--global-particles", type=number(100, 5_000_000, integer=True), default=None,
+                   metavar="N", help="particles of the global initialisation (default 20000)")
     p.add_argument("--initial-q", default=None, metavar="Q1,Q2,Q3,Q4",
                    help="initial attitude estimate (inertial->body quaternion, scalar first, "
                    "at the first epoch) instead of the file's perturbed truth; needed for "

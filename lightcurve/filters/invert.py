@@ -27,7 +27,8 @@ from ._common import FilterProblem
 from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
 from .result import Estimate
 
-__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES"]
+__all__ = ["invert", "build_problem", "initial_mode", "METHODS", "ATTITUDE_MODES",
+           "INITIAL_MODES"]
 
 METHODS = ("mekf", "ukf", "bpf")
 #: ``invert(attitude=…)``: estimate attitude and rate, or hold them at the file's truth (§10.7)
@@ -189,6 +190,27 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                          attitude_known=attitude == "truth")
 
 
+#: ``invert(initial=…)``: where the filter starts
+INITIAL_MODES = ("auto", "truth", "given", "global")
+
+
+def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
+    """Resolve ``invert(initial=…)`` to "truth", "given" or "global" (see :func:`invert`)."""
+    if initial not in INITIAL_MODES:
+        raise InputError("unknown initial-estimate mode", field="initial", value=initial,
+                         allowed=", ".join(INITIAL_MODES))
+    if initial == "auto":
+        if initial_q is not None:
+            return "given"
+        return "truth" if curve.has_truth else "global"
+    if initial == "given" and initial_q is None:
+        raise InputError("initial='given' needs initial_q (CLI --initial-q)", field="initial_q")
+    if initial == "truth" and not curve.has_truth:
+        raise InputError("initial='truth' needs a lightcurve with a truth attitude",
+                         field="initial", value=initial, allowed="given, global")
+    return initial
+
+
 def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
            particles=10_000, roughening=0.2, resampling="systematic", ess_threshold=0.5,
            initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
@@ -197,7 +219,8 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
            keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
            reflection_process_noise=0.0, reflection_facets=None,
            reflection_kinds=("xi", "a", "m", "A"), gate=None,
-           rejuvenation="auto", library_dirs=None, site_dirs=None) -> Estimate:
+           rejuvenation="auto", library_dirs=None, site_dirs=None, initial="auto",
+           global_config=None) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -253,6 +276,16 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         in the MEKF and the BPF). Counts land in
         ``est.meta["gate"]`` and :meth:`Estimate.summary`.
 
+    initial : {"auto", "truth", "given", "global"}
+        Where the filter starts: "truth" = the file's truth perturbed by σθ, σω (Bernard ch. 9
+        simulations); "given" = ``initial_q`` / ``initial_omega``; "global" = no first guess:
+        the global initialisation of :mod:`lightcurve.acquisition.global_init` (attitude
+        uniform over SO(3), rate from the spin-period analysis) finds the posterior modes and
+        runs this filter from each; the heaviest mode's estimate is returned, every mode in
+        ``meta["global_init"]``. "auto" (default): "given" when ``initial_q`` is given, else
+        "truth" when the file has a truth, else "global".
+    global_config : :class:`lightcurve.acquisition.global_init.GlobalInitConfig` or None
+
     Returns
     -------
     Estimate
@@ -260,6 +293,22 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     if method not in METHODS:
         raise InputError("unknown filter method", field="method", value=method,
                          allowed=", ".join(METHODS))
+    if initial_mode(initial, curve, initial_q, initial_omega) == "global":
+        from ..acquisition.global_init import global_initialise
+
+        handover = dict(particles=particles, roughening=roughening, resampling=resampling,
+                        ess_threshold=ess_threshold, acs_sigma_deg=acs_sigma_deg,
+                        acs_mode=acs_mode, pseudo_noise=pseudo_noise,
+                        eta_sigma_deg_s2=eta_sigma_deg_s2, inertia_kg_m2=inertia_kg_m2,
+                        alpha=alpha, beta=beta, kappa=kappa, error=error, jacobian=jacobian,
+                        reflection=reflection, reflection_frac=reflection_frac,
+                        reflection_process_noise=reflection_process_noise,
+                        reflection_facets=reflection_facets, reflection_kinds=reflection_kinds,
+                        gate=gate, rejuvenation=rejuvenation, library_dirs=library_dirs,
+                        site_dirs=site_dirs, initial="given")
+        return global_initialise(curve, method, seed=seed, config=global_config, shape=shape,
+                                 dynamics=dynamics, filter_kwargs=handover,
+                                 library_dirs=library_dirs, site_dirs=site_dirs).best
     problem = build_problem(curve, seed=seed, sigma_theta_deg=sigma_theta_deg,
                             sigma_omega_deg_s=sigma_omega_deg_s, initial_q=initial_q,
                             initial_omega=initial_omega, shape=shape, dynamics=dynamics,

@@ -245,6 +245,18 @@ def estimate_figure(est, curve=None, title=None):
         tra = np.degrees(np.unwrap(np.radians(st["ra_deg"])))
         tra += 360.0 * np.round((ra_c[-1] - tra[-1]) / 360.0)
         a.plot(tra, st["dec_deg"], "k--", lw=0.8, label="truth")
+    gi = (est.meta or {}).get("global_init") or {}
+    for j, m in enumerate(gi.get("modes", [])[1:], start=1):
+        # the other attitude modes of a global initialisation: their final spin axes
+        if "final_q" not in m:
+            continue
+        sm = spin_axis(np.asarray(m["final_q"]), np.radians(np.asarray(m["final_omega_deg_s"])))
+        mra = float(sm["ra_deg"][0])
+        mra += 360.0 * np.round((ra_c[-1] - mra) / 360.0)
+        a.plot(mra, float(sm["dec_deg"][0]), "s", mfc="none", mec="C1", ms=8, zorder=4,
+               label="other modes (global initialisation)" if j == 1 else None)
+        a.annotate(f"{100 * m['weight']:.0f}%", (mra, float(sm["dec_deg"][0])), fontsize=7,
+                   color="C1", xytext=(4, 4), textcoords="offset points")
     a.set_xlabel("right ascension [deg] (GCRS)")
     a.set_ylabel("declination [deg]")
     a.set_title("spin axis on the sky (colour: time)", loc="left", fontsize=9)
@@ -352,6 +364,16 @@ def _title(est, sp, eul, eul_s, frac_in, epoch):
                   + ("inside 3σ" if s["inside_3sigma"] else "OUTSIDE 3σ"))
     if est.diverged:
         line2 += f"; DIVERGED ({est.divergence_reason})"
+    cons = s.get("consistency") or {}
+    if cons.get("flags"):
+        line2 += (f"; FLAGGED: {', '.join(cons['flags'])} (NIS mean {cons['nis_mean']:.2g}, 99 % "
+                  f"band {cons['nis_band'][0]:.2g}–{cons['nis_band'][1]:.2g})")
+    gi = (est.meta or {}).get("global_init")
+    if gi:
+        line2 += "\nglobal initialisation: " + (
+            f"AMBIGUOUS, {gi['n_modes']} attitude modes (this plot: the heaviest, "
+            f"{100 * gi['modes'][0]['weight']:.0f} %)" if gi["ambiguous"] else
+            f"one attitude mode ({100 * gi['modes'][0]['weight']:.0f} % of the posterior)")
     return line1 + "\n" + line2
 
 

@@ -178,6 +178,57 @@ class Estimate(EstimateViews):
         return self
 
     # ------------------------------------------------------------------------------------
+    def consistency(self, prob=0.99) -> dict:
+        """Are the filter's innovations and the fitted lightcurve consistent with the noise?
+
+        Two tests at probability ``prob`` (default 99 %), independent of the truth:
+
+        * NIS: the mean of ``νₖ²/Sₖ`` over the updated epochs against the two-sided interval of
+          the mean of n χ²₁ variables (Bar-Shalom, Li & Kirubarajan 2001 §5.4.2,
+          :func:`lightcurve.estimation.consistency.chi2_interval`): above it, the filter's own
+          covariance does not explain its innovations (``"nis_high"``); below, it is
+          pessimistic (``"nis_low"``).
+        * Residuals (when the estimate carries ``predicted_mag`` from the posterior attitude and
+          the measured ``mag``, ``mag_sigma``): the χ²/dof of ``(y − ŷ)/σ`` with 6 fitted
+          states removed, against the same kind of interval (``"residuals_high"``: a model
+          mismatch or a wrong attitude, whatever the covariance says).
+
+        Returns a dict: ``nis_mean``, ``nis_band``, ``n_updates``, ``residual_chi2_dof``,
+        ``residual_band``, ``n_residuals``, ``flags`` (list of str) and ``consistent`` (no flag).
+        """
+        from ..estimation.consistency import chi2_interval
+
+        out = {"nis_mean": None, "nis_band": None, "n_updates": 0, "residual_chi2_dof": None,
+               "residual_band": None, "n_residuals": 0, "flags": []}
+        nu = np.asarray(self.innovations, float)
+        S = np.asarray(self.innovation_var, float)
+        ok = np.isfinite(nu) & np.isfinite(S) & (S > 0)
+        n = int(ok.sum())
+        if n:
+            m = float(np.mean(nu[ok] ** 2 / S[ok]))
+            lo, hi = chi2_interval(1, prob, n_avg=n)
+            out.update(nis_mean=m, nis_band=[lo, hi], n_updates=n)
+            if m > hi:
+                out["flags"].append("nis_high")
+            elif m < lo:
+                out["flags"].append("nis_low")
+        yhat = getattr(self, "predicted_mag", None)
+        y = getattr(self, "mag", None)
+        sig = getattr(self, "mag_sigma", None)
+        if yhat is not None and y is not None and sig is not None:
+            r = (np.asarray(y, float) - np.asarray(yhat, float)) / np.asarray(sig, float)
+            r = r[np.isfinite(r)]
+            dof = r.size - 6
+            if dof >= 1:
+                c = float(r @ r / dof)
+                lo, hi = chi2_interval(1, prob, n_avg=dof)
+                out.update(residual_chi2_dof=c, residual_band=[lo, hi], n_residuals=int(r.size))
+                if c > hi:
+                    out["flags"].append("residuals_high")
+        out["consistent"] = not out["flags"]
+        return out
+
+    # ------------------------------------------------------------------------------------
     def summary(self) -> dict:
         """Final-epoch summary (JSON-ready): RSS errors, 3σ bounds, inside-3σ, runtime."""
         out = {
@@ -201,6 +252,13 @@ class Estimate(EstimateViews):
         }
         if np.any(np.isfinite(self.n_eff)):
             out["final_n_eff"] = float(self.n_eff[-1])
+        cons = self.consistency()
+        out["consistency"] = cons
+        out["flagged"] = bool(cons["flags"])
+        gi = (self.meta or {}).get("global_init")
+        if gi:   # global initialisation (lightcurve.acquisition.global_init): the modes
+            out["global_init"] = {k: gi[k] for k in ("ambiguous", "statement", "n_modes",
+                                                     "modes") if k in gi}
         if self.bias is not None and self.bias_sigma is not None:
             out["final_bias_mag"] = [float(x) for x in self.bias[-1]]
             out["final_bias_sigma_mag"] = [float(x) for x in self.bias_sigma[-1]]
