@@ -5,13 +5,37 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from dataclasses import fields
+
+from ..filters.config import (BPF_KEYWORDS, VARIANTS, ProblemConfig, filter_config_class)
+from ..studies.batch import expand_inputs, invert_files
 from ._args import SEED, csv_ints, csv_list, number
 
-__all__ = ["register"]
+__all__ = ["register", "configs_from_args"]
+
+
+def configs_from_args(args):
+    """``(ProblemConfig, filter options dict)`` from the parsed ``invert`` options — the same
+    validated objects the Python API and the study TOML build."""
+    problem = ProblemConfig(
+        seed=args.seed, sigma_theta_deg=args.sigma_theta_deg,
+        sigma_omega_deg_s=args.sigma_omega_deg_s, acs_mode=args.acs_mode,
+        pseudo_noise=args.pseudo_noise, reflection=args.reflection,
+        attitude="truth" if args.attitude_known else "estimate",
+        reflection_frac=args.reflection_frac,
+        reflection_kinds=tuple(csv_list(args.reflection_params, "--reflection-params")),
+        reflection_facets=(None if args.reflection_facets is None else
+                           tuple(csv_ints(args.reflection_facets, "--reflection-facets"))),
+        gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
+    cls = filter_config_class(args.method)
+    names = [f.name for f in fields(cls)] if cls is not None else list(BPF_KEYWORDS)
+    opts = {n: getattr(args, n) for n in names if hasattr(args, n)}
+    if cls is not None:
+        opts = cls(**opts).as_options()    # validated here (InputError → exit 2)
+    return problem, opts
 
 
 def _cmd_invert(args) -> int:
-    from ..studies.batch import expand_inputs, invert_files
 
     n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
     bar = n_files > 1 and not args.quiet
@@ -28,23 +52,10 @@ def _cmd_invert(args) -> int:
         else:
             print(line, file=stream)
 
+    problem, filter_options = configs_from_args(args)
     res = invert_files(args.files, args.method, args.output, workers=args.workers,
                        scheduler=args.scheduler, dask_local=args.dask_local, progress=bar,
-                       plot=args.plot, report=report, seed=args.seed,
-                       sigma_theta_deg=args.sigma_theta_deg,
-                       sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
-                       roughening=args.roughening, resampling=args.resampling,
-                       rejuvenation=args.rejuvenation,
-                       ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
-                       pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
-                       kappa=args.kappa, reflection=args.reflection,
-                       attitude="truth" if args.attitude_known else "estimate",
-                       reflection_frac=args.reflection_frac,
-                       reflection_kinds=csv_list(args.reflection_params, "--reflection-params"),
-                       reflection_facets=(None if args.reflection_facets is None else
-                                          csv_ints(args.reflection_facets,
-                                                    "--reflection-facets")),
-                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
+                       plot=args.plot, report=report, **problem.as_options(), **filter_options)
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -100,6 +111,9 @@ def register(sub) -> None:
                    help="controlled model: ACS noise as attitude random walk or jitter")
     p.add_argument("--pseudo-noise", type=number(0.0), default=0.0,
                    help="rate pseudo-noise PSD, (rad/s)^2/s (default 0)")
+    p.add_argument("--variant", choices=VARIANTS, default="robust",
+                   help="robust: our improved filters (default); thesis: the filters as the "
+                   "source text writes them (Bernard 2021 ch. 7)")
     p.add_argument("--alpha", type=number(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
     p.add_argument("--beta", type=number(), default=2.0, help="UKF beta (default 2)")
     p.add_argument("--kappa", type=number(), default=0.0, help="UKF kappa (default 0)")
