@@ -40,7 +40,7 @@ from ..core.dynamics import error_F_nb
 from . import _checks as ck
 from .atmosphere import altitude_m, density_kg_m3
 from .rigid_body import check_inertia, euler_omega_dot
-from .torques import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU, _srp_inputs, drag_relative_velocity
+from .torques import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU, srp_inputs, drag_relative_velocity
 
 __all__ = [
     "gravity_gradient_jacobian",
@@ -93,7 +93,7 @@ def srp_torque_jacobian(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, 
                         p_sun_1au: float = P_SUN_1AU) -> np.ndarray:
     """``∂T_srp/∂δθ`` (N m/rad, 3×3); arguments as :func:`~lightcurve.dynamics.torques.srp_torque`."""
     q = _single_quat(q)
-    A, n, c, cs, cd, s_b, P = _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
+    A, n, c, cs, cd, s_b, P = srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
                                           c_spec, c_diff, c_abs, lit_fraction, sun_distance_m, p_sun_1au)
     if s_b.shape != (3,):
         raise ValueError("sun_dir_eci: expected a single vector of shape (3,)")

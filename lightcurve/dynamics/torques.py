@@ -107,8 +107,11 @@ def gravity_gradient_torque_nb(q, r_eci_m, J, mu):
 # ----------------------------------------------------------------------------------------
 # solar radiation pressure
 # ----------------------------------------------------------------------------------------
-def _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, c_abs,
-                lit_fraction, sun_distance_m, p_sun_1au):
+def srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, c_abs,
+               lit_fraction, sun_distance_m, p_sun_1au):
+    """Validated SRP inputs shared by :func:`srp_torque` and its Jacobian: ``(A, n̂, c, C_s, C_d,
+    ŝ_b, P)`` — facet areas, normals, centres, specular/diffuse coefficients, the body-frame
+    Sun direction and the pressure ``P = P_1au (au/d)² · lit`` (N/m²)."""
     A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
     F = A.shape[0]
     cs = ck.per_facet(c_spec, F, "c_spec")
@@ -171,7 +174,7 @@ def srp_torque(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c
     p_sun_1au : float
         Radiation pressure at 1 au, N/m² (default 4.56e-6).
     """
-    A, n, c, cs, cd, s_b, P = _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
+    A, n, c, cs, cd, s_b, P = srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
                                           c_spec, c_diff, c_abs, lit_fraction, sun_distance_m, p_sun_1au)
     Fi = srp_facet_forces(s_b, P, A, n, cs, cd)
     return np.sum(np.cross(c, Fi), axis=-2)

@@ -59,7 +59,7 @@ def _truth_rhs_nb(x, T, J, Ji, eta):
 
 from . import _checks as ck
 from .integrators import integrate_truth
-from .kinematics import _check_omega
+from .kinematics import check_omega
 from .rigid_body import check_inertia
 
 __all__ = ["ControlledTruth", "UncontrolledTruth", "srp_coefficients_from_materials"]
@@ -138,7 +138,7 @@ def _single_q(q, name):
 
 
 def _single_w(w, name):
-    w = _check_omega(w, name)
+    w = check_omega(w, name)
     if w.shape != (3,):
         raise ValueError(f"{name}: expected shape (3,), got {w.shape}")
     return w.copy()

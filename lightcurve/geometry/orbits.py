@@ -399,10 +399,10 @@ def tle_positions(line1: str, line2: str, epoch_utc, t_s):
     its epoch, growing by km per day). Raises :class:`InputError` for a malformed TLE or when
     SGP4 reports an error (e.g. decayed) at any requested time.
     """
-    from .time import _is_time, skyfield_times
+    from .time import is_time, skyfield_times
 
     sat = _earth_satellite(line1, line2)
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     p = sat.at(t)
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T
@@ -436,9 +436,9 @@ def geodetic_height_m(r_itrs_m) -> np.ndarray:
 
 
 def _as_time_list(utc_times):
-    from .time import _is_time, parse_epoch, timescale
+    from .time import is_time, parse_epoch, timescale
 
-    if _is_time(utc_times):
+    if is_time(utc_times):
         return utc_times
     vals = [utc_times] if isinstance(utc_times, str) else list(np.atleast_1d(utc_times))
     dts = [parse_epoch(x if not isinstance(x, np.str_) else str(x)) for x in vals]
@@ -579,7 +579,7 @@ def orbit_from_section(section) -> Orbit:
     sec = section if isinstance(section, Section) else Section(section, name="orbit")
     kind = sec.str("type", "keplerian", choices=("keplerian", "cartesian", "tle"))
     gravity = sec.str("gravity", "J4", choices=tuple(_GRAVITY))
-    f = sec._field
+    f = sec.field_name
     if kind == "keplerian":
         a_km = sec.float("a_km", min=0.0, min_open=True)
         e = sec.float("e", min=0.0, max=1.0, max_open=True)

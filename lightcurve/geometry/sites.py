@@ -148,7 +148,7 @@ def site_from_section(sec: Section, *, site_id: str | None = None) -> Site:
     """
     sid = sec.str("id", site_id or "inline")
     if not _ID_RE.match(sid):
-        raise InputError("bad site id", file=sec.file, field=sec._field("id"), value=sid,
+        raise InputError("bad site id", file=sec.file, field=sec.field_name("id"), value=sid,
                          allowed="lower-case letters, digits, '_' and '-'")
     name = sec.str("name", sid)
     lat = sec.float("lat_deg", min=-90.0, max=90.0)
@@ -293,9 +293,9 @@ def site_position_velocity_gcrs(site: Site, epoch_utc, t_s=0.0):
 
     ``epoch_utc`` may be a skyfield ``Time`` array, in which case ``t_s`` is ignored.
     """
-    from .time import _is_time, skyfield_times
+    from .time import is_time, skyfield_times
 
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     p = _topos(site).at(t)
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T

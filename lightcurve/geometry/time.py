@@ -174,7 +174,7 @@ def skyfield_times(epoch_utc, t_s):
 
 def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     eph = ephemeris()
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     earth, body = eph["earth"], eph[name]
     if light_time:
         pos = earth.at(t).observe(body).position.m
@@ -183,7 +183,8 @@ def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(pos, dtype=float).reshape(3, -1).T)
 
 
-def _is_time(x) -> bool:
+def is_time(x) -> bool:
+    """True for a skyfield ``Time`` (duck-typed: the class name and a ``tt`` attribute)."""
     return type(x).__name__ == "Time" and hasattr(x, "tt")
 
 

@@ -141,7 +141,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
         if isinstance(v, bool) or not isinstance(v, (str, int)) or (isinstance(v, int) and v < 0) \
                 or (isinstance(v, str) and not v.strip()):
             raise InputError("expected a column name (text) or a 0-based column index", file=sec.file,
-                             field=sec._field(key), value=v)
+                             field=sec.field_name(key), value=v)
         return v.strip() if isinstance(v, str) else v
 
     spec = RecordingSpec(
@@ -167,7 +167,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     sec.check_unknown()
 
     def err(key, msg, value=None, allowed=None):
-        return InputError(msg, file=sec.file, field=sec._field(key), value=value, allowed=allowed)
+        return InputError(msg, file=sec.file, field=sec.field_name(key), value=value, allowed=allowed)
 
     if spec.time_column is None or spec.mag_column is None:
         raise err("time_column", "time_column and mag_column are required")

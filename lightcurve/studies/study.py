@@ -259,7 +259,7 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
     raw = sec.raw(key)
     vals = raw if isinstance(raw, list) else [raw]
     if not vals:
-        raise InputError("expected a non-empty list", file=sec.file, field=sec._field(key), value=raw)
+        raise InputError("expected a non-empty list", file=sec.file, field=sec.field_name(key), value=raw)
     out = []
     for v in vals:
         ok = (kind is str and isinstance(v, str)) or (kind is int and isinstance(v, int)
@@ -267,16 +267,16 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
               and not isinstance(v, bool) and np.isfinite(v))
         if not ok:
             raise InputError(f"expected a list of {kind.__name__}", file=sec.file,
-                             field=sec._field(key), value=raw)
+                             field=sec.field_name(key), value=raw)
         if choices is not None and v not in choices:
-            raise InputError("unknown value", file=sec.file, field=sec._field(key), value=v,
+            raise InputError("unknown value", file=sec.file, field=sec.field_name(key), value=v,
                              allowed=", ".join(map(str, choices)))
         if (min is not None and (v < min or (min_open and v == min))) or (max is not None and v > max):
-            raise InputError("out of range", file=sec.file, field=sec._field(key), value=v,
+            raise InputError("out of range", file=sec.file, field=sec.field_name(key), value=v,
                              allowed=f"{'(' if min_open else '['}{min}, {max}]")
         out.append(kind(v))
     if len(set(out)) != len(out):
-        raise InputError("duplicate values", file=sec.file, field=sec._field(key), value=raw)
+        raise InputError("duplicate values", file=sec.file, field=sec.field_name(key), value=raw)
     return out
 
 
