@@ -42,7 +42,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .rotations import qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
+from .rotations import qrot_xyz_nb
 
 __all__ = [
     "LAMBERT", "COOK_TORRANCE", "PHONG", "ASHIKHMIN_SHIRLEY", "COOK_TORRANCE_THESIS",

@@ -31,6 +31,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.frames import itrs_rotation
+from ..geometry.sites import WGS84_A_M, WGS84_F
+from ..rotations import dcm_to_quat, quat_inv, quat_mult, quat_normalize, quat_to_rotvec
+
 __all__ = ["LAWS", "attitude_law", "law_body_rates", "geodetic_up_itrs", "nadir_sun_yaw_dcm"]
 
 #: Names accepted by :func:`attitude_law` (and by ``[attitude] law = ...``).
@@ -49,8 +53,6 @@ def geodetic_up_itrs(r_itrs_m) -> np.ndarray:
     ``φ = atan2(z, p (1 − e² N/(N + h)))`` (converges to < 1e-12 rad in a few steps for any
     point above the Earth's centre region); up = (cos φ cos λ, cos φ sin λ, sin φ).
     """
-    from ..geometry.sites import WGS84_A_M, WGS84_F
-
     r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
     e2 = WGS84_F * (2.0 - WGS84_F)
     p = np.hypot(r[:, 0], r[:, 1])
@@ -114,9 +116,6 @@ def attitude_law(name: str, r_obj_eci_m, r_sun_eci_m, epoch_utc, t_s) -> np.ndar
     ValueError
         Unknown law, mismatched shapes, non-finite input.
     """
-    from ..geometry.frames import itrs_rotation
-    from ..rotations import dcm_to_quat, quat_normalize
-
     if name not in LAWS:
         raise ValueError(f"unknown attitude law {name!r}; known: {', '.join(LAWS)}")
     r = np.atleast_2d(np.asarray(r_obj_eci_m, dtype=float))
@@ -154,8 +153,6 @@ def law_body_rates(q, t_s) -> np.ndarray:
     differences inside, one-sided at the ends; samples with equal times share the rate of their
     neighbours. One sample (or all at one time) → zeros.
     """
-    from ..rotations import quat_inv, quat_mult, quat_to_rotvec
-
     q = np.atleast_2d(np.asarray(q, dtype=float))
     t = np.atleast_1d(np.asarray(t_s, dtype=float))
     if q.shape != (t.size, 4):

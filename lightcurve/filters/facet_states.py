@@ -47,10 +47,15 @@ import math
 import numba as nb
 import numpy as np
 
+from ..core.photometry import (
+    COOK_TORRANCE,
+    brdf_product_nb,
+    facet_flux_nb,
+    magnitude_partials_q_nb,
+)
 from ..errors import InputError
-from ..core.photometry import (COOK_TORRANCE, brdf_product_nb, facet_flux_nb,
-                               magnitude_partials_q_nb)
-from ..photometry.partials import kernel_capable
+from ..photometry.magnitude import apparent_magnitude
+from ..photometry.partials import kernel_capable, magnitude_partials
 from ..rotations import qrot_xyz_nb
 
 __all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
@@ -413,8 +418,6 @@ class FacetParameterStates:
                                    self._areas0, self._ids, self._params0,
                                    float(model.offset[k]), np.ascontiguousarray(Z),
                                    self.kind_col, self.facet, self.logit)
-        from ..photometry.magnitude import apparent_magnitude
-
         out = np.empty(Q.shape[0])
         with np.errstate(divide="ignore"):
             for i in range(Q.shape[0]):
@@ -446,8 +449,6 @@ class FacetParameterStates:
     def partials_numpy(self, model, q, z, k):
         """:meth:`partials` by :func:`lightcurve.photometry.magnitude_partials` (NumPy
         backend) on a copy of the shape with p(z) — any BRDF; the reference of the kernel."""
-        from ..photometry.partials import magnitude_partials
-
         z = np.asarray(z, float).reshape(self.dim)
         q = np.asarray(q, float).reshape(4)
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -83,8 +83,15 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
+from scipy.stats import chi2
 
-from .result import FLAG_BELOW_HORIZON, FLAG_GATE_RELEASED, FLAG_INFLATED, FLAG_OUTLIER, FLAG_UNLIT
+from .result import (
+    FLAG_BELOW_HORIZON,
+    FLAG_GATE_RELEASED,
+    FLAG_INFLATED,
+    FLAG_OUTLIER,
+    FLAG_UNLIT,
+)
 
 __all__ = ["GateConfig", "InnovationGate", "GATE_MODES", "set_gate", "nis_threshold"]
 
@@ -96,8 +103,6 @@ _USED, _REJECTED, _INFLATED, _RELEASED, _UNLIT, _BELOW = 0, 1, 2, 3, 4, 5
 
 def nis_threshold(false_alarm: float, dof: int = 1) -> float:
     """χ² threshold γ with ``P(χ²_dof > γ) = false_alarm`` (dimensionless)."""
-    from scipy.stats import chi2
-
     return float(chi2.isf(float(false_alarm), int(dof)))
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import rotations as rot
+from ..errors import InputError
 from ..io.atomic import atomic_path
 
 __all__ = ["Estimate", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
@@ -246,8 +247,6 @@ def read_estimate(path) -> Estimate:
     import json
 
     import h5py
-
-    from ..errors import InputError
 
     path = Path(path)
     try:

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..rotations import quat_rotate
+from .shapes_io import load_shape
 
 __all__ = ["facet_lit_visible", "facet_exposure_fractions"]
 
@@ -46,13 +48,9 @@ def facet_exposure_fractions(curve, shape=None) -> dict:
     over all epochs, and ``lit_and_visible_by_site`` {site name: list}.
     """
     if curve.truth_q is None:
-        from ..errors import InputError
-
         raise InputError("facet exposure needs the truth attitude of a simulated lightcurve",
                          field="truth/q")
     if shape is None:
-        from . import load_shape
-
         shape = load_shape(curve.attrs["shape"])
     lit, vis = facet_lit_visible(shape.normals_body, curve.truth_q, curve.obj_to_sun_unit,
                                  curve.obj_to_obs_unit)

@@ -56,7 +56,7 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from ..core.photometry import COOK_TORRANCE, cook_torrance_xyz
+from ..core.photometry import cook_torrance_xyz
 from ..errors import ConvergenceError, InputError
 from ..photometry.perturb import perturb_reflection
 
