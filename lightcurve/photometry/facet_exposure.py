@@ -5,7 +5,7 @@ A facet i contributes to the magnitude (DESIGN.md magnitude equation) only at ep
 unit vectors in body axes, ``v_b = A(q) v_I`` (Bernard eq. 3.16). A facet that is never both
 lit and visible contributes nothing to any measurement, so none of its reflection parameters
 (ξ, a = F0, m, A) can be learned from the lightcurve: that is the geometry behind the
-observability statements of issue 6 (Bernard §10.7). Self-shadowing is not considered (the
+observability statements of Bernard §10.7. Self-shadowing is not considered (the
 convex-shape assumption of the magnitude model).
 """
 

@@ -1,4 +1,4 @@
-"""Batch Bayesian posterior of facet reflection parameters with emcee (issue 6, "fit-reflection").
+"""Batch Bayesian posterior of facet reflection parameters with emcee (`lightcurve fit-reflection`).
 
 Given a lightcurve and a *known* attitude history (the file's truth, or a filter estimate), the
 posterior of the Cook–Torrance parameters of the facets is sampled with the affine-invariant
@@ -42,7 +42,7 @@ Diagnostics
   :class:`ConvergenceError` naming the reasons (unless ``allow_unconverged=True``);
 * identifiability: ``width_ratio`` = posterior sd / prior sd in z; a parameter is called
   *identified* when the data shrink its width by at least 2× (ratio < ``identify_ratio`` = 0.5,
-  the criterion of the issue's acceptance for thesis fig. 10.11f);
+  our criterion for thesis fig. 10.11f);
 * posterior predictive lightcurve: quantile bands of the noise-free model and of model + noise
   over posterior draws, and the fraction of measurements inside the central 95 % band.
 """

@@ -5,7 +5,7 @@ seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (li
 mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
 ``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
-(physics effects switched on; see the diagnosis issue), ``[reflection]`` (truth reflection
+(physics effects switched on; :mod:`lightcurve.physics`), ``[reflection]`` (truth reflection
 parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
 
