@@ -297,18 +297,6 @@ def _mm(A, B, out):
 
 
 @njit(cache=True)
-def _mmt(A, B, out):
-    """``out = A @ Bᵀ`` (square, no aliasing)."""
-    n = A.shape[0]
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += A[i, k] * B[j, k]
-            out[i, j] = s
-
-
-@njit(cache=True)
 def error_F_nb(w, J, J_inv, uncontrolled, F):
     """Fill ``F`` (6, 6) with the continuous error-dynamics matrix at the rate ``w`` (3,) rad/s.
 
@@ -496,7 +484,7 @@ def uncontrolled_transition_nb(w0, J, J_inv, eta_psd, dt, nsub):
         _mm(Ph, Phi, T1)
         Phi[:, :] = T1
         _mm(Ph, Qd, T1)
-        _mmt(T1, Ph, T2)
+        _mm(T1, Ph.T, T2)
         for i in range(6):
             for j in range(6):
                 Qd[i, j] = T2[i, j] + Qh[i, j]

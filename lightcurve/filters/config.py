@@ -93,6 +93,14 @@ class ConfigBase:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
+    @classmethod
+    def resolve(cls, config=None, **overrides):
+        """``config`` (default: the default settings) with the non-None ``overrides`` applied —
+        the keyword form of the filter runners (``run_ukf(problem, alpha=0.5)``)."""
+        config = cls() if config is None else config
+        changes = {k: v for k, v in overrides.items() if v is not None}
+        return config.replace(**changes) if changes else config
+
 
 @dataclass(frozen=True)
 class ProblemConfig(ConfigBase):

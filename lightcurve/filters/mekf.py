@@ -89,10 +89,7 @@ def run_mekf(problem: FilterProblem, config: MEKFConfig | None = None, *, error=
     facets : :class:`lightcurve.filters.facet_states.FacetParameterStates` or None
         Model 3 facet-parameter states z appended after the biases (module docstring).
     """
-    config = MEKFConfig() if config is None else config
-    changes = {k: v for k, v in (("error", error), ("jacobian", jacobian)) if v is not None}
-    if changes:
-        config = config.replace(**changes)
+    config = MEKFConfig.resolve(config, error=error, jacobian=jacobian)
     problem.meta.setdefault("variant", config.variant)
     with single_thread():
         return run_kalman(problem, _MEKFStep(problem, config.error, config.jacobian, bias,

@@ -71,11 +71,7 @@ def run_ukf(problem: FilterProblem, config: UKFConfig | None = None, *, alpha=No
     ``bias``: :class:`lightcurve.filters.reflection.SiteBias` or None.
     ``facets``: :class:`lightcurve.filters.facet_states.FacetParameterStates` or None (Model 3).
     """
-    config = UKFConfig() if config is None else config
-    changes = {k: v for k, v in (("alpha", alpha), ("beta", beta), ("kappa", kappa))
-               if v is not None}
-    if changes:
-        config = config.replace(**changes)
+    config = UKFConfig.resolve(config, alpha=alpha, beta=beta, kappa=kappa)
     problem.meta.setdefault("variant", config.variant)
     alpha, beta, kappa = config.alpha, config.beta, config.kappa
     L = StateLayout(not problem.attitude_known, bias, facets)
