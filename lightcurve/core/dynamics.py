@@ -144,7 +144,8 @@ def _stage(q0, q1, q2, q3, w0, w1, w2, J, K, T, gg, wheels, ts):
 
 @njit(cache=True, inline="always")
 def rk4_step_xyz(q0, q1, q2, q3, w0, w1, w2, dt, J, K, T, gg, wheels):
-    """One classical RK4 step of ``[q, ω]`` over ``dt`` s (module docstring) → 7-tuple
+    """One classical RK4 step of ``[q, ω]`` (Bernard eq. 4.12–4.13; O'Keefe eq. B.1 with wheels)
+    over ``dt`` s (module docstring) → 7-tuple
     ``(q0, q1, q2, q3, ω0, ω1, ω2)``, the quaternion renormalised (sign kept).
 
     ``q`` scalar first, inertial→body; ``ω`` rad/s body axes; ``J``, ``K`` row-major 9-tuples
