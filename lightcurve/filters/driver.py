@@ -35,7 +35,7 @@ from ._common import (FilterProblem, Recorder, StateLayout, attach_bias, attach_
 from .gating import InnovationGate
 from .result import FLAG_NAN, Estimate
 
-__all__ = ["KalmanState", "KalmanStep", "run_kalman"]
+__all__ = ["KalmanState", "KalmanStep", "StepBase", "run_kalman"]
 
 
 @dataclass
@@ -70,6 +70,17 @@ class KalmanStep(Protocol):
         """Measurement update with the finite magnitude ``y`` of epoch k, in place (the prior
         kept, and the epoch flagged in ``rec``, when the update is refused or gated out)."""
         ...
+
+
+class StepBase:
+    """What every step holds: the problem, its extra states (``bias``, ``facets``) and the ACS
+    noise covariance ζ of its dynamics (3×3, rad²)."""
+
+    def __init__(self, problem: FilterProblem, bias=None, facets=None):
+        self.p = problem
+        self.bias = bias
+        self.facets = facets
+        self.zc = problem.dynamics.zeta_cov
 
 
 def run_kalman(problem: FilterProblem, step: KalmanStep, bias=None, facets=None) -> Estimate:

@@ -52,7 +52,7 @@ from ..core.rotations import from_grp_rel_nb, normalize_into_nb, perturb_rotvec_
 from ..photometry.partials import kernel_capable
 from .config import MEKFConfig
 from ._common import GRP_A, GRP_F, FilterProblem, single_thread
-from .driver import run_kalman
+from .driver import StepBase, run_kalman
 from .result import FLAG_INVISIBLE, FLAG_REFUSED, Estimate
 
 __all__ = ["run_mekf"]
@@ -112,7 +112,7 @@ class _Photometry:
         self.work = tuple(np.empty(F) for _ in range(4))   # ∂m/∂A, ∂m/∂ξ, ∂m/∂a, ∂m/∂m
 
 
-class _MEKFStep:
+class _MEKFStep(StepBase):
     """The MEKF's time and measurement updates (module docstring) for
     :func:`lightcurve.filters.driver.run_kalman`."""
 
@@ -120,13 +120,10 @@ class _MEKFStep:
     gate_auto = "inflate"
 
     def __init__(self, problem, error, jacobian, bias, facets):
-        self.p = problem
+        super().__init__(problem, bias, facets)
         self.error = error
         self.jacobian = jacobian
-        self.bias = bias
-        self.facets = facets
         self.ph = _Photometry(problem.model, jacobian)
-        self.zc = problem.dynamics.zeta_cov
 
     def predict(self, x, k, dt, Phi, Qd, phib, rec):
         L = x.layout

@@ -54,7 +54,7 @@ from ..core.rotations import perturb_rotvec_nb
 from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
 from .config import UKFConfig
 from ._common import FilterProblem, StateLayout, apply_grp, grp_rel, single_thread
-from .driver import run_kalman
+from .driver import StepBase, run_kalman
 from .result import FLAG_INVISIBLE, FLAG_REFUSED, Estimate
 
 __all__ = ["run_ukf"]
@@ -97,7 +97,7 @@ def _sigma_states(q, w, off6, na):
     return chi, Q, np.ascontiguousarray(W)
 
 
-class _UKFStep:
+class _UKFStep(StepBase):
     """The USQUE time and measurement updates (module docstring) for
     :func:`lightcurve.filters.driver.run_kalman`."""
 
@@ -105,12 +105,9 @@ class _UKFStep:
     gate_auto = "reject"
 
     def __init__(self, problem, w6, w9, bias, facets):
-        self.p = problem
+        super().__init__(problem, bias, facets)
         self.w6 = w6
         self.w9 = w9
-        self.bias = bias
-        self.facets = facets
-        self.zc = problem.dynamics.zeta_cov
 
     def predict(self, x, k, dt, Phi, Qd, phib, rec):
         L = x.layout

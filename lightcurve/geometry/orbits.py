@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .sites import enu_matrix, get_site, itrs_to_geodetic, site_itrs_m
 
 __all__ = [
     "MU_EARTH",
@@ -417,22 +418,9 @@ def tle_positions(line1: str, line2: str, epoch_utc, t_s):
 # positions from topocentric observations
 # ----------------------------------------------------------------------------------------
 def geodetic_height_m(r_itrs_m) -> np.ndarray:
-    """Height above the WGS84 ellipsoid (m) of ITRS point(s), ``(N,)`` (iterative, < 1 mm)."""
-    from .sites import WGS84_A_M, WGS84_F
-
-    r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
-    e2 = WGS84_F * (2 - WGS84_F)
-    p = np.hypot(r[:, 0], r[:, 1])
-    z = r[:, 2]
-    lat = np.arctan2(z, p * (1 - e2))
-    for _ in range(8):
-        n = WGS84_A_M / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-        h = np.where(np.abs(np.cos(lat)) > 1e-9, p / np.cos(lat) - n,
-                     np.abs(z) - n * (1 - e2))
-        lat = np.arctan2(z, p * (1 - e2 * n / (n + h)))
-    n = WGS84_A_M / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    # robust form valid at all latitudes
-    return p * np.cos(lat) + z * np.sin(lat) - n * (1 - e2 * np.sin(lat) ** 2)
+    """Height above the WGS84 ellipsoid (m) of ITRS point(s), ``(N,)``
+    (:func:`lightcurve.geometry.sites.itrs_to_geodetic`)."""
+    return itrs_to_geodetic(r_itrs_m)[2]
 
 
 def _as_time_list(utc_times):
@@ -468,8 +456,6 @@ def positions_from_topocentric(site, utc_times, alt_deg, az_deg, range_m=None, h
         reaches (or an altitude below the horizon), negative ranges.
     """
     from .frames import altaz_to_enu, itrs_rotation
-    from .sites import enu_matrix, get_site, site_itrs_m
-
     site = get_site(site)
     if (range_m is None) == (height_m is None):
         raise InputError("give exactly one of range_m or height_m", field="range_m/height_m")

@@ -35,6 +35,7 @@ from ..errors import InputError
 from ..io.tomlio import Section, load_toml
 
 __all__ = [
+    "itrs_to_geodetic",
     "Site",
     "load_sites",
     "get_site",
@@ -138,6 +139,28 @@ class Site:
         if self.file:
             lines.append(f"file:      {self.file}")
         return "\n".join(lines)
+
+
+def itrs_to_geodetic(r_itrs_m):
+    """WGS84 geodetic latitude (rad), longitude (rad) and height (m) of ITRS point(s) (m),
+    ``(N, 3)`` → three ``(N,)`` arrays.
+
+    Fixed-point iteration of ``φ = atan2(z, p (1 − e² N/(N + h)))`` with the height in the form
+    ``h = p cos φ + z sin φ − N (1 − e² sin²φ)`` (valid at all latitudes); ten iterations reach
+    < 1e-12 rad for any point above the Earth's centre region.
+    """
+    r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
+    e2 = WGS84_F * (2.0 - WGS84_F)
+    p = np.hypot(r[:, 0], r[:, 1])
+    z = r[:, 2]
+    lat = np.arctan2(z, p * (1.0 - e2))
+    for _ in range(10):
+        n = WGS84_A_M / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+        h = p * np.cos(lat) + z * np.sin(lat) - n * (1.0 - e2 * np.sin(lat) ** 2)
+        lat = np.arctan2(z, p * (1.0 - e2 * n / (n + h)))
+    n = WGS84_A_M / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    h = p * np.cos(lat) + z * np.sin(lat) - n * (1.0 - e2 * np.sin(lat) ** 2)
+    return lat, np.arctan2(r[:, 1], r[:, 0]), h
 
 
 def site_from_section(sec: Section, *, site_id: str | None = None) -> Site:
