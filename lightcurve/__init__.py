@@ -21,7 +21,8 @@ __all__ = ["InputError", "ConvergenceError", "__version__", "simulate", "read_li
 
 
 def __getattr__(name):
-    if name == "simulate":   # the one simulate: lightcurve.studies.simulate.simulate
+    if name == "simulate":   # the one simulate: lightcurve.studies.simulate.simulate (a
+        # Scenario, a TOML path or a bundled scenario name: "default", "thesis", "thesis/<case>")
         from .studies.simulate import simulate
 
         return simulate

@@ -1,21 +1,25 @@
 """Earth albedo on coarse sun sensors (O'Keefe 2015, eq. 2.15-2.21).
 
-The Earth map, its cells and their irradiance at the spacecraft (eq. 2.15-2.18) live in
-:mod:`lightcurve.earth.albedo` (re-exported here); this module adds what the sensors see of
-them: a CSS with normal ``n̂`` receives ``Σ_j a_j f(−û_j)`` (see :mod:`lightcurve.css.sensors`),
-and the filters' expected-albedo models in the Sun frame.
+The Earth map, its cells and their irradiance at the spacecraft (eq. 2.15-2.18), the TOMS
+maps and their random draws live in :mod:`lightcurve.earth.albedo` (re-exported here); this
+module adds what the sensors see of them: a CSS with normal ``n̂`` receives
+``Σ_j a_j f(−û_j)`` (see :mod:`lightcurve.css.sensors`), the filters' expected-albedo models
+in the Sun frame, and the windowed cell sums of the truth simulation.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 
-from ..earth.albedo import (AUTHALIC_RADIUS_M, WGS84_A_M, WGS84_F, ZONAL_LEGENDRE_COEFFS,
-                            AlbedoGrid, AlbedoMap, albedo_cells_in_view, albedo_cells_nb,
-                            authalic_latitude, builtin_albedo_map, cell_areas_m2,
-                            cell_centers_ecef, cell_irradiance_nb, earth_rotation_angle,
-                            fit_zonal_coefficients, load_albedo_map, zonal_albedo)
+from ..earth.albedo import (AUTHALIC_RADIUS_M, TOMS_GRIDS, WGS84_A_M, WGS84_F,
+                            ZONAL_LEGENDRE_COEFFS, AlbedoGrid, AlbedoMap, albedo_cells_in_view,
+                            albedo_cells_nb, authalic_latitude, builtin_albedo_map,
+                            cell_areas_m2, cell_centers_ecef, cell_irradiance_nb,
+                            draw_albedo_map, earth_rotation_angle, fit_zonal_coefficients,
+                            load_albedo_map, load_toms, zonal_albedo)
 
 __all__ = [
     "WGS84_A_M", "WGS84_F", "ZONAL_LEGENDRE_COEFFS", "AUTHALIC_RADIUS_M", "AlbedoMap",
@@ -23,6 +27,7 @@ __all__ = [
     "builtin_albedo_map", "load_albedo_map", "fit_zonal_coefficients", "albedo_cells_in_view",
     "albedo_on_sensors_nb", "albedo_cells_nb", "cell_irradiance_nb", "earth_rotation_angle",
     "albedo_sun_frame_nb", "expected_albedo_nb", "albedo_phi_nb", "sun_nadir_axis_nb",
+    "TOMS_GRIDS", "load_toms", "draw_albedo_map", "AlbedoCells", "albedo_vectors_nb", "r3_nb",
 ]
 
 
@@ -180,3 +185,123 @@ def expected_albedo_nb(coords, ratio, m, s_b, sens_normals, cos_fov, horizon, n_
             v += (tab[i, kk] - mu) ** 2
         mean_out[kk] = mu
         var_out[kk] = v / n_phi
+
+
+# ---------------------------------------------------------------------------------------
+# albedo grid with row/column structure (window search)
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AlbedoCells:
+    """Earth-fixed cell geometry of a regular albedo map, kept on its (nlat, nlon) grid.
+
+    centers_m (nlat·nlon, 3) m, normals (nlat·nlon, 3) unit geodetic normals, rho_area_m2
+    (nlat·nlon,) = ρ A (m²), lat_c (nlat,) rad cell-centre latitudes, lon_w0 rad west edge of
+    column 0, dlon rad column width, dlat_max rad largest row height.
+    """
+
+    centers_m: np.ndarray
+    normals: np.ndarray
+    rho_area_m2: np.ndarray
+    lat_c: np.ndarray
+    nlat: int
+    nlon: int
+    lon_w0: float
+    dlon: float
+    dlat_max: float
+    source: str = "map"
+
+    @classmethod
+    def from_map(cls, amap: AlbedoMap) -> "AlbedoCells":
+        lat_e, lon_e = np.asarray(amap.lat_edges_rad), np.asarray(amap.lon_edges_rad)
+        # cell centres at the authalic-latitude midpoint, as AlbedoGrid (the truth model)
+        centers, normals, lat_c, lon_c = cell_centers_ecef(lat_e, lon_e)
+        ra = (cell_areas_m2(lat_e, lon_e) * amap.values).reshape(-1)
+        dlon = float(np.mean(np.diff(lon_e)))
+        if not np.allclose(np.diff(lon_e), dlon):
+            raise ValueError("AlbedoCells needs equal-width longitude columns")
+        return cls(np.ascontiguousarray(centers), np.ascontiguousarray(normals),
+                   np.ascontiguousarray(ra), lat_c, lat_c.size, lon_c.size, float(lon_e[0]),
+                   dlon, float(np.max(np.diff(lat_e))), amap.source)
+
+    @classmethod
+    def none(cls) -> "AlbedoCells":
+        """An empty grid (no albedo)."""
+        z = np.zeros((0, 3))
+        return cls(z, z.copy(), np.zeros(0), np.zeros(0), 0, 0, -np.pi, 2 * np.pi, np.pi, "none")
+
+    def args(self):
+        return (self.centers_m, self.normals, self.rho_area_m2, self.lat_c, self.nlat, self.nlon,
+                self.lon_w0, self.dlon, self.dlat_max)
+
+
+@numba.njit(cache=True)
+def r3_nb(theta, v):
+    """R3(θ) v: ECI → Earth-fixed for the Earth rotation angle θ (rad)."""
+    c = np.cos(theta)
+    s = np.sin(theta)
+    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+
+
+@numba.njit(cache=True)
+def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                      r_E, s_E, nE, cos_fov, hE, edge_m):
+    """Per-sensor albedo vector sums V_κ = Σ a_j ĉ_j (Earth-fixed, (N,3)) over the cells that
+    are sunlit, in view of the spacecraft and inside sensor κ's FOV (normals nE (N,3),
+    structure-horizon normals hE (N,3), Earth-fixed).  Only rows/columns of the cap visible
+    from r_E (m) are visited.  ``edge_m`` (N,): cosine margin about each FOV cut-off; the
+    irradiance Σ a_j c_j of the cells inside that band (whose membership is uncertain) is
+    returned as ``A_edge``.  Returns (V (N,3), A_edge (N,), number of cells evaluated)."""
+    N = nE.shape[0]
+    V = np.zeros((N, 3))
+    Aedge = np.zeros(N)
+    if nlat == 0:
+        return V, Aedge, 0
+    rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
+    lam0 = np.arccos(min(1.0, 6356752.0 / rn))  # visible cap half angle (polar radius: safe)
+    phi = np.arcsin(r_E[2] / rn)
+    lon = np.arctan2(r_E[1], r_E[0])
+    lo = phi - lam0 - dlat_max
+    hi = phi + lam0 + dlat_max
+    # per row: the longitude half-width of the cap (angular radius λ widened by one row, for
+    # the cells' extent) at the row's latitude, cos Δλ = (cos λ − sin φᵢ sin φ)/(cos φᵢ cos φ)
+    cos_l = np.cos(min(np.pi, lam0 + dlat_max + 0.01))
+    sphi, cphi = np.sin(phi), np.cos(phi)
+    count = 0
+    for i in range(nlat):
+        if lat_c[i] < lo or lat_c[i] > hi:
+            continue
+        den = np.cos(lat_c[i]) * cphi
+        cl = (cos_l - np.sin(lat_c[i]) * sphi) / den if den > 1e-12 else -2.0
+        if cl >= 1.0:
+            continue
+        if cl <= -1.0:
+            c0 = 0
+            ncol = nlon
+        else:
+            half = np.arccos(cl) + dlon
+            c0 = int(np.floor((lon - half - lon_w0) / dlon))
+            ncol = int(np.ceil(2.0 * half / dlon)) + 2
+            if ncol > nlon:
+                ncol = nlon
+                c0 = 0
+        for cc in range(ncol):
+            jc = (c0 + cc) % nlon
+            j = i * nlon + jc
+            if rho_area[j] <= 0.0:
+                continue
+            count += 1
+            a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_E, s_E)
+            if a == 0.0:
+                continue
+            for k in range(N):
+                c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
+                if c > 0.0 and abs(c - cos_fov[k]) < edge_m[k]:
+                    Aedge[k] += a * c
+                if c < cos_fov[k] or c <= 0.0:
+                    continue
+                if hE[k, 0] * ux + hE[k, 1] * uy + hE[k, 2] * uz < 0.0:
+                    continue
+                V[k, 0] += a * ux
+                V[k, 1] += a * uy
+                V[k, 2] += a * uz
+    return V, Aedge, count

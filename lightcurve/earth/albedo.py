@@ -25,9 +25,10 @@ Cell areas are exact ellipsoidal areas computed through the authalic latitude β
 so the cells add up to the ellipsoid's surface area.
 
 Maps: CERES 2018 albedo CSV files (rows latitude −90…90 south to north, columns longitude
-−180…180; 18×36, 36×72 or 180×360) and the 10° TOMS mean reflectivity file (percent, 36
-rows of longitude × 18 columns of latitude, i.e. transposed).  The default map is the
-built-in zonal model :func:`zonal_albedo`.
+−180…180; 18×36, 36×72 or 180×360) and the TOMS 2000–2005 mean reflectivity and its standard
+deviation that O'Keefe (2015) §2.1.2.1 uses (percent, rows of longitude × columns of latitude,
+i.e. transposed; 10°×10° 36×18, 5°×5° 72×36, 1°×1.25° 288×180; :func:`load_toms`).  The
+default map is the built-in zonal model :func:`zonal_albedo`.
 """
 
 from __future__ import annotations
@@ -38,15 +39,19 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from .._paths import shared_data_dir
 from ..core.constants import OMEGA_EARTH
 from ..errors import InputError
+from ..estimation.rng import as_generator
 from ..geometry.time import parse_epoch, timescale
+from ..io.safe_open import ALBEDO_MAX_BYTES as _MAX_MAP_BYTES
 
 __all__ = [
     "WGS84_A_M", "WGS84_F", "ZONAL_LEGENDRE_COEFFS", "AUTHALIC_RADIUS_M", "AlbedoMap",
     "AlbedoGrid", "authalic_latitude", "cell_areas_m2", "cell_centers_ecef", "zonal_albedo",
     "builtin_albedo_map", "load_albedo_map", "fit_zonal_coefficients", "cell_irradiance_nb",
-    "albedo_cells_nb", "albedo_cells_in_view", "earth_rotation_angle",
+    "albedo_cells_nb", "albedo_cells_in_view", "earth_rotation_angle", "TOMS_GRIDS",
+    "load_toms", "draw_albedo_map",
 ]
 
 WGS84_A_M = 6378137.0
@@ -197,37 +202,41 @@ def builtin_albedo_map(resolution_deg: float = 10.0) -> AlbedoMap:
 
 
 _CERES_SHAPES = ((18, 36), (36, 72), (180, 360))
-_MAX_MAP_BYTES = 16 * 1024 * 1024
+_TOMS_SHAPES = ((36, 18), (72, 36), (288, 180))
+TOMS_GRIDS = {"10x10": "10x10", "5x5": "5x5", "1p25x1": "1p25x1"}
+"""TOMS grid names of the files ``earthReflectivity{Mean,Std}_<grid>.dat``."""
 
 
 def load_albedo_map(path) -> AlbedoMap:
-    """Load a CERES albedo CSV (shape 18×36, 36×72 or 180×360, values in [0, 1]) or the
-    10° TOMS reflectivity ``.dat`` file (36×18 in percent; transposed to CERES layout).
+    """Load a CERES albedo CSV (shape 18×36, 36×72 or 180×360, values in [0, 1]) or a
+    TOMS reflectivity ``.dat`` file (36×18, 72×36 or 288×180 in percent; transposed to the
+    CERES layout — mean or standard-deviation files alike).
 
     Raises :class:`InputError` (naming the file and field) for a missing file, unparsable
     numbers, a wrong shape, NaN, or values outside [0, 1] (0–100 % for TOMS).
     """
+    import io
+
+    from ..io.safe_open import read_bytes
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError("albedo map file not found", file=path)
-    size = path.stat().st_size
-    if size > _MAX_MAP_BYTES:  # refused before reading (bounded time and memory)
-        raise InputError(f"file too large ({size} bytes) for an albedo map", file=path,
-                         allowed=f"<= {_MAX_MAP_BYTES} bytes (a 1-degree CERES map is ~0.5 MB)")
+    # a regular file of at most 16 MiB (a 1-degree CERES map is ~0.5 MB), size from the
+    # opened descriptor, refused before reading
+    data = io.BytesIO(read_bytes(path, max_bytes=_MAX_MAP_BYTES, what="albedo map file"))
     toms = path.suffix.lower() == ".dat"
     try:
         if toms:
-            raw = np.loadtxt(path, dtype=float)
+            raw = np.loadtxt(data, dtype=float)
         else:
-            raw = np.loadtxt(path, delimiter=",", dtype=float)
+            raw = np.loadtxt(data, delimiter=",", dtype=float)
     except ValueError as exc:
         raise InputError(f"cannot parse numbers: {exc}", file=path, field="values") from None
     raw = np.atleast_2d(raw)
     if toms:
-        if raw.shape != (36, 18):
+        if raw.shape not in _TOMS_SHAPES:
             raise InputError("TOMS reflectivity map has the wrong shape", file=path,
                              field="values", value=raw.shape,
-                             allowed="36 rows (longitude) x 18 columns (latitude)")
+                             allowed="36x18, 72x36 or 288x180 (rows longitude, columns latitude)")
         vals, scale_max = raw.T / 100.0, "0..100 percent"
     else:
         if raw.shape not in _CERES_SHAPES:
@@ -314,3 +323,38 @@ def earth_rotation_angle(epoch_utc: str, t_s):
     """
     theta0 = timescale().from_datetime(parse_epoch(epoch_utc)).gmst / 24.0 * 2.0 * np.pi
     return theta0 + OMEGA_EARTH * np.asarray(t_s, dtype=float)
+
+
+def load_toms(grid: str = "1p25x1", directory=None):
+    """The TOMS 2000–2005 mean reflectivity and its standard deviation (O'Keefe 2015 §2.1.2.1,
+    fig. 2.4) on ``grid`` ("1p25x1" = 1°×1.25°, "5x5", "10x10"), as two :class:`AlbedoMap`
+    (fractions, CERES layout).
+
+    ``directory`` holds ``earthReflectivity{Mean,Std}_<grid>.dat`` (default
+    ``../shared/data/earth_albedo`` beside the repository, or $LIGHTCURVE_SHARED_DATA);
+    :class:`InputError` names the missing file.
+    """
+    if grid not in TOMS_GRIDS:
+        raise InputError("unknown TOMS grid", field="grid", value=grid,
+                         allowed=", ".join(TOMS_GRIDS))
+    if directory is None:
+        base = shared_data_dir()
+        if base is None:
+            raise InputError("TOMS albedo data not found: pass the folder or set "
+                             "LIGHTCURVE_SHARED_DATA", field="albedo",
+                             allowed="a folder with earthReflectivityMean_<grid>.dat")
+        directory = base / "earth_albedo"
+    d = Path(directory)
+    mean = load_albedo_map(d / f"earthReflectivityMean_{grid}.dat")
+    std = load_albedo_map(d / f"earthReflectivityStd_{grid}.dat")
+    return mean, std
+
+
+def draw_albedo_map(mean: AlbedoMap, std: AlbedoMap, rng) -> AlbedoMap:
+    """One realisation of the albedo: every cell N(mean, std²) independently, clipped to
+    [0, 1] (O'Keefe 2015 §2.1.2.1 uses the TOMS mean and standard deviation "to generate
+    statistically accurate values"; how is left open — this is our choice, one draw per cell
+    held over a run)."""
+    g = as_generator(rng)
+    v = np.clip(mean.values + std.values * g.standard_normal(mean.values.shape), 0.0, 1.0)
+    return AlbedoMap(v, mean.lat_edges_rad, mean.lon_edges_rad, mean.source + "+draw")

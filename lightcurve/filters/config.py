@@ -26,7 +26,7 @@ from typing import ClassVar
 
 from ..errors import InputError
 
-__all__ = ["VARIANTS", "ConfigBase", "ProblemConfig", "MEKFConfig", "UKFConfig", "register_filter_config",
+__all__ = ["VARIANTS", "INITIAL_MODES", "ConfigBase", "ProblemConfig", "MEKFConfig", "UKFConfig", "register_filter_config",
            "filter_config", "filter_config_class", "split_options", "METHOD_NAMES"]
 
 VARIANTS = ("robust", "thesis")
@@ -35,6 +35,8 @@ VARIANTS = ("robust", "thesis")
 DYNAMICS = ("controlled", "uncontrolled")
 ACS_MODES = ("random_walk", "jitter")
 ATTITUDE_MODES = ("estimate", "truth")
+INITIAL_MODES = ("auto", "truth", "given", "global")
+"""``initial``: where the filter starts (:func:`lightcurve.filters.invert.invert`)."""
 REFLECTION_MODELS = ("none", "random-walk", "model1", "model2", "model3")
 REFLECTION_KINDS = ("xi", "a", "m", "A")
 
@@ -130,6 +132,12 @@ class ProblemConfig(ConfigBase):
     reflection_kinds : tuple of "xi", "a", "m", "A" — Model 3 parameters.
     gate : None, "auto", "reject", "inflate", "off", dict or GateConfig — innovation gate and
         epoch screening (:mod:`lightcurve.filters.gating`).
+    library_dirs, site_dirs : tuple of paths or None — extra shape-library / observatory
+        folders for a shape named by ``shape`` or by the file, and for the file's scenario.
+    initial : "auto" | "truth" | "given" | "global" — where the filter starts
+        (:func:`lightcurve.filters.invert.invert`).
+    global_config : :class:`lightcurve.acquisition.global_init.GlobalInitConfig` or None —
+        settings of ``initial="global"``.
     """
 
     seed: int = 0
@@ -152,6 +160,10 @@ class ProblemConfig(ConfigBase):
     reflection_facets: tuple | None = None
     reflection_kinds: tuple = REFLECTION_KINDS
     gate: object = None
+    library_dirs: tuple | None = None
+    site_dirs: tuple | None = None
+    initial: str = "auto"
+    global_config: object = None
 
     def __post_init__(self):
         s = object.__setattr__
@@ -215,6 +227,12 @@ class ProblemConfig(ConfigBase):
         for k in kinds:
             _choice("reflection_kinds", k, REFLECTION_KINDS)
         s(self, "reflection_kinds", kinds)
+        for name in ("library_dirs", "site_dirs"):
+            v = getattr(self, name)
+            if v is not None:
+                s(self, name, (v,) if isinstance(v, (str, bytes)) or hasattr(v, "__fspath__")
+                  else tuple(v))
+        _choice("initial", self.initial, INITIAL_MODES)
 
 
 @dataclass(frozen=True)

@@ -18,18 +18,17 @@ states are estimated.
 
 from __future__ import annotations
 
-import tomllib
-
 import numpy as np
 
 from .. import rotations as rot
 from ..errors import InputError
 from ..io.lightcurve_h5 import Lightcurve
-from ..photometry import load_shape
+from ..io.tomlio import Section, loads_toml
+from ..studies.scenario import scenario_from_lightcurve
 from . import bpf as _bpf
 from ._common import FilterProblem
-from .config import (ATTITUDE_MODES, BPF_KEYWORDS, METHOD_NAMES, ConfigBase, ProblemConfig,
-                     filter_config_class, split_options)
+from .config import (ATTITUDE_MODES, BPF_KEYWORDS, INITIAL_MODES, METHOD_NAMES, ConfigBase,
+                     ProblemConfig, filter_config_class, split_options)
 from .facet_states import FacetParameterStates
 from .gating import set_gate
 from .mekf import run_mekf
@@ -38,7 +37,8 @@ from .reflection import SiteBias
 from .result import Estimate
 from .ukf import run_ukf
 
-__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES"]
+__all__ = ["invert", "build_problem", "initial_mode", "METHODS", "ATTITUDE_MODES",
+           "INITIAL_MODES"]
 
 METHODS = METHOD_NAMES
 """Filter methods: "mekf", "ukf", "bpf"."""
@@ -46,17 +46,67 @@ METHODS = METHOD_NAMES
 _RUNNERS = {"mekf": run_mekf, "ukf": run_ukf, "bpf": _bpf.run_bpf}
 
 
-def _scenario_attitude(curve):
-    """The [attitude] table of the scenario TOML stored in the file ({} if none)."""
-    txt = getattr(curve, "scenario_toml", "") or ""
-    if not txt.strip():
+def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
+    """The ``[attitude]`` of the scenario stored in the file, validated: keys ``dynamics``,
+    ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and ``inertia_kg_m2`` when set. ``{}`` when the
+    file has no scenario.
+
+    A complete scenario (a ``[scenario]`` table with its ``epoch_utc``, as ``simulate`` and
+    ``import`` store) goes through the scenario loader
+    (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as the
+    resolved shape); any other text (synthetic test curves holding only an ``[attitude]``
+    table) has those four keys validated with the loader's ranges. Invalid content is an
+    :class:`InputError`, never silently ignored.
+    """
+    text = getattr(curve, "scenario_toml", "") or ""
+    if not text.strip():
         return {}
-    try:
-        doc = tomllib.loads(txt)
-    except tomllib.TOMLDecodeError:
-        return {}
-    at = doc.get("attitude", {})
-    return at if isinstance(at, dict) else {}
+    src = (curve.attrs or {}).get("file") or "<lightcurve>"
+    doc = loads_toml(text, file=f"{src}:scenario")
+    if isinstance(doc.get("scenario"), dict) and "epoch_utc" in doc["scenario"]:
+        at = scenario_from_lightcurve(curve, src, shape=shape, library_dirs=library_dirs,
+                                      site_dirs=site_dirs).attitude
+        out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
+               "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
+        if at.inertia_kg_m2 is not None:
+            out["inertia_kg_m2"] = at.inertia_kg_m2
+        return out
+    sec = Section(doc.get("attitude", {}), file=f"{src}:scenario", name="attitude")
+    out = {"dynamics": sec.str("dynamics", "controlled",
+                               choices=("controlled", "uncontrolled", "law")),
+           "acs_sigma_deg": sec.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+           "eta_sigma_deg_s2": sec.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0)}
+    J = sec.matrix("inertia_kg_m2", None, shape=(3, 3))
+    if J is not None:
+        out["inertia_kg_m2"] = J
+    return out
+
+
+def _check_curve(curve):
+    if not isinstance(curve, Lightcurve):
+        raise InputError("invert needs a lightcurve.io.Lightcurve", field="curve",
+                         value=type(curve).__name__)
+    n = len(curve)
+    t = np.asarray(curve.t, float)
+    for name in ("mag", "mag_sigma"):
+        v = np.asarray(getattr(curve, name))
+        if v.shape != (n,):
+            raise InputError("inconsistent shapes", field=name, value=v.shape, allowed=f"({n},)")
+    for name in ("r_obj_eci_m", "r_site_eci_m", "r_sun_eci_m"):
+        v = np.asarray(getattr(curve, name))
+        if v.shape != (n, 3):
+            raise InputError("inconsistent shapes", field=name, value=v.shape,
+                             allowed=f"({n}, 3)")
+    if n == 0 or not np.any(np.isfinite(curve.mag)):
+        raise InputError("the lightcurve has no visible (finite) magnitude to filter",
+                         field="mag", value=f"{n} rows, 0 finite")
+    if np.any(np.diff(t) < 0):
+        raise InputError("times must be non-decreasing", field="t")
+    fin = np.isfinite(curve.mag)
+    sig = np.asarray(curve.mag_sigma, float)
+    if np.any(~(sig[fin] > 0)):
+        raise InputError("mag_sigma must be > 0 where a magnitude is given", field="mag_sigma",
+                         allowed="> 0")
 
 
 def _check_curve(curve):
@@ -93,8 +143,10 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
     field names, as :func:`invert` takes them) build one or change the given one.
     ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` / ``dynamics`` default to the scenario stored in
     the lightcurve file (ACS 0 and "controlled" when the file has none). ``attitude="truth"``
-    sets ``FilterProblem.attitude_known`` (needs truth in the file). The reflection settings
-    are not used here (:func:`invert` adds those states).
+    sets ``FilterProblem.attitude_known`` (needs truth in the file). The shape is
+    :meth:`Lightcurve.resolve_shape` (``shape`` > the file's stored shape > its
+    ``attrs["shape"]`` from the library, with ``library_dirs``). The reflection settings and
+    ``initial`` are not used here (:func:`invert` handles them).
     """
     if config is None:
         cfg = ProblemConfig(**options)
@@ -104,16 +156,9 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
     if cfg.attitude == "truth" and not curve.has_truth:
         raise InputError("attitude known (truth) needs a lightcurve with truth_q and "
                          "truth_omega_rad_s", field="attitude", value=cfg.attitude)
-    shape = cfg.shape
-    if shape is None:
-        name = (curve.attrs or {}).get("shape", "")
-        if not name:
-            raise InputError("the lightcurve names no shape (attrs['shape']); pass shape=",
-                             field="attrs.shape")
-        shape = load_shape(str(name))
-    elif isinstance(shape, str):
-        shape = load_shape(shape)
-    at = _scenario_attitude(curve)
+    shape = curve.resolve_shape(cfg.shape, library_dirs=cfg.library_dirs)
+    at = _scenario_attitude(curve, shape, library_dirs=cfg.library_dirs,
+                            site_dirs=cfg.site_dirs)
     dyn_kind = cfg.dynamics or at.get("dynamics", "controlled")
     if dyn_kind not in ("controlled", "uncontrolled"):
         raise InputError("unknown dynamics", field="dynamics", value=dyn_kind,
@@ -144,14 +189,18 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
     dw = rng.standard_normal(3) * sw_r
     if cfg.initial_q is None:
         if not curve.has_truth:
-            raise InputError("no truth in the lightcurve: give initial_q (and initial_omega)",
-                             field="initial_q")
+            # truth-free data (a recording): the filter needs a starting attitude from the user
+            # (or from the global initialisation, invert(initial="global"))
+            raise InputError("the lightcurve has no truth attitude to start from: give an "
+                             "initial estimate (initial_q, initial_omega; CLI --initial-q "
+                             "Q1,Q2,Q3,Q4 --initial-omega-deg-s WX,WY,WZ)", field="initial_q")
         q0 = rot.quat_mult(rot.rotvec_to_quat(dth), rot.quat_normalize(curve.truth_q[0]))
     else:
         q0 = np.asarray(cfg.initial_q, float)
     if cfg.initial_omega is None:
         if curve.truth_omega_rad_s is None:
-            raise InputError("no truth rate in the lightcurve: give initial_omega",
+            raise InputError("the lightcurve has no truth rate to start from: give "
+                             "initial_omega (CLI --initial-omega-deg-s WX,WY,WZ)",
                              field="initial_omega")
         w0 = curve.truth_omega_rad_s[0] + dw
     else:
@@ -180,6 +229,25 @@ def _extra_states(problem, cfg: ProblemConfig):
     return SiteBias.from_problem(cfg.reflection, problem, frac=cfg.reflection_frac), None
 
 
+
+
+def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
+    """Resolve ``invert(initial=…)`` to "truth", "given" or "global" (see :func:`invert`)."""
+    if initial not in INITIAL_MODES:
+        raise InputError("unknown initial-estimate mode", field="initial", value=initial,
+                         allowed=", ".join(INITIAL_MODES))
+    if initial == "auto":
+        if initial_q is not None:
+            return "given"
+        return "truth" if curve.has_truth else "global"
+    if initial == "given" and initial_q is None:
+        raise InputError("initial='given' needs initial_q (CLI --initial-q)", field="initial_q")
+    if initial == "truth" and not curve.has_truth:
+        raise InputError("initial='truth' needs a lightcurve with a truth attitude",
+                         field="initial", value=initial, allowed="given, global")
+    return initial
+
+
 def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
            **options) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
@@ -206,7 +274,13 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     1σ of the initial attitude / rate errors (Bernard ch. 9), dynamics model and noise,
     reflection states (ch. 8: per-site biases, Model 3 facet parameters; ``attitude="truth"``
     is the §10.7 attitude-known mode), the innovation gate (:mod:`lightcurve.filters.gating`),
-    and ``variant`` ("robust" default, "thesis" the source text).
+    where the filter starts (``initial``: "truth" = the file's truth perturbed by σθ, σω;
+    "given" = ``initial_q`` / ``initial_omega``; "global" = the global initialisation of
+    :mod:`lightcurve.acquisition.global_init`, which runs this filter from each posterior
+    mode and returns the heaviest mode's estimate, every mode in ``meta["global_init"]``;
+    "auto" = given, else truth, else global), and ``variant`` ("robust" default, "thesis"
+    the source text). The estimate carries the measurements and the magnitudes predicted at
+    the posterior attitude (:func:`attach_measurements`).
 
     Returns
     -------
@@ -232,6 +306,20 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     if cls is not None:
         fconf = cls(**filt_opts) if fconf is None else (fconf.replace(**filt_opts) if filt_opts
                                                         else fconf)
+    if initial_mode(pcfg.initial, curve, pcfg.initial_q, pcfg.initial_omega) == "global":
+        start = ("seed", "sigma_theta_deg", "sigma_omega_deg_s", "initial_q", "initial_omega",
+                 "shape", "dynamics", "library_dirs", "site_dirs", "global_config", "initial")
+        handover = {k: v for k, v in pcfg.as_options().items() if k not in start}
+        handover.update(fconf.as_options() if fconf is not None else filt_opts)
+        handover["initial"] = "given"
+        # the global initialisation drives this filter (acquisition sits above filters):
+        # imported here, when it is asked for
+        from ..acquisition.global_init import global_initialise
+
+        return global_initialise(curve, method, seed=pcfg.seed, config=pcfg.global_config,
+                                 shape=pcfg.shape, dynamics=pcfg.dynamics,
+                                 filter_kwargs=handover, library_dirs=pcfg.library_dirs,
+                                 site_dirs=pcfg.site_dirs).best
     fp = build_problem(curve, pcfg)
     fp.meta["method"] = method
     if fconf is not None:
@@ -240,7 +328,9 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
         set_gate(fp, pcfg.gate)
     bias, facets = _extra_states(fp, pcfg)
     if fconf is not None:
-        return _RUNNERS[method](fp, fconf, bias=bias, facets=facets)
+        est = _RUNNERS[method](fp, fconf, bias=bias, facets=facets)
+        attach_measurements(est, curve, fp.model)
+        return est
     # the particle filter's keyword form (no registered configuration class)
     bpf_opts = dict(BPF_KEYWORDS)
     filt_opts.pop("variant", None)
@@ -249,5 +339,26 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
                     "roughening": float(bpf_opts["roughening"]),
                     "resampling": bpf_opts["resampling"],
                     "ess_threshold": float(bpf_opts["ess_threshold"])})
-    return _bpf.run_bpf(fp, seed=pcfg.seed, bias=bias, facets=facets, attitude=pcfg.attitude,
-                        **bpf_opts)
+    est = _bpf.run_bpf(fp, seed=pcfg.seed, bias=bias, facets=facets, attitude=pcfg.attitude,
+                       **bpf_opts)
+    attach_measurements(est, curve, fp.model)
+    return est
+
+
+def attach_measurements(est, curve, model) -> None:
+    """Record what a real-data plot of ``est`` needs (:class:`Estimate` fields): the epoch,
+    the source file, the measured magnitudes, their σ and sites, and ``predicted_mag`` — the
+    measurement model's magnitude at the posterior attitude of every epoch (nominal shape,
+    no bias states; +inf where no light reaches the observer)."""
+    est.epoch_utc = str(curve.epoch_utc)
+    est.source_file = str((curve.attrs or {}).get("file", "") or "")
+    est.mag = np.asarray(curve.mag, float).copy()
+    est.mag_sigma = np.asarray(curve.mag_sigma, float).copy()
+    est.site = np.asarray(curve.site, np.int64).copy()
+    est.site_names = list(curve.site_names)
+    q = np.asarray(est.q, float)
+    post = np.full(len(curve), np.nan)
+    for k in range(len(curve)):
+        if np.all(np.isfinite(q[k])):
+            post[k] = float(model.predict_q(q[k], k)[0])
+    est.predicted_mag = post

@@ -257,7 +257,10 @@ def get_brdf(name: str, *, file=None, field=None) -> BRDF:
     try:
         return _REGISTRY[name]
     except KeyError:
-        raise InputError("unknown BRDF", file=file, field=field, value=name,
+        raise InputError("unknown BRDF (a user BRDF must be registered first: on the command "
+                         "line load its module with --plugin MODULE_OR_FILE.py, or install a "
+                         "package with a 'lightcurve.brdfs' entry point; docs/extending.md)",
+                         file=file, field=field, value=name,
                          allowed=", ".join(sorted(_REGISTRY))) from None
 
 

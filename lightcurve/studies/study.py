@@ -135,6 +135,8 @@ class RunTask:
     scenario_text: str
     scenario_file: str
     options: tuple = ()  # sorted (name, value) pairs of [options]
+    library_dirs: tuple = ()  # extra shape-library folders (absolute paths)
+    site_dirs: tuple = ()     # extra observatory folders (absolute paths)
 
     @property
     def run_id(self) -> str:
@@ -155,6 +157,11 @@ class Study:
     options: dict = field(default_factory=dict)
     source: str = ""
     text: str = ""
+    #: extra shape-library / observatory folders (``lightcurve compare --library/--sites``)
+    library_dirs: tuple = ()
+    site_dirs: tuple = ()
+    #: fingerprints of the shapes resolved from ``library_dirs`` (part of the input hash)
+    shape_fingerprints: dict = field(default_factory=dict)
 
     @property
     def hash(self) -> str:
@@ -166,6 +173,29 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
+    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
+        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
+        in execution order: scenario keys sorted, then run index, then the cells sharing that
+        scenario key in grid order — runs that share a simulated lightcurve (common random
+        numbers) come back to back. The same set as :meth:`tasks`."""
+        n = self.runs if runs is None else int(runs)
+        opts = tuple(sorted(self.options.items()))
+        groups: dict = {}
+        for c in self.cells:
+            groups.setdefault(c.scenario_key, []).append(c)
+        for key in sorted(groups):
+            cells = groups[key]
+            tags = [c.tag for c in cells]
+            for i in range(n):
+                for c, tag in zip(cells, tags):
+                    if ids_only:
+                        yield f"{tag}_r{i:05d}"
+                        continue
+                    f = self.scenario_files[(c.dynamics, c.sites)]
+                    txt = self.scenario_texts[(c.dynamics, c.sites)]
+                    s, fs = run_seeds(self.seed, c, i)
+                    yield RunTask(c, i, s, fs, txt, str(f), opts)
+
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
@@ -176,7 +206,8 @@ class Study:
             txt = self.scenario_texts[(c.dynamics, c.sites)]
             for i in range(n):
                 s, fs = run_seeds(self.seed, c, i)
-                out.append(RunTask(c, i, s, fs, txt, str(f), opts))
+                out.append(RunTask(c, i, s, fs, txt, str(f), opts, self.library_dirs,
+                                   self.site_dirs))
         return out
 
 
@@ -189,6 +220,21 @@ def input_hash(study: Study) -> str:
     for k in sorted(study.scenario_texts):
         h.update(f"\0{k[0]}|{k[1]}\0".encode())
         h.update(study.scenario_texts[k].encode())
+    for k in sorted(study.shape_fingerprints):  # shapes from --library folders (content)
+        h.update(f"\0shape {k[0]}|{k[1]}\0{study.shape_fingerprints[k]}".encode())
+    return h.hexdigest()
+
+
+def shape_fingerprint(shape) -> str:
+    """Hex SHA-256 of a resolved shape's geometry, mass properties and materials."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    for a in (shape.areas_m2, shape.normals_body, shape.centers_body_m, shape.inertia_kg_m2):
+        h.update(np.ascontiguousarray(a, float).tobytes())
+    h.update(repr((shape.name, float(shape.mass_kg),
+                   [(m.name, m.brdf_name, sorted(m.params.items())) for m in shape.materials])
+                  ).encode())
     return h.hexdigest()
 
 
@@ -280,8 +326,42 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
     return out
 
 
-def load_study(path) -> Study:
+def _fill_template(template: str, file, **values) -> str:
+    """``template`` with its ``{name}`` placeholders replaced by ``values``.
+
+    Only bare placeholders are allowed: no attribute or index access (``{dynamics.x}``), no
+    conversion and no format spec (``{sites:>300}`` would pad a path to any length).
+    """
+    import string
+
+    def bad(why):
+        return InputError(f"bad placeholder in the scenario template ({why})", file=file,
+                          field="study.scenario", value=template,
+                          allowed="text with {dynamics} and {sites} placeholders only")
+
+    out = []
+    try:
+        parts = list(string.Formatter().parse(template))
+    except ValueError as exc:
+        raise bad(str(exc)) from None
+    for literal, name, spec, conv in parts:
+        out.append(literal)
+        if name is None:
+            continue
+        if name not in values:
+            raise bad(f"unknown placeholder {{{name}}}")
+        if spec or conv:
+            raise bad(f"{{{name}}} with a format spec or conversion")
+        out.append(str(values[name]))
+    return "".join(out)
+
+
+def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     """Load and validate a study TOML (module docstring); every scenario file is parsed.
+
+    ``library_dirs`` / ``site_dirs``: extra shape-library and observatory folders for the
+    scenarios (they travel with every run task; with ``library_dirs`` the resolved shapes'
+    content is part of the input hash, so a changed library shape is a changed study).
 
     Reflection models: every value of ``grid.reflection`` is a filter option
     (:data:`REFLECTION_MODELS`); the simulated lightcurves do not depend on it (common random
@@ -299,8 +379,7 @@ def load_study(path) -> Study:
     from .scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
-    text = path.read_text(encoding="utf-8")
+    doc, text = load_toml(path, with_text=True)
     root = Section(doc, file=path)
     st = root.section("study")
     name = st.str("name", path.stem)
@@ -353,24 +432,24 @@ def load_study(path) -> Study:
         opts["filters"] = tuple(sorted((m, tuple(sorted(v.items()))) for m, v in filt.items()))
     root.check_unknown()
 
-    files, texts = {}, {}
+    lib = tuple(str(Path(d).resolve()) for d in (library_dirs or ()))
+    sdirs = tuple(str(Path(d).resolve()) for d in (site_dirs or ()))
+    files, texts, prints = {}, {}, {}
     for dyn in axes["dynamics"]:
         for ns in axes["sites"]:
-            try:
-                rel = template.format(dynamics=dyn, sites=ns)
-            except (KeyError, IndexError, ValueError) as exc:
-                raise InputError(f"bad placeholder in the scenario template ({exc}); use "
-                                 "{dynamics} and {sites}", file=path, field="study.scenario",
-                                 value=template) from None
+            rel = _fill_template(template, path, dynamics=dyn, sites=ns)
             f = Path(rel)
             if not f.is_absolute():
                 f = path.parent / f
-            if not f.is_file():
+            if not f.exists():
                 raise InputError("scenario file not found", file=path, field="study.scenario",
                                  value=str(f), allowed="an existing scenario TOML for every "
                                  "(dynamics, sites) of the grid")
-            txt = f.read_text(encoding="utf-8")
-            sc = parse_scenario(txt, file=f)
+            doc_f, txt = load_toml(f, with_text=True)  # regular file, size cap
+            sc = parse_scenario(doc_f, file=f, text=txt, library_dirs=lib or None,
+                                site_dirs=sdirs or None)
+            if lib:
+                prints[(dyn, ns)] = shape_fingerprint(sc.shape)
             if sc.attitude.dynamics != dyn:
                 raise InputError(f"scenario {f.name} has dynamics {sc.attitude.dynamics!r}, the "
                                  f"grid cell needs {dyn!r}", file=path, field="study.scenario",
@@ -382,5 +461,6 @@ def load_study(path) -> Study:
             texts[(dyn, ns)] = txt
     cells = [Cell(*vals) for vals in itertools.product(*(axes[k] for k in GRID_KEYS))]
     return Study(name=name, seed=seed, runs=runs, cells=cells, scenario_files=files,
-                 scenario_texts=texts, options=opts, source=str(path), text=text)
+                 scenario_texts=texts, options=opts, source=str(path), text=text,
+                 library_dirs=lib, site_dirs=sdirs, shape_fingerprints=prints)
 
