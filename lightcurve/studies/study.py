@@ -162,9 +162,8 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
-    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
-        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
-        in execution order: scenario keys sorted, then run index, then the cells sharing that
+    def iter_tasks(self, runs: int | None = None):
+        """Every :class:`RunTask`, generated lazily in execution order: scenario keys sorted, then run index, then the cells sharing that
         scenario key in grid order — runs that share a simulated lightcurve (common random
         numbers) come back to back. The same set as :meth:`tasks`."""
         n = self.runs if runs is None else int(runs)
@@ -174,12 +173,8 @@ class Study:
             groups.setdefault(c.scenario_key, []).append(c)
         for key in sorted(groups):
             cells = groups[key]
-            tags = [c.tag for c in cells]
             for i in range(n):
-                for c, tag in zip(cells, tags):
-                    if ids_only:
-                        yield f"{tag}_r{i:05d}"
-                        continue
+                for c in cells:
                     f = self.scenario_files[(c.dynamics, c.sites)]
                     txt = self.scenario_texts[(c.dynamics, c.sites)]
                     s, fs = run_seeds(self.seed, c, i)
@@ -373,6 +368,12 @@ def load_study(path) -> Study:
     o = root.section("options", {})
     if o.has("particles"):
         opts["particles"] = o.int("particles", min=2, max=10_000_000)
+        from ..filters.invert import BPF_BYTES_PER_PARTICLE
+        from ..memory import check_allocation
+
+        check_allocation(opts["particles"] * BPF_BYTES_PER_PARTICLE,
+                         f"particle filter with {opts['particles']} particles (per worker)",
+                         file=path, field="options.particles", value=opts["particles"])
     if o.has("acs_mode"):
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
     o.check_unknown()
