@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._args import SEED, number
+from ._args import SEED, naming_file, number
 
 __all__ = ["register"]
 
@@ -12,10 +12,12 @@ def _cmd_diagnose(args) -> int:
     from ..diagnosis.report import write_report
 
     say = (lambda m: None) if args.quiet else (lambda m: print(m, flush=True))
-    d = diagnose_recording(args.recording, args.scenario, free=args.free,
-                           exclude=[e.strip() for e in (args.exclude or "").split(",") if e.strip()],
-                           cross_validation=False if args.no_cv else None, progress=say,
-                           max_effects=args.max_effects, seed=args.seed)
+    with naming_file(args.recording):
+        d = diagnose_recording(args.recording, args.scenario, free=args.free,
+                               exclude=[e.strip() for e in (args.exclude or "").split(",")
+                                        if e.strip()],
+                               cross_validation=False if args.no_cv else None, progress=say,
+                               max_effects=args.max_effects, seed=args.seed)
     jpath, hpath = write_report(d, args.output)
     js = d.summary()
     print(f"verdict: {js['verdict']}; baseline chi2/dof {js['baseline']['chi2_dof']:.3g}; chosen: "

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import SEED, csv_ints, csv_list, number, output_not_input
+from ._args import SEED, csv_ints, csv_list, naming_file, number, output_not_input
 
 __all__ = ["register"]
 
@@ -32,11 +32,12 @@ def _cmd_fit_reflection(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(args.file).stem
     try:
-        fit = fit_reflection(curve, shape=args.shape, attitude=args.attitude,
-                             estimate=args.estimate, facets=facets, kinds=kinds,
-                             prior_frac=args.prior_frac, walkers=args.walkers, seed=args.seed,
-                             max_steps=args.max_steps, tau_factor=args.tau_factor,
-                             progress=say)
+        with naming_file(args.file):
+            fit = fit_reflection(curve, shape=args.shape, attitude=args.attitude,
+                                 estimate=args.estimate, facets=facets, kinds=kinds,
+                                 prior_frac=args.prior_frac, walkers=args.walkers,
+                                 seed=args.seed, max_steps=args.max_steps,
+                                 tau_factor=args.tau_factor, progress=say)
     except ConvergenceError as exc:
         from ..io.atomic import atomic_write_text
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._args import SEED, output_not_input
+from ._args import SEED, number, output_not_input
 
 __all__ = ["register"]
 
@@ -134,8 +134,8 @@ def register(sub) -> None:
     p.add_argument("--method", default="ukf", choices=("ukf", "mekf", "bpf", "none"),
                    help="attitude filter used to invert the simulated lightcurve (default ukf; "
                    "none: simulate only)")
-    p.add_argument("--sigma-theta-deg", type=float, default=3.0,
+    p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3, Bernard ch. 9)")
-    p.add_argument("--sigma-omega-deg-s", type=float, default=0.02,
+    p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
     p.set_defaults(func=_cmd_demo)

@@ -299,7 +299,7 @@ def load_study(path) -> StudySpec:
     spec = StudySpec(
         name=st.str("name", "css-study"),
         n_runs=st.int("n_runs", 200, min=1, max=100000),
-        seed=st.int("seed", 1, min=0),
+        seed=st.int("seed", 1, min=0, max=2**63 - 1),
         settle_s=st.float("settle_s", 300.0, min=0.0),
     )
     st.check_unknown()

@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .lightcurve_h5 import Lightcurve
+from .lightcurve_h5 import MAG_RANGE, Lightcurve
 from .tomlio import Section
 
 __all__ = ["RecordingSpec", "recording_spec_from_section", "read_recording", "TIME_FORMATS"]
@@ -404,8 +404,9 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
             m = float(ms)
         except ValueError:
             raise bad("mag", "not a number") from None
-        if not math.isfinite(m) or not (-30.0 < m < 40.0):
-            raise bad("mag", "magnitude out of range", "(-30, 40), or empty/nan to skip the row")
+        if not math.isfinite(m) or not (MAG_RANGE[0] < m < MAG_RANGE[1]):
+            raise bad("mag", "magnitude out of range",
+                      f"({MAG_RANGE[0]:g}, {MAG_RANGE[1]:g}), or empty/nan to skip the row")
         try:
             dt = _parse_time(f[ci["time"]], spec.time_format)
         except (ValueError, OverflowError):

@@ -361,8 +361,11 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
     key = (lambda t: f"lightcurve-run-{t.run_id}-{t.filter_seed}") if key is None else key
     cluster = None
     if address is None:
+        import logging
+
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
-                                           processes=True, dashboard_address=None)
+                                           processes=True, dashboard_address=None,
+                                           silence_logs=logging.ERROR)
         client = distributed.Client(cluster)
     else:
         try:

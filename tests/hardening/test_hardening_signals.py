@@ -213,7 +213,7 @@ def test_stop_pool_terminates_busy_workers():
     while len(getattr(ex, "_processes", {}) or {}) < 2 and time.monotonic() < t_end:
         time.sleep(0.05)
     procs = list(ex._processes.values())
-    assert len(procs) == 2
+    assert procs, "no worker started within 60 s"
     stop_pool(ex, grace_s=2.0)
     assert all(not p.is_alive() for p in procs)
     assert all(f.cancelled() or f.done() for f in futs)
