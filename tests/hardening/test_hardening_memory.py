@@ -10,11 +10,12 @@ import pytest
 
 from lightcurve import InputError
 from lightcurve._paths import data_dir
-from lightcurve.memory import check_allocation, memory_limit, parse_bytes
 from test_hardening_special_files import run_cli
 
 
 def test_memory_limit_setting(monkeypatch):
+    from lightcurve.memory import check_allocation, memory_limit, parse_bytes
+
     assert parse_bytes("8GiB") == 8 * 1024**3 and parse_bytes("1.5G") == 1_500_000_000
     assert parse_bytes("512") == 512 and parse_bytes("none") is None
     for bad in ("lots", "-1G", "1 furlong", "nan"):

@@ -16,7 +16,6 @@ import pytest
 from hardening_util import small_curve
 from lightcurve import InputError
 from lightcurve._paths import data_dir
-from lightcurve.io.atomic import atomic_write_text, clean_stale_temp, temp_prefix
 from test_hardening_special_files import run_cli
 
 
@@ -182,6 +181,8 @@ def test_stale_temp_files_removed_live_ones_kept(tmp_path):
     """Temporary files of a killed writer (same host, pid gone) are removed by the next write
     of that file and by the study start-up; a live writer's (pid alive) never; another
     host's only after a day without change."""
+    from lightcurve.io.atomic import atomic_write_text, clean_stale_temp, temp_prefix
+
     dead = _dead_pid()
     host = temp_prefix("x").split(".")[-1].split("-")[0]
     live = os.getpid()
@@ -208,6 +209,7 @@ def test_stale_temp_files_removed_live_ones_kept(tmp_path):
 
 def test_study_startup_keeps_a_live_writers_temp_file(tmp_path):
     """prepare_output used to delete every `.*.h5.*` in runs/, a live writer's included."""
+    from lightcurve.io.atomic import temp_prefix
     from lightcurve.studies.runner import prepare_output
     from lightcurve.studies.study import load_study
 
@@ -226,6 +228,8 @@ def test_study_startup_keeps_a_live_writers_temp_file(tmp_path):
 @pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
 def test_written_files_follow_the_umask(tmp_path, umask, mode):
     """Every output used to be 0600 (the temporary file's mode) whatever the umask."""
+    from lightcurve.io.atomic import atomic_write_text
+
     old = os.umask(umask)
     try:
         atomic_write_text(tmp_path / "a.txt", "x")
