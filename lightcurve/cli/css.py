@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._args import SEED, number, output_not_input
+import argparse
+
+from ._args import SEED, add_executors, add_output, add_quiet, number, output_not_input
 
 __all__ = ["register"]
 
@@ -30,7 +32,8 @@ def _css_albedo(spec):
 def _cmd_css_simulate(args) -> int:
 
     from ..css.recording import write_recording
-    from ..css.study import gyroless_params, settled_mask
+    from ..css.study import settled_mask
+    from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams
     from ..css.truth import Scenario, simulate
 
@@ -49,10 +52,25 @@ def _cmd_css_simulate(args) -> int:
     from dataclasses import replace as _replace
 
     fp = _replace(fp, albedo_model=args.filter_albedo != "none")
-    sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
-                  duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
-                  albedo=_css_albedo(args.albedo), filter_params=fp,
-                  filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
+    if args.variant is not None:
+        # O'Keefe (2015) §2.4 set-up (60° FOV, structure horizon, 2 Hz / 10 Hz, J2-J6 orbit,
+        # TOMS albedo when the data folder is there) with the thesis or robust estimators
+        from ..css.experiments import thesis_scenario
+
+        if args.config not in ("dual_pyramid", "cube"):
+            from ..errors import InputError
+
+            raise InputError("--variant runs the thesis set-up: dual_pyramid or cube only",
+                             field="--config", value=args.config, allowed="dual_pyramid, cube")
+        sc = thesis_scenario(args.config, args.estimator, variant=args.variant, gyro=gyro,
+                             controlled=args.controlled, duration_s=args.duration_s,
+                             albedo="toms" if args.albedo == "builtin" else _css_albedo(args.albedo))
+        css = sc.css
+    else:
+        sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
+                      duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
+                      albedo=_css_albedo(args.albedo), filter_params=fp,
+                      filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
     r = simulate(sc, args.seed)
     m = settled_mask(r.t, r.lit, args.settle_s)
     e = r.error_deg[m]
@@ -75,7 +93,7 @@ def _cmd_css_estimate(args) -> int:
 
     from ..css.recording import read_recording
     from ..css.single_point import angle_deg, estimate
-    from ..css.study import gyroless_params
+    from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams, run_filter
 
     output_not_input(args.out, args.recording, option="--out")
@@ -108,23 +126,28 @@ def _cmd_css_estimate(args) -> int:
 
 
 def _cmd_css_study(args) -> int:
-    from dataclasses import replace
-
-    from ..css.study import load_study, run_study, write_report
+    from ..css.study import load_study, run_study
 
     spec = load_study(args.pipeline)
-    if args.runs is not None:
-        spec = replace(spec, n_runs=args.runs)
-    cases = run_study(spec)
-    if args.out:
-        out_dir = args.out
-    else:  # derived from the study's name (data): keep it inside the current folder
+    out_dir = args.output
+    if out_dir is None:  # derived from the study's name (data): keep it inside the current folder
         from ..io.paths import safe_output_path
 
         out_dir = safe_output_path(".", f"{spec.name}-report", field="study.name")
-    out = write_report(spec, cases, out_dir)
-    print((out / "summary.txt").read_text(), end="")
-    print(f"report in {out}/ (summary.json, summary.txt, envelopes.png, error_maps.png)")
+    summary = run_study(spec, out_dir, runs=args.runs, workers=args.workers,
+                        scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
+                        progress=not args.quiet)
+    print(f"{spec.name}: {summary['verdict']['text']}")
+    print(f"{'estimator':>9} {'variant':>7} {'gyro':>12} {'runs':>5} {'p99 lvl':>8} "
+          f"{'thesis':>7} {'>15 max min/orb':>15}")
+    for c in summary["cases"]:
+        lv = c.get("p99_level_deg")
+        th = c.get("thesis_p99_deg")
+        a15 = c.get("above15_s_per_orbit", {}).get("max")
+        print(f"{c['estimator']:>9} {c['variant']:>7} {c['gyro']:>12} {c['runs']:5d} "
+              f"{'-' if lv is None else format(lv, '8.2f'):>8} {'-' if th is None else format(th, 'g'):>7} "
+              f"{'-' if a15 is None else format(a15 / 60, '15.2f'):>15}")
+    print(f"report in {out_dir}/ (summary.json, report.html)")
     return 0
 
 
@@ -139,8 +162,8 @@ def register(sub) -> None:
     def common(q):
         q.add_argument("--config", default="dual_pyramid",
                        help="sensor set: dual_pyramid, cube or a sensor TOML file (default dual_pyramid)")
-        q.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=70.0,
-                       help="FOV half angle of the bundled sets, deg (default 70)")
+        q.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=60.0,
+                       help="FOV half angle of the bundled sets, deg (default 60, O'Keefe §2.1.3)")
 
     s = css_sub.add_parser(
         "simulate", help="simulate one dispersed run (truth, CSS, gyro, estimator, control)",
@@ -151,9 +174,15 @@ def register(sub) -> None:
     common(s)
     s.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
                    help="estimator in the loop (default ekf)")
-    s.add_argument("--gyro", default="tactical", choices=("rate", "tactical", "navigation", "none"),
-                   help="gyro grade, or none for gyro-less operation (default tactical)")
+    s.add_argument("--gyro", default="tactical", choices=("inertial", "intermediate", "moderate", "low", "rate", "tactical",
+                            "navigation", "none"),
+                   help="gyro grade (Table 2.3: inertial, intermediate, moderate, low; generic: "
+                   "rate, tactical, navigation), or none for gyro-less operation (default tactical)")
     s.add_argument("--controlled", action="store_true", help="run the sun-pointing controller")
+    s.add_argument("--variant", choices=("thesis", "robust"), default=None,
+                   help="simulate O'Keefe's own set-up (§2.4: 60° FOV, structure horizon, 2 Hz CSS, "
+                   "10 Hz gyro, J2-J6 orbit, TOMS albedo) with the thesis's estimators and "
+                   "controller (thesis) or ours (robust); default: the generic set-up below")
     s.add_argument("--duration-s", type=number(0.0, 366 * 86400.0, lo_open=True), default=1800.0, help="duration, s (default 1800)")
     s.add_argument("--dt-s", type=number(1e-3, 60.0), default=0.5, help="sample and control step, s (default 0.5)")
     s.add_argument("--epoch", default="2015-03-01T00:00:00Z", help="epoch, ISO 8601 UTC")
@@ -165,7 +194,7 @@ def register(sub) -> None:
     s.add_argument("--seed", type=SEED, default=1, help="random seed (default 1)")
     s.add_argument("--settle-s", type=number(0.0), default=300.0,
                    help="ignore errors this long after entering sunlight, s (default 300)")
-    s.add_argument("--out", help="write the run to this HDF5 file")
+    s.add_argument("-o", "--output", "--out", dest="out", help="write the run to this HDF5 file (--out: deprecated alias)")
     s.set_defaults(func=_cmd_css_simulate)
 
     e = css_sub.add_parser(
@@ -179,19 +208,25 @@ def register(sub) -> None:
     e.add_argument("--threshold", type=number(), default=0.5,
                    help="activity threshold of the single-point methods (default 0.5)")
     e.add_argument("--settle-s", type=number(0.0), default=300.0, help="skip this long before scoring, s")
-    e.add_argument("--out", help="write the estimates to this CSV file")
+    e.add_argument("-o", "--output", "--out", dest="out", help="write the estimates to this CSV file (--out: deprecated alias)")
     e.set_defaults(func=_cmd_css_estimate)
 
     st = css_sub.add_parser(
-        "study", help="Monte Carlo study from a pipeline TOML (percentile envelopes, time above 15/30 deg)",
-        description="Run a CSS Monte Carlo study (e.g. pipelines/css/*.toml) and write "
-        "summary.json, summary.txt, envelopes.png and error_maps.png: 99th-percentile errors "
-        "after the first minutes in sunlight next to the thesis values, time above 15/30 deg "
-        "per orbit, with control the time to sun pointing, and the noise-free single-point "
-        "error maps (figs. 3.1-3.2).")
+        "study", help="Monte Carlo study (O'Keefe ch. 3 experiments): envelopes, p99, time above 15/30 deg",
+        description="Run or resume a CSS Monte Carlo study (pipelines/css/okeefe2015/*.toml: "
+        "the thesis's experiments, thesis and robust variants side by side) and write "
+        "summary.json and a self-contained report.html: the 99th-percentile error level next "
+        "to the thesis's number, percentile envelopes against sunlit time, time above "
+        "15/30 deg per orbit. Finished runs are kept under DIR/runs and skipped on restart.")
     st.add_argument("pipeline", help="study TOML file")
     st.add_argument("--runs", type=number(1, 100000, integer=True), help="override the number of runs")
-    st.add_argument("--out", help="report folder (default <study name>-report)")
+    add_output(st, what="folder", help="output folder; finished runs are kept there and "
+               "skipped on restart (default <study name>-report)")
+    st.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
+    add_executors(st)
+    st.add_argument("--force", action="store_true",
+                    help="discard stored runs of a different study in the output folder")
+    add_quiet(st)
     st.set_defaults(func=_cmd_css_study)
 
     # --- calibration, fault detection, VMM/SMM, Sun models (handlers in
@@ -224,7 +259,7 @@ def register(sub) -> None:
                     help="albedo of the truth: builtin, none, or a CERES CSV / TOMS .dat file")
     ca.add_argument("--albedo-filter", default=None,
                     help="albedo map of the full filter (default: the truth's map)")
-    ca.add_argument("--out", help="write the summary to this JSON file")
+    ca.add_argument("-o", "--output", "--out", dest="out", help="write the summary to this JSON file (--out: deprecated alias)")
     ca.set_defaults(func=_lazy("cmd_calibrate"))
 
     fa = css_sub.add_parser(
@@ -249,7 +284,7 @@ def register(sub) -> None:
                     "output stays at zero; catches off failures of never-calibrated sensors)")
     fa.add_argument("--star-period-s", type=number(0.0, 3600.0), default=10.0,
                     help="star-tracker period, s; 0 for none (default 10)")
-    fa.add_argument("--out", help="write the summary to this JSON file")
+    fa.add_argument("-o", "--output", "--out", dest="out", help="write the summary to this JSON file (--out: deprecated alias)")
     fa.set_defaults(func=_lazy("cmd_faults"))
 
     vm = css_sub.add_parser(
@@ -264,7 +299,7 @@ def register(sub) -> None:
                     help="photodiode FOV half angle, deg (cube; default 70)")
     vm.add_argument("--albedo", action="store_true", help="Earth albedo in the truth (unmodelled)")
     vm.add_argument("--plot", help="write the figure to this PNG file")
-    vm.add_argument("--out", help="write the summary to this JSON file")
+    vm.add_argument("-o", "--output", "--out", dest="out", help="write the summary to this JSON file (--out: deprecated alias)")
     vm.set_defaults(func=_lazy("cmd_vmm"))
 
     sm = css_sub.add_parser(

@@ -5,15 +5,61 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._args import SEED, csv_ints, csv_list, number
+from ._args import (add_executors, add_model_options, add_output, add_plot, add_quiet, add_seed,
+                    csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+                    refuse_inapplicable)
 
 __all__ = ["register"]
+
+
+#: options that only one filter uses (``--method``)
+METHOD_OPTIONS = {"particles": {"bpf"}, "roughening": {"bpf"}, "resampling": {"bpf"},
+                  "rejuvenation": {"bpf"}, "ess_threshold": {"bpf"}, "device": {"bpf"},
+                  "alpha": {"ukf"}, "beta": {"ukf"}, "kappa": {"ukf"}}
+#: options that only some reflection models use (``--reflection``)
+REFLECTION_OPTIONS = {"reflection_params": {"model3"}, "reflection_facets": {"model3"},
+                      "reflection_frac": {"random-walk", "model1", "model2", "model3"},
+                      "attitude_known": {"random-walk", "model1", "model2", "model3"}}
+
+
+def _refuse_inapplicable_options(args) -> None:
+    """An option the chosen filter, reflection model or gate ignores is an input error."""
+    refuse_inapplicable(args, "method", METHOD_OPTIONS)
+    refuse_inapplicable(args, "reflection", REFLECTION_OPTIONS)
+    refuse_inapplicable(args, "gate", {"gate_false_alarm": {"auto", "reject", "inflate"}})
 
 
 def _cmd_invert(args) -> int:
     from ..studies.batch import expand_inputs, invert_files
 
+    _refuse_inapplicable_options(args)
     n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+    start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
+    if args.initial_q is not None:
+        start["initial_q"] = initial_q(args.initial_q)
+    if args.initial_omega_deg_s is not None:
+        start["initial_omega"] = initial_omega_rad_s(args.initial_omega_deg_s)
+    if args.shape is not None:
+        start["shape"] = args.shape
+    if args.library:
+        start["library_dirs"] = tuple(args.library)
+    if args.sites:
+        start["site_dirs"] = tuple(args.sites)
+    start["initial"] = args.initial
+    if args.initial == "given" and args.initial_q is None:
+        from ..errors import InputError
+
+        raise InputError("--initial given needs --initial-q (and --initial-omega-deg-s)",
+                         field="--initial", value="given")
+    if args.global_particles is not None:
+        if args.initial not in ("global", "auto"):
+            from ..errors import InputError
+
+            raise InputError("--global-particles applies to the global initialisation only",
+                             field="--global-particles", allowed="--initial global or auto")
+        from ..acquisition.global_init import GlobalInitConfig
+
+        start["global_config"] = GlobalInitConfig(particles=args.global_particles)
     bar = n_files > 1 and not args.quiet
 
     def report(text, kind="info"):
@@ -44,7 +90,8 @@ def _cmd_invert(args) -> int:
                        reflection_facets=(None if args.reflection_facets is None else
                                           csv_ints(args.reflection_facets,
                                                     "--reflection-facets")),
-                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
+                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
+                       **start)
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -60,36 +107,58 @@ def register(sub) -> None:
         "HDF5 per input plus DIR/summary.json (per file: method, final RSS attitude and rate "
         "error, final 3-sigma bounds, whether every component ended inside 3 sigma, "
         "divergence flag, runtime; or the error of a file that failed — the others go on). "
-        "The initial estimate is the file's truth perturbed by --sigma-theta-deg / "
-        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9). Many files run in parallel on "
+        "The initial estimate (--initial) is the file's truth perturbed by --sigma-theta-deg / "
+        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or --initial-q / "
+        "--initial-omega-deg-s with those sigmas as their uncertainty, or — for a recording "
+        "with neither — the global initialisation, which needs no first guess and reports every "
+        "attitude mode the data allow. "
+        "The shape is the one the file carries unless --shape is given. Many files run in "
+        "parallel on "
         "the executors of 'compare' (process pool, Dask); the results do not depend on the "
         "executor. Exit code 2 if an input was rejected, 1 if a run failed.")
     p.add_argument("files", nargs="+", metavar="FILE.h5",
                    help="lightcurve HDF5 file(s) or glob patterns (expanded here, so quoted "
                    "patterns work; a pattern matching nothing is an error)")
-    ex = p.add_mutually_exclusive_group()
-    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None,
-                    help="local process-pool size (default: one per CPU, at most one per file; "
-                    "1 runs in this process)")
-    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
-    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None, metavar="W",
-                    help="start a Dask LocalCluster with W worker processes")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_executors(p, workers_help="local process-pool size (default: one per CPU, at most one "
+                  "per file; 1 runs in this process)")
+    add_quiet(p, help="no progress bar")
     p.add_argument("--method", choices=("mekf", "ukf", "bpf"), default="ukf",
                    help="filter (default: ukf)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
+    add_output(p, what="folder", required=True)
+    add_seed(p, default=0, help="random seed of the initial-estimate perturbation and of the "
+             "particle filter")
     p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3)")
     p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s, in (0, 360] (default 0.02)")
+    p.add_argument("--initial", choices=("auto", "truth", "given", "global"), default="auto",
+                   help="where the filter starts: truth = the file's truth perturbed by "
+                   "--sigma-theta-deg/--sigma-omega-deg-s (simulations, Bernard ch. 9); given = "
+                   "--initial-q/--initial-omega-deg-s; global = no first guess: attitude "
+                   "uniform over all rotations, rate from the spin-period analysis, a tempered "
+                   "Monte Carlo search for every attitude the data allow, then this filter "
+                   "from each (ambiguities are reported, not hidden). auto (default): given if "
+                   "--initial-q is set, else truth if the file has one, else global")
+    p.add_argument("--global-particles", type=number(100, 5_000_000, integer=True), default=None,
+                   metavar="N", help="particles of the global initialisation (default 20000)")
+    p.add_argument("--initial-q", default=None, metavar="Q1,Q2,Q3,Q4",
+                   help="initial attitude estimate (inertial->body quaternion, scalar first, "
+                   "at the first epoch) instead of the file's perturbed truth; needed for "
+                   "recordings without truth. Its 1-sigma error is --sigma-theta-deg. Write "
+                   "--initial-q=-0.5,... when the first value is negative")
+    p.add_argument("--initial-omega-deg-s", default=None, metavar="WX,WY,WZ",
+                   help="initial body-rate estimate, deg/s body axes (default: the file's "
+                   "perturbed truth; needed without truth). Its 1-sigma error is "
+                   "--sigma-omega-deg-s. Write --initial-omega-deg-s=-1,... when the first "
+                   "value is negative")
+    add_model_options(p)
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
     p.add_argument("--roughening", type=number(0.0, 10.0), default=0.2,
                    help="BPF roughening constant G in [0, 10] (Bernard table 7.9: sigma = G E "
                    "N^(-1/n), E the spread of the cloud; used with --rejuvenation separate; "
                    "default 0.2)")
-    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic")
+    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic",
+                   help="BPF resampling scheme (default systematic)")
     p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
                    help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
                    "the whole state with the Musso et al. (2001) bandwidth; separate = the "
@@ -140,6 +209,6 @@ def register(sub) -> None:
     p.add_argument("--gate-false-alarm", type=number(0.0, 0.5, lo_open=True), default=1e-4,
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
-    p.add_argument("--plot", action="store_true", help="also write a PNG per file")
+    add_plot(p, help="also write the estimate figure (PNG) next to each result")
     p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
                    "listed in {output}/summary.json; run the command again on the others")

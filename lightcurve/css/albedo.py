@@ -23,9 +23,10 @@ Cell areas are exact ellipsoidal areas computed through the authalic latitude β
 so the cells add up to the ellipsoid's surface area.
 
 Maps: CERES 2018 albedo CSV files (rows latitude −90…90 south to north, columns longitude
-−180…180; 18×36, 36×72 or 180×360) and the 10° TOMS mean reflectivity file (percent, 36
-rows of longitude × 18 columns of latitude, i.e. transposed).  The default map is the
-built-in zonal model :func:`zonal_albedo`.
+−180…180; 18×36, 36×72 or 180×360) and the TOMS 2000–2005 mean reflectivity and its standard
+deviation that O'Keefe (2015) §2.1.2.1 uses (percent, rows of longitude × columns of latitude,
+i.e. transposed; 10°×10° 36×18, 5°×5° 72×36, 1°×1.25° 288×180; :func:`load_toms`).  The
+default map is the built-in zonal model :func:`zonal_albedo`.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ __all__ = [
     "load_albedo_map", "fit_zonal_coefficients", "albedo_cells_in_view",
     "albedo_on_sensors_nb", "albedo_cells_nb", "earth_rotation_angle",
     "albedo_sun_frame_nb", "expected_albedo_nb", "albedo_phi_nb", "sun_nadir_axis_nb",
+    "TOMS_GRIDS", "load_toms", "draw_albedo_map", "AlbedoCells", "albedo_vectors_nb", "r3_nb",
 ]
 
 WGS84_A_M = 6378137.0
@@ -196,11 +198,15 @@ def builtin_albedo_map(resolution_deg: float = 10.0) -> AlbedoMap:
 
 
 _CERES_SHAPES = ((18, 36), (36, 72), (180, 360))
+_TOMS_SHAPES = ((36, 18), (72, 36), (288, 180))
+TOMS_GRIDS = {"10x10": "10x10", "5x5": "5x5", "1p25x1": "1p25x1"}
+"""TOMS grid names of the files ``earthReflectivity{Mean,Std}_<grid>.dat``."""
 
 
 def load_albedo_map(path) -> AlbedoMap:
-    """Load a CERES albedo CSV (shape 18×36, 36×72 or 180×360, values in [0, 1]) or the
-    10° TOMS reflectivity ``.dat`` file (36×18 in percent; transposed to CERES layout).
+    """Load a CERES albedo CSV (shape 18×36, 36×72 or 180×360, values in [0, 1]) or a
+    TOMS reflectivity ``.dat`` file (36×18, 72×36 or 288×180 in percent; transposed to the
+    CERES layout — mean or standard-deviation files alike).
 
     Raises :class:`InputError` (naming the file and field) for a missing file, unparsable
     numbers, a wrong shape, NaN, or values outside [0, 1] (0–100 % for TOMS).
@@ -223,10 +229,10 @@ def load_albedo_map(path) -> AlbedoMap:
         raise InputError(f"cannot parse numbers: {exc}", file=path, field="values") from None
     raw = np.atleast_2d(raw)
     if toms:
-        if raw.shape != (36, 18):
+        if raw.shape not in _TOMS_SHAPES:
             raise InputError("TOMS reflectivity map has the wrong shape", file=path,
                              field="values", value=raw.shape,
-                             allowed="36 rows (longitude) x 18 columns (latitude)")
+                             allowed="36x18, 72x36 or 288x180 (rows longitude, columns latitude)")
         vals, scale_max = raw.T / 100.0, "0..100 percent"
     else:
         if raw.shape not in _CERES_SHAPES:
@@ -471,3 +477,164 @@ def earth_rotation_angle(epoch_utc: str, t_s):
 
     theta0 = timescale().from_datetime(parse_epoch(epoch_utc)).gmst / 24.0 * 2.0 * np.pi
     return theta0 + OMEGA_EARTH_RAD_S * np.asarray(t_s, dtype=float)
+
+
+def load_toms(grid: str = "1p25x1", directory=None):
+    """The TOMS 2000–2005 mean reflectivity and its standard deviation (O'Keefe 2015 §2.1.2.1,
+    fig. 2.4) on ``grid`` ("1p25x1" = 1°×1.25°, "5x5", "10x10"), as two :class:`AlbedoMap`
+    (fractions, CERES layout).
+
+    ``directory`` holds ``earthReflectivity{Mean,Std}_<grid>.dat`` (default
+    ``../shared/data/earth_albedo`` beside the repository, or $LIGHTCURVE_SHARED_DATA);
+    :class:`InputError` names the missing file.
+    """
+    from .._paths import shared_data_dir
+
+    if grid not in TOMS_GRIDS:
+        raise InputError("unknown TOMS grid", field="grid", value=grid,
+                         allowed=", ".join(TOMS_GRIDS))
+    if directory is None:
+        base = shared_data_dir()
+        if base is None:
+            raise InputError("TOMS albedo data not found: pass the folder or set "
+                             "LIGHTCURVE_SHARED_DATA", field="albedo",
+                             allowed="a folder with earthReflectivityMean_<grid>.dat")
+        directory = base / "earth_albedo"
+    d = Path(directory)
+    mean = load_albedo_map(d / f"earthReflectivityMean_{grid}.dat")
+    std = load_albedo_map(d / f"earthReflectivityStd_{grid}.dat")
+    return mean, std
+
+
+def draw_albedo_map(mean: AlbedoMap, std: AlbedoMap, rng) -> AlbedoMap:
+    """One realisation of the albedo: every cell N(mean, std²) independently, clipped to
+    [0, 1] (O'Keefe 2015 §2.1.2.1 uses the TOMS mean and standard deviation "to generate
+    statistically accurate values"; how is left open — this is our choice, one draw per cell
+    held over a run)."""
+    from ..estimation.rng import as_generator
+
+    g = as_generator(rng)
+    v = np.clip(mean.values + std.values * g.standard_normal(mean.values.shape), 0.0, 1.0)
+    return AlbedoMap(v, mean.lat_edges_rad, mean.lon_edges_rad, mean.source + "+draw")
+
+
+# ---------------------------------------------------------------------------------------
+# albedo grid with row/column structure (window search)
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AlbedoCells:
+    """Earth-fixed cell geometry of a regular albedo map, kept on its (nlat, nlon) grid.
+
+    centers_m (nlat·nlon, 3) m, normals (nlat·nlon, 3) unit geodetic normals, rho_area_m2
+    (nlat·nlon,) = ρ A (m²), lat_c (nlat,) rad cell-centre latitudes, lon_w0 rad west edge of
+    column 0, dlon rad column width, dlat_max rad largest row height.
+    """
+
+    centers_m: np.ndarray
+    normals: np.ndarray
+    rho_area_m2: np.ndarray
+    lat_c: np.ndarray
+    nlat: int
+    nlon: int
+    lon_w0: float
+    dlon: float
+    dlat_max: float
+    source: str = "map"
+
+    @classmethod
+    def from_map(cls, amap: AlbedoMap) -> "AlbedoCells":
+        lat_e, lon_e = np.asarray(amap.lat_edges_rad), np.asarray(amap.lon_edges_rad)
+        # cell centres at the authalic-latitude midpoint, as AlbedoGrid (the truth model)
+        centers, normals, lat_c, lon_c = cell_centers_ecef(lat_e, lon_e)
+        ra = (cell_areas_m2(lat_e, lon_e) * amap.values).reshape(-1)
+        dlon = float(np.mean(np.diff(lon_e)))
+        if not np.allclose(np.diff(lon_e), dlon):
+            raise ValueError("AlbedoCells needs equal-width longitude columns")
+        return cls(np.ascontiguousarray(centers), np.ascontiguousarray(normals),
+                   np.ascontiguousarray(ra), lat_c, lat_c.size, lon_c.size, float(lon_e[0]),
+                   dlon, float(np.max(np.diff(lat_e))), amap.source)
+
+    @classmethod
+    def none(cls) -> "AlbedoCells":
+        """An empty grid (no albedo)."""
+        z = np.zeros((0, 3))
+        return cls(z, z.copy(), np.zeros(0), np.zeros(0), 0, 0, -np.pi, 2 * np.pi, np.pi, "none")
+
+    def args(self):
+        return (self.centers_m, self.normals, self.rho_area_m2, self.lat_c, self.nlat, self.nlon,
+                self.lon_w0, self.dlon, self.dlat_max)
+
+
+@numba.njit(cache=True)
+def r3_nb(theta, v):
+    """R3(θ) v: ECI → Earth-fixed for the Earth rotation angle θ (rad)."""
+    c = np.cos(theta)
+    s = np.sin(theta)
+    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+
+
+@numba.njit(cache=True)
+def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                      r_E, s_E, nE, cos_fov, hE, edge_m):
+    """Per-sensor albedo vector sums V_κ = Σ a_j ĉ_j (Earth-fixed, (N,3)) over the cells that
+    are sunlit, in view of the spacecraft and inside sensor κ's FOV (normals nE (N,3),
+    structure-horizon normals hE (N,3), Earth-fixed).  Only rows/columns of the cap visible
+    from r_E (m) are visited.  ``edge_m`` (N,): cosine margin about each FOV cut-off; the
+    irradiance Σ a_j c_j of the cells inside that band (whose membership is uncertain) is
+    returned as ``A_edge``.  Returns (V (N,3), A_edge (N,), number of cells evaluated)."""
+    N = nE.shape[0]
+    V = np.zeros((N, 3))
+    Aedge = np.zeros(N)
+    if nlat == 0:
+        return V, Aedge, 0
+    rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
+    lam0 = np.arccos(min(1.0, 6356752.0 / rn))  # visible cap half angle (polar radius: safe)
+    phi = np.arcsin(r_E[2] / rn)
+    lon = np.arctan2(r_E[1], r_E[0])
+    lo = phi - lam0 - dlat_max
+    hi = phi + lam0 + dlat_max
+    # per row: the longitude half-width of the cap (angular radius λ widened by one row, for
+    # the cells' extent) at the row's latitude, cos Δλ = (cos λ − sin φᵢ sin φ)/(cos φᵢ cos φ)
+    cos_l = np.cos(min(np.pi, lam0 + dlat_max + 0.01))
+    sphi, cphi = np.sin(phi), np.cos(phi)
+    count = 0
+    for i in range(nlat):
+        if lat_c[i] < lo or lat_c[i] > hi:
+            continue
+        den = np.cos(lat_c[i]) * cphi
+        cl = (cos_l - np.sin(lat_c[i]) * sphi) / den if den > 1e-12 else -2.0
+        if cl >= 1.0:
+            continue
+        if cl <= -1.0:
+            c0 = 0
+            ncol = nlon
+        else:
+            half = np.arccos(cl) + dlon
+            c0 = int(np.floor((lon - half - lon_w0) / dlon))
+            ncol = int(np.ceil(2.0 * half / dlon)) + 2
+            if ncol > nlon:
+                ncol = nlon
+                c0 = 0
+        for cc in range(ncol):
+            jc = (c0 + cc) % nlon
+            j = i * nlon + jc
+            if rho_area[j] <= 0.0:
+                continue
+            count += 1
+            a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_E, s_E)
+            if a == 0.0:
+                continue
+            for k in range(N):
+                c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
+                if c > 0.0 and abs(c - cos_fov[k]) < edge_m[k]:
+                    Aedge[k] += a * c
+                if c < cos_fov[k] or c <= 0.0:
+                    continue
+                if hE[k, 0] * ux + hE[k, 1] * uy + hE[k, 2] * uz < 0.0:
+                    continue
+                V[k, 0] += a * ux
+                V[k, 1] += a * uy
+                V[k, 2] += a * uz
+    return V, Aedge, count
+
+

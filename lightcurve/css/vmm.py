@@ -26,7 +26,7 @@ Truth: the torque-free/gravity-gradient tumbling of :mod:`lightcurve.css.truth` 
 orbit), photodiodes of the cube configuration (table 2.2, 90° FOV by default, so that one to
 three diodes are lit), Farrenkopf gyro, a tilted-dipole geomagnetic field (dipole moment
 7.94e22 A m², pole at 80.65° N, 72.68° W — IGRF-2015 first-degree terms, rounded; our choice:
-the paper's field model could not be consulted).  Earth albedo is off by default (neither
+the DiGregorio slides give no field model, only 'zero-mean Gaussian noise' on the truth).  Earth albedo is off by default (neither
 filter models it); ``albedo=True`` switches the built-in model on in the truth.
 """
 

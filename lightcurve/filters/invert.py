@@ -27,7 +27,8 @@ from ._common import FilterProblem
 from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
 from .result import Estimate
 
-__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES"]
+__all__ = ["invert", "build_problem", "initial_mode", "METHODS", "ATTITUDE_MODES",
+           "INITIAL_MODES"]
 
 METHODS = ("mekf", "ukf", "bpf")
 #: memory of the particle filter per particle (all working arrays; measured 420 B with the
@@ -37,19 +38,44 @@ BPF_BYTES_PER_PARTICLE = 512
 ATTITUDE_MODES = ("estimate", "truth")
 
 
-def _scenario_attitude(curve):
-    """The [attitude] table of the scenario TOML stored in the file ({} if none)."""
-    txt = getattr(curve, "scenario_toml", "") or ""
-    if not txt.strip():
-        return {}
-    import tomllib
+def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
+    """The ``[attitude]`` of the scenario stored in the file, validated: keys ``dynamics``,
+    ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and ``inertia_kg_m2`` when set. ``{}`` when the
+    file has no scenario.
 
-    try:
-        doc = tomllib.loads(txt)
-    except (tomllib.TOMLDecodeError, RecursionError):  # RecursionError: hostile nesting
+    A complete scenario (a ``[scenario]`` table with its ``epoch_utc``, as ``simulate`` and
+    ``import`` store) goes through the scenario loader
+    (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as the
+    resolved shape); any other text (synthetic test curves holding only an ``[attitude]``
+    table) has those four keys validated with the loader's ranges. Invalid content is an
+    :class:`InputError`, never silently ignored.
+    """
+    text = getattr(curve, "scenario_toml", "") or ""
+    if not text.strip():
         return {}
-    at = doc.get("attitude", {})
-    return at if isinstance(at, dict) else {}
+    from ..io.tomlio import Section, loads_toml
+
+    src = (curve.attrs or {}).get("file") or "<lightcurve>"
+    doc = loads_toml(text, file=f"{src}:scenario")
+    if isinstance(doc.get("scenario"), dict) and "epoch_utc" in doc["scenario"]:
+        from ..studies.scenario import scenario_from_lightcurve
+
+        at = scenario_from_lightcurve(curve, src, shape=shape, library_dirs=library_dirs,
+                                      site_dirs=site_dirs).attitude
+        out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
+               "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
+        if at.inertia_kg_m2 is not None:
+            out["inertia_kg_m2"] = at.inertia_kg_m2
+        return out
+    sec = Section(doc.get("attitude", {}), file=f"{src}:scenario", name="attitude")
+    out = {"dynamics": sec.str("dynamics", "controlled",
+                               choices=("controlled", "uncontrolled", "law")),
+           "acs_sigma_deg": sec.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+           "eta_sigma_deg_s2": sec.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0)}
+    J = sec.matrix("inertia_kg_m2", None, shape=(3, 3))
+    if J is not None:
+        out["inertia_kg_m2"] = J
+    return out
 
 
 def _check_curve(curve):
@@ -83,13 +109,15 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                   initial_q=None, initial_omega=None, shape=None, dynamics=None,
                   acs_sigma_deg=None, acs_mode="random_walk", pseudo_noise=0.0,
                   eta_sigma_deg_s2=None, inertia_kg_m2=None, substep_s=0.5,
-                  attitude="estimate") -> FilterProblem:
+                  attitude="estimate", library_dirs=None, site_dirs=None) -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
     Parameters mirror :func:`invert`; ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` /
     ``dynamics`` default to the scenario stored in the lightcurve file (ACS 0 and
     "controlled" when the file has none). ``attitude="truth"`` sets
-    ``FilterProblem.attitude_known`` (needs truth in the file).
+    ``FilterProblem.attitude_known`` (needs truth in the file). The shape is
+    :meth:`Lightcurve.resolve_shape` (``shape`` > the file's stored shape > its
+    ``attrs["shape"]`` from the library, with ``library_dirs``).
     """
     _check_curve(curve)
     if attitude not in ATTITUDE_MODES:
@@ -98,19 +126,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     if attitude == "truth" and not curve.has_truth:
         raise InputError("attitude known (truth) needs a lightcurve with truth_q and "
                          "truth_omega_rad_s", field="attitude", value=attitude)
-    if shape is None:
-        name = (curve.attrs or {}).get("shape", "")
-        if not name:
-            raise InputError("the lightcurve names no shape (attrs['shape']); pass shape=",
-                             field="attrs.shape")
-        from ..photometry import load_shape
-
-        shape = load_shape(str(name), library_only=True)  # a name from a data file
-    elif isinstance(shape, str):
-        from ..photometry import load_shape
-
-        shape = load_shape(shape)
-    at = _scenario_attitude(curve)
+    shape = curve.resolve_shape(shape, library_dirs=library_dirs)
+    at = _scenario_attitude(curve, shape, library_dirs=library_dirs, site_dirs=site_dirs)
     dyn_kind = dynamics or at.get("dynamics", "controlled")
     if dyn_kind not in ("controlled", "uncontrolled"):
         raise InputError("unknown dynamics", field="dynamics", value=dyn_kind,
@@ -144,8 +161,11 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     dw = rng.standard_normal(3) * sw_r
     if initial_q is None:
         if not curve.has_truth:
-            raise InputError("no truth in the lightcurve: give initial_q (and initial_omega)",
-                             field="initial_q")
+            # truth-free data (a recording): the filter needs a starting attitude from the user
+            # (or from a global initialisation step, when one exists)
+            raise InputError("the lightcurve has no truth attitude to start from: give an "
+                             "initial estimate (initial_q, initial_omega; CLI --initial-q "
+                             "Q1,Q2,Q3,Q4 --initial-omega-deg-s WX,WY,WZ)", field="initial_q")
         q0 = rot.quat_mult(rot.rotvec_to_quat(dth), rot.quat_normalize(curve.truth_q[0]))
     else:
         q0 = np.asarray(initial_q, float).reshape(4)
@@ -154,7 +174,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                              value=q0.tolist())
     if initial_omega is None:
         if curve.truth_omega_rad_s is None:
-            raise InputError("no truth rate in the lightcurve: give initial_omega",
+            raise InputError("the lightcurve has no truth rate to start from: give "
+                             "initial_omega (CLI --initial-omega-deg-s WX,WY,WZ)",
                              field="initial_omega")
         w0 = curve.truth_omega_rad_s[0] + dw
     else:
@@ -172,6 +193,27 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                          attitude_known=attitude == "truth")
 
 
+#: ``invert(initial=…)``: where the filter starts
+INITIAL_MODES = ("auto", "truth", "given", "global")
+
+
+def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
+    """Resolve ``invert(initial=…)`` to "truth", "given" or "global" (see :func:`invert`)."""
+    if initial not in INITIAL_MODES:
+        raise InputError("unknown initial-estimate mode", field="initial", value=initial,
+                         allowed=", ".join(INITIAL_MODES))
+    if initial == "auto":
+        if initial_q is not None:
+            return "given"
+        return "truth" if curve.has_truth else "global"
+    if initial == "given" and initial_q is None:
+        raise InputError("initial='given' needs initial_q (CLI --initial-q)", field="initial_q")
+    if initial == "truth" and not curve.has_truth:
+        raise InputError("initial='truth' needs a lightcurve with a truth attitude",
+                         field="initial", value=initial, allowed="given, global")
+    return initial
+
+
 def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
            particles=10_000, roughening=0.2, resampling="systematic", ess_threshold=0.5,
            initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
@@ -180,7 +222,8 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
            keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
            reflection_process_noise=0.0, reflection_facets=None,
            reflection_kinds=("xi", "a", "m", "A"), gate=None,
-           rejuvenation="auto") -> Estimate:
+           rejuvenation="auto", library_dirs=None, site_dirs=None, initial="auto",
+           global_config=None) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -202,7 +245,11 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     initial_q, initial_omega :
         User initial estimate (inertial→body quaternion; rad/s body axes) instead of the
         perturbed truth.
-    shape : Shape or str, optional (default ``curve.attrs["shape"]``)
+    shape : Shape or str, optional
+        Default: the shape the file carries, else ``curve.attrs["shape"]`` from the library.
+    library_dirs, site_dirs : optional
+        Extra shape-library / observatory folders for a shape named by ``shape`` or by the
+        file, and for the file's scenario.
     dynamics : {"controlled", "uncontrolled"}, optional (default: the file's scenario)
     acs_sigma_deg : float, optional — ACS noise 1σ (deg); default the scenario's.
     acs_mode : {"random_walk", "jitter"} — see :mod:`lightcurve.filters.models`.
@@ -232,6 +279,16 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         in the MEKF and the BPF). Counts land in
         ``est.meta["gate"]`` and :meth:`Estimate.summary`.
 
+    initial : {"auto", "truth", "given", "global"}
+        Where the filter starts: "truth" = the file's truth perturbed by σθ, σω (Bernard ch. 9
+        simulations); "given" = ``initial_q`` / ``initial_omega``; "global" = no first guess:
+        the global initialisation of :mod:`lightcurve.acquisition.global_init` (attitude
+        uniform over SO(3), rate from the spin-period analysis) finds the posterior modes and
+        runs this filter from each; the heaviest mode's estimate is returned, every mode in
+        ``meta["global_init"]``. "auto" (default): "given" when ``initial_q`` is given, else
+        "truth" when the file has a truth, else "global".
+    global_config : :class:`lightcurve.acquisition.global_init.GlobalInitConfig` or None
+
     Returns
     -------
     Estimate
@@ -245,12 +302,29 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         n_p = int(particles)
         check_allocation(n_p * (BPF_BYTES_PER_PARTICLE + 8 * 7 * len(tuple(keep_clouds))),
                          f"particle filter with {n_p} particles", field="particles", value=n_p)
+    if initial_mode(initial, curve, initial_q, initial_omega) == "global":
+        from ..acquisition.global_init import global_initialise
+
+        handover = dict(particles=particles, roughening=roughening, resampling=resampling,
+                        ess_threshold=ess_threshold, acs_sigma_deg=acs_sigma_deg,
+                        acs_mode=acs_mode, pseudo_noise=pseudo_noise,
+                        eta_sigma_deg_s2=eta_sigma_deg_s2, inertia_kg_m2=inertia_kg_m2,
+                        alpha=alpha, beta=beta, kappa=kappa, error=error, jacobian=jacobian,
+                        reflection=reflection, reflection_frac=reflection_frac,
+                        reflection_process_noise=reflection_process_noise,
+                        reflection_facets=reflection_facets, reflection_kinds=reflection_kinds,
+                        gate=gate, rejuvenation=rejuvenation, library_dirs=library_dirs,
+                        site_dirs=site_dirs, initial="given")
+        return global_initialise(curve, method, seed=seed, config=global_config, shape=shape,
+                                 dynamics=dynamics, filter_kwargs=handover,
+                                 library_dirs=library_dirs, site_dirs=site_dirs).best
     problem = build_problem(curve, seed=seed, sigma_theta_deg=sigma_theta_deg,
                             sigma_omega_deg_s=sigma_omega_deg_s, initial_q=initial_q,
                             initial_omega=initial_omega, shape=shape, dynamics=dynamics,
                             acs_sigma_deg=acs_sigma_deg, acs_mode=acs_mode,
                             pseudo_noise=pseudo_noise, eta_sigma_deg_s2=eta_sigma_deg_s2,
-                            inertia_kg_m2=inertia_kg_m2, attitude=attitude)
+                            inertia_kg_m2=inertia_kg_m2, attitude=attitude,
+                            library_dirs=library_dirs, site_dirs=site_dirs)
     problem.meta["method"] = method
     if gate is not None:   # innovation gate / epoch screening settings (filters.gating)
         from .gating import set_gate
@@ -283,17 +357,39 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     if method == "mekf":
         from .mekf import run_mekf
 
-        return run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
-    if method == "ukf":
+        est = run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
+    elif method == "ukf":
         from .ukf import run_ukf
 
-        return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
-    from .bpf import run_bpf
+        est = run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
+    else:
+        from .bpf import run_bpf
 
-    extra = {"bias": bias, "facets": facets, "attitude": attitude,
-             "rejuvenation": rejuvenation}
-    problem.meta.update({"particles": int(particles), "roughening": float(roughening),
-                         "resampling": resampling, "ess_threshold": float(ess_threshold)})
-    return run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
-                   resampling=resampling, ess_threshold=ess_threshold, keep_clouds=keep_clouds,
-                   **extra)
+        extra = {"bias": bias, "facets": facets, "attitude": attitude,
+                 "rejuvenation": rejuvenation}
+        problem.meta.update({"particles": int(particles), "roughening": float(roughening),
+                             "resampling": resampling, "ess_threshold": float(ess_threshold)})
+        est = run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
+                      resampling=resampling, ess_threshold=ess_threshold,
+                      keep_clouds=keep_clouds, **extra)
+    attach_measurements(est, curve, problem.model)
+    return est
+
+
+def attach_measurements(est, curve, model) -> None:
+    """Record what a real-data plot of ``est`` needs (:class:`Estimate` fields): the epoch,
+    the source file, the measured magnitudes, their σ and sites, and ``predicted_mag`` — the
+    measurement model's magnitude at the posterior attitude of every epoch (nominal shape,
+    no bias states; +inf where no light reaches the observer)."""
+    est.epoch_utc = str(curve.epoch_utc)
+    est.source_file = str((curve.attrs or {}).get("file", "") or "")
+    est.mag = np.asarray(curve.mag, float).copy()
+    est.mag_sigma = np.asarray(curve.mag_sigma, float).copy()
+    est.site = np.asarray(curve.site, np.int64).copy()
+    est.site_names = list(curve.site_names)
+    q = np.asarray(est.q, float)
+    post = np.full(len(curve), np.nan)
+    for k in range(len(curve)):
+        if np.all(np.isfinite(q[k])):
+            post[k] = float(model.predict_q(q[k], k)[0])
+    est.predicted_mag = post

@@ -80,6 +80,9 @@ def _library_dirs(library_dirs) -> list[Path]:
         if isinstance(library_dirs, (str, Path)):
             library_dirs = [library_dirs]
         dirs.extend(Path(d) for d in library_dirs)
+    from ..plugins import plugin_shape_dirs
+
+    dirs.extend(plugin_shape_dirs())  # folders listed by --plugin modules (SHAPE_DIRS)
     try:
         dirs.append(data_dir("shapes"))
     except FileNotFoundError:

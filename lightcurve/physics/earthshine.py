@@ -73,7 +73,7 @@ class Earthshine(Effect):
     description = ("Earthshine: sunlight reflected by the Earth's clouds, land and sea lights up "
                    "the side of the object facing the Earth, making it brighter than sunlight "
                    "alone would, most of all when that side faces the observer.")
-    params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0,
+    params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0, null=0.0,
                         description="multiplier of the albedo map"),)
     options = {"albedo": "builtin", "resolution_deg": 10.0}
     group = "reflection"

@@ -131,6 +131,8 @@ class RunTask:
     scenario_text: str
     scenario_file: str
     options: tuple = ()  # sorted (name, value) pairs of [options]
+    library_dirs: tuple = ()  # extra shape-library folders (absolute paths)
+    site_dirs: tuple = ()     # extra observatory folders (absolute paths)
 
     @property
     def run_id(self) -> str:
@@ -151,6 +153,11 @@ class Study:
     options: dict = field(default_factory=dict)
     source: str = ""
     text: str = ""
+    #: extra shape-library / observatory folders (``lightcurve compare --library/--sites``)
+    library_dirs: tuple = ()
+    site_dirs: tuple = ()
+    #: fingerprints of the shapes resolved from ``library_dirs`` (part of the input hash)
+    shape_fingerprints: dict = field(default_factory=dict)
 
     @property
     def hash(self) -> str:
@@ -190,7 +197,8 @@ class Study:
             txt = self.scenario_texts[(c.dynamics, c.sites)]
             for i in range(n):
                 s, fs = run_seeds(self.seed, c, i)
-                out.append(RunTask(c, i, s, fs, txt, str(f), opts))
+                out.append(RunTask(c, i, s, fs, txt, str(f), opts, self.library_dirs,
+                                   self.site_dirs))
         return out
 
 
@@ -203,6 +211,21 @@ def input_hash(study: Study) -> str:
     for k in sorted(study.scenario_texts):
         h.update(f"\0{k[0]}|{k[1]}\0".encode())
         h.update(study.scenario_texts[k].encode())
+    for k in sorted(study.shape_fingerprints):  # shapes from --library folders (content)
+        h.update(f"\0shape {k[0]}|{k[1]}\0{study.shape_fingerprints[k]}".encode())
+    return h.hexdigest()
+
+
+def shape_fingerprint(shape) -> str:
+    """Hex SHA-256 of a resolved shape's geometry, mass properties and materials."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    for a in (shape.areas_m2, shape.normals_body, shape.centers_body_m, shape.inertia_kg_m2):
+        h.update(np.ascontiguousarray(a, float).tobytes())
+    h.update(repr((shape.name, float(shape.mass_kg),
+                   [(m.name, m.brdf_name, sorted(m.params.items())) for m in shape.materials])
+                  ).encode())
     return h.hexdigest()
 
 
@@ -324,8 +347,12 @@ def _fill_template(template: str, file, **values) -> str:
     return "".join(out)
 
 
-def load_study(path) -> Study:
+def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     """Load and validate a study TOML (module docstring); every scenario file is parsed.
+
+    ``library_dirs`` / ``site_dirs``: extra shape-library and observatory folders for the
+    scenarios (they travel with every run task; with ``library_dirs`` the resolved shapes'
+    content is part of the input hash, so a changed library shape is a changed study).
 
     Reflection models: every value of ``grid.reflection`` is a filter option
     (:data:`REFLECTION_MODELS`); the simulated lightcurves do not depend on it (common random
@@ -379,7 +406,9 @@ def load_study(path) -> Study:
     o.check_unknown()
     root.check_unknown()
 
-    files, texts = {}, {}
+    lib = tuple(str(Path(d).resolve()) for d in (library_dirs or ()))
+    sdirs = tuple(str(Path(d).resolve()) for d in (site_dirs or ()))
+    files, texts, prints = {}, {}, {}
     for dyn in axes["dynamics"]:
         for ns in axes["sites"]:
             rel = _fill_template(template, path, dynamics=dyn, sites=ns)
@@ -391,7 +420,10 @@ def load_study(path) -> Study:
                                  value=str(f), allowed="an existing scenario TOML for every "
                                  "(dynamics, sites) of the grid")
             doc_f, txt = load_toml(f, with_text=True)  # regular file, size cap
-            sc = parse_scenario(doc_f, file=f, text=txt)
+            sc = parse_scenario(doc_f, file=f, text=txt, library_dirs=lib or None,
+                                site_dirs=sdirs or None)
+            if lib:
+                prints[(dyn, ns)] = shape_fingerprint(sc.shape)
             if sc.attitude.dynamics != dyn:
                 raise InputError(f"scenario {f.name} has dynamics {sc.attitude.dynamics!r}, the "
                                  f"grid cell needs {dyn!r}", file=path, field="study.scenario",
@@ -403,5 +435,6 @@ def load_study(path) -> Study:
             texts[(dyn, ns)] = txt
     cells = [Cell(*vals) for vals in itertools.product(*(axes[k] for k in GRID_KEYS))]
     return Study(name=name, seed=seed, runs=runs, cells=cells, scenario_files=files,
-                 scenario_texts=texts, options=opts, source=str(path), text=text)
+                 scenario_texts=texts, options=opts, source=str(path), text=text,
+                 library_dirs=lib, site_dirs=sdirs, shape_fingerprints=prints)
 

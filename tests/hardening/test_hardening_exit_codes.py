@@ -48,7 +48,12 @@ def one_line(err):
      "finite seconds"),
     (lambda t: t.replace('[[sites]]\nname = "socorro"\nwindows_s = [[0.0, 360.0]]\n',
                          '[[sites]]\nname = "socorro"\nwindows_s = [[0.0, 360.0]]\n' * 1000),
-     "the same site as sites[0]"),
+     "two [[sites]] entries with one id"),
+    (lambda t: t.replace('[[sites]]\nname = "socorro"\nwindows_s = [[0.0, 360.0]]\n',
+                         '[[sites]]\nname = "socorro"\nwindows_s = [[0.0, 360.0]]\n'
+                         '[[sites]]\nid = "socorro-again"\nlat_deg = 33.8173\n'
+                         'lon_deg = -106.66\nheight_m = 1500.0\nwindows_s = [[0.0, 360.0]]\n'),
+     "the same place as sites[0]"),
 ])
 def test_scenario_inputs_exit_2(edit, frag, tmp_path, capsys):
     p = _scenario(tmp_path, edit(DEFAULT))
