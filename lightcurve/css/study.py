@@ -270,13 +270,17 @@ def _write_task(out: Path, res: dict):
             if not np.isscalar(v):
                 arrays[f"{k}::{n}"] = v
     path = out / "runs" / f"{res['task_id']}.npz"
-    with atomic_path(path, suffix=".npz") as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    with atomic_path(path, suffix=".npz") as tmp:  # the temporary name ends in .npz
+        np.savez_compressed(tmp, **arrays)
 
 
 def _read_task(path: Path) -> dict:
-    with np.load(path) as z:
+    from ..io.safe_open import open_regular
+
+    # the study's own run file, but in a user-chosen folder: a regular file, size-capped;
+    # NumPy arrays only (no pickle)
+    with open_regular(path, max_bytes=1 << 30, what="run file", track=False) as fh, \
+            np.load(fh, allow_pickle=False) as z:
         meta = json.loads(bytes(z["meta"]).decode())
         cases = {k: dict(v) for k, v in meta["scalars"].items()}
         for name in z.files:

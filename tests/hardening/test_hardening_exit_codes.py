@@ -17,7 +17,8 @@ from lightcurve import InputError
 from lightcurve._paths import data_dir
 from test_hardening_special_files import run_cli
 
-DEFAULT = (data_dir("pipelines") / "default.toml").read_text()
+#: the thesis LEO fast-spin case (Bernard §9.3), the edited base of the scenario cases
+DEFAULT = (data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text()
 
 
 def _scenario(tmp_path, text, name="s.toml"):
@@ -177,7 +178,7 @@ def _default_curve():
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return simulate(parse_scenario(DEFAULT, file="default.toml"))
+        return simulate(parse_scenario(DEFAULT, file="leo-ic1-fast-spin-controlled-1site.toml"))
 
 
 def test_extreme_in_range_magnitudes_keep_the_filters_finite():

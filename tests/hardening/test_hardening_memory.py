@@ -58,7 +58,7 @@ def test_convexity_check_of_a_large_facet_list_is_blocked(monkeypatch):
 
 
 def _scenario_text(duration_s, cadence_s):
-    text = (data_dir("pipelines") / "default.toml").read_text()
+    text = (data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text()
     return (text.replace("duration_s = 360.0", f"duration_s = {duration_s}")
             .replace("cadence_s = 5.0", f"cadence_s = {cadence_s}")
             .replace("windows_s = [[0.0, 360.0]]", f"windows_s = [[0.0, {duration_s}]]"))
@@ -147,6 +147,10 @@ def test_lazy_tasks_equal_the_sorted_task_list(tmp_path):
                                                       'filter = ["ukf", "mekf", "bpf"]')
     (tmp_path / "study.toml").write_text(text.replace("r_percent = [1.0]",
                                                       "r_percent = [1.0, 3.0]"))
-    study = load_study(tmp_path / "study.toml")
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    study = load_study(tmp_path / "study.toml", library_dirs=[extra], site_dirs=[extra])
     ref = sorted(study.tasks(4), key=lambda t: (t.cell.scenario_key, t.run))
-    assert list(study.iter_tasks(4)) == ref
+    lazy = list(study.iter_tasks(4))
+    assert lazy == ref and len(lazy) == 3 * 2 * 4
+    assert all(t.library_dirs == (str(extra.resolve()),) and t.site_dirs for t in lazy)
