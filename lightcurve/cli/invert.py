@@ -128,8 +128,8 @@ def register(sub) -> None:
              "particle filter")
     p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3)")
-    p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
-                   help="1-sigma initial rate error per axis, deg/s (default 0.02)")
+    p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
+                   help="1-sigma initial rate error per axis, deg/s, in (0, 360] (default 0.02)")
     p.add_argument("--initial", choices=("auto", "truth", "given", "global"), default="auto",
                    help="where the filter starts: truth = the file's truth perturbed by "
                    "--sigma-theta-deg/--sigma-omega-deg-s (simulations, Bernard ch. 9); given = "
@@ -152,9 +152,10 @@ def register(sub) -> None:
                    "value is negative")
     add_model_options(p)
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
-    p.add_argument("--roughening", type=number(0.0), default=0.2,
-                   help="BPF roughening constant G (Bernard table 7.9; used with --rejuvenation "
-                   "separate; default 0.2)")
+    p.add_argument("--roughening", type=number(0.0, 10.0), default=0.2,
+                   help="BPF roughening constant G in [0, 10] (Bernard table 7.9: sigma = G E "
+                   "N^(-1/n), E the spread of the cloud; used with --rejuvenation separate; "
+                   "default 0.2)")
     p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic",
                    help="BPF resampling scheme (default systematic)")
     p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
@@ -166,12 +167,18 @@ def register(sub) -> None:
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
     p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",
                    help="controlled model: ACS noise as attitude random walk or jitter")
-    p.add_argument("--pseudo-noise", type=number(0.0), default=0.0,
-                   help="rate pseudo-noise PSD, (rad/s)^2/s (default 0)")
+    p.add_argument("--pseudo-noise", type=number(0.0, 1.0), default=0.0,
+                   help="rate pseudo-noise PSD, (rad/s)^2/s, in [0, 1] (1 already lets the rate "
+                   "wander by 1 rad/s in 1 s; default 0)")
     add_variant(p)
-    p.add_argument("--alpha", type=number(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
-    p.add_argument("--beta", type=number(), default=2.0, help="UKF beta (default 2)")
-    p.add_argument("--kappa", type=number(), default=0.0, help="UKF kappa (default 0)")
+    p.add_argument("--alpha", type=number(1e-4, 1.0), default=1.0,
+                   help="UKF alpha in [1e-4, 1] (Bernard sec. 6: between 0 and 1; below 1e-4 "
+                   "the sigma-point weights lose all precision; default 1)")
+    p.add_argument("--beta", type=number(0.0, 100.0), default=2.0,
+                   help="UKF beta in [0, 100] (Bernard sec. 6: non-negative, 2 for a Gaussian "
+                   "prior; default 2)")
+    p.add_argument("--kappa", type=number(0.0, 100.0), default=0.0,
+                   help="UKF kappa in [0, 100] (Bernard sec. 6: kappa >= 0; default 0)")
     p.add_argument("--reflection", choices=("none", "random-walk", "model1", "model2", "model3"),
                    default="none",
                    help="states for uncertain reflection parameters (Bernard ch. 8): per-site "
@@ -188,7 +195,7 @@ def register(sub) -> None:
     p.add_argument("--reflection-facets", default=None, metavar="LIST",
                    help="model3: comma-separated facet indices (0-based, shape-file order) "
                    "whose parameters are estimated (default: every Cook-Torrance facet)")
-    p.add_argument("--reflection-frac", type=number(0.0, lo_open=True), default=0.1,
+    p.add_argument("--reflection-frac", type=number(0.0, 10.0, lo_open=True), default=0.1,
                    help="relative 1-sigma of the reflection parameters: prior of model3, "
                    "eq. 8.10 bias variance of model1/2 (default 0.1 = Bernard sec. 10.1)")
     p.add_argument("--attitude-known", action="store_true",

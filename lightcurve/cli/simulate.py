@@ -233,7 +233,7 @@ def register(sub) -> None:
     add_seed(p, default=None, help="random seed of the simulation and of the filter's start")
     p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3, Bernard ch. 9)")
-    p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
+    p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
     add_quiet(p, help="print nothing (files are still written)")
     p.set_defaults(func=_cmd_demo)

@@ -432,12 +432,17 @@ def satellite_positions(sat, epoch_utc, t_s):
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T
     if not np.all(np.isfinite(r)):
-        msg = getattr(p, "message", None)
-        msgs = sorted({str(m) for m in np.atleast_1d(np.asarray(msg, dtype=object))
-                       if m is not None}) if msg is not None else []
-        bad = int(np.sum(~np.all(np.isfinite(r), axis=1)))
-        raise InputError(f"SGP4 failed for this element set at {bad} of {r.shape[0]} requested "
-                         f"times: {'; '.join(msgs) or 'no position'}", field="line1/line2")
+        bad = ~np.all(np.isfinite(r), axis=1)
+        msg = getattr(p, "message", None)  # one entry per time, None where SGP4 succeeded
+        if msg is None or isinstance(msg, str):
+            texts = [str(msg)] if msg else []
+        else:
+            texts = sorted({str(m) for m, b in zip(np.atleast_1d(msg), bad) if b and m})
+        k = int(np.argmax(bad))
+        raise InputError(f"SGP4 failed for this TLE at {int(bad.sum())} of {bad.size} requested "
+                         f"time(s), first at index {k}: "
+                         f"{'; '.join(texts)[:300] or 'no position returned'}",
+                         field="line1/line2")
     return np.ascontiguousarray(r), np.ascontiguousarray(v)
 
 
@@ -571,6 +576,13 @@ class Orbit:
         return rv_to_coe(self.r0_m, self.v0_m_s)
 
 
+#: largest orbit size accepted (semi-major axis, or a position component), km: the radius of
+#: the Earth's Hill sphere, a (m_E / 3 M_S)^(1/3) = 1.496e8 km x (3.0e-6 / 3)^(1/3) ~ 1.5e6 km,
+#: beyond which the Sun, not the Earth, dominates the motion (and the two-body propagation
+#: here is meaningless); velocity components at most 100 km/s (Earth escape at LEO ~ 11 km/s)
+MAX_ORBIT_RADIUS_KM = 1.5e6
+
+
 def orbit_from_section(section) -> Orbit:
     """Parse a scenario's ``[orbit]`` table (a :class:`~lightcurve.io.tomlio.Section`).
 
@@ -592,7 +604,7 @@ def orbit_from_section(section) -> Orbit:
     gravity = sec.str("gravity", "J4", choices=tuple(_GRAVITY))
     f = sec.field_name
     if kind == "keplerian":
-        a_km = sec.float("a_km", min=0.0, min_open=True)
+        a_km = sec.float("a_km", min=0.0, min_open=True, max=MAX_ORBIT_RADIUS_KM)
         e = sec.float("e", min=0.0, max=1.0, max_open=True)
         i = sec.float("i_deg", min=0.0, max=180.0)
         raan = sec.float("raan_deg", 0.0)
@@ -608,8 +620,8 @@ def orbit_from_section(section) -> Orbit:
         r, v = coe_to_rv(a_km * 1e3, e, *np.radians([i, raan, argp, nu]))
         return Orbit("keplerian", gravity, r, v)
     if kind == "cartesian":
-        r = sec.vector("r_km", n=3) * 1e3
-        v = sec.vector("v_km_s", n=3) * 1e3
+        r = sec.vector("r_km", n=3, min=-MAX_ORBIT_RADIUS_KM, max=MAX_ORBIT_RADIUS_KM) * 1e3
+        v = sec.vector("v_km_s", n=3, min=-100.0, max=100.0) * 1e3
         sec.check_unknown()
         if np.linalg.norm(r) <= R_EARTH_M:
             raise InputError("position is inside the Earth", file=sec.file, field=f("r_km"),

@@ -144,7 +144,11 @@ def parse_epoch(epoch_utc) -> datetime:
                          field="epoch_utc", value=epoch_utc)
     if dt.tzinfo is None:
         dt = dt.replace(tzinfo=timezone.utc)
-    dt = dt.astimezone(timezone.utc)
+    try:
+        dt = dt.astimezone(timezone.utc)
+    except (OverflowError, ValueError):  # e.g. 0001-01-01T00:00:00+01:00 is before year 1 UTC
+        raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
+                         value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC") from None
     if not (DE421_START_UTC <= dt <= DE421_END_UTC):
         raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
                          value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC")

@@ -87,7 +87,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .lightcurve_h5 import Lightcurve
+from .lightcurve_h5 import MAG_RANGE, Lightcurve
 from .safe_open import CSV_MAX_BYTES, read_text
 from .tomlio import Section
 
@@ -481,8 +481,9 @@ def _parse_rows(path, rows, header, ci, colname, spec: RecordingSpec, default_si
             m = float(ms)
         except ValueError:
             raise bad("mag", "not a number") from None
-        if not math.isfinite(m) or not (-30.0 < m < 40.0):
-            raise bad("mag", "magnitude out of range", "(-30, 40), or empty/nan to skip the row")
+        if not math.isfinite(m) or not (MAG_RANGE[0] < m < MAG_RANGE[1]):
+            raise bad("mag", "magnitude out of range",
+                      f"({MAG_RANGE[0]:g}, {MAG_RANGE[1]:g}), or empty/nan to skip the row")
         expo = float("nan")
         if ci["exposure_start"] is not None:
             t0, t1 = when("exposure_start"), when("exposure_end")

@@ -26,14 +26,23 @@ def facets_convex(normals, centers, tol_m: float = 1e-9) -> bool:
     which no facet can occlude or shadow another for a closed convex polyhedron. For an
     open facet list (e.g. a two-plate satellite) it is the centre-point approximation of
     the same condition.
+
+    Evaluated in blocks of rows (at most about 4·10⁶ pairs, 96 MB, at a time) so that the
+    F×F×3 differences of a large mesh are never held at once; stops at the first violation.
     """
     n = np.asarray(normals, float)
     c = np.asarray(centers, float)
-    if n.shape[0] < 2:
+    F = n.shape[0]
+    if F < 2:
         return True
-    d = np.einsum("ik,ijk->ij", n, c[None, :, :] - c[:, None, :])
-    np.fill_diagonal(d, -np.inf)
-    return bool(np.all(d <= tol_m))
+    rows = max(1, 4_000_000 // F)
+    for i0 in range(0, F, rows):
+        i1 = min(F, i0 + rows)
+        d = np.einsum("ik,ijk->ij", n[i0:i1], c[None, :, :] - c[i0:i1, None, :])
+        d[np.arange(i1 - i0), np.arange(i0, i1)] = -np.inf
+        if not np.all(d <= tol_m):
+            return False
+    return True
 
 
 class Shape:

@@ -290,6 +290,21 @@ def _get(probs, fn, fallback):
         return fallback
 
 
+#: largest inertia element accepted, kg·m² (the ISS, the heaviest spacecraft, has principal
+#: moments of order 10⁸ kg·m²; four orders of margin; values near 1e308 overflow the
+#: eigen-decomposition and the Euler equations)
+MAX_INERTIA_KG_M2 = 1e12
+
+
+def check_inertia_magnitude(J, file, field) -> None:
+    """InputError when an inertia element exceeds :data:`MAX_INERTIA_KG_M2` in magnitude."""
+    J = np.asarray(J, float)
+    if not np.all(np.abs(J) <= MAX_INERTIA_KG_M2):
+        raise InputError("inertia element too large", file=file, field=field,
+                         value=float(np.max(np.abs(J))),
+                         allowed=f"|I_ij| <= {MAX_INERTIA_KG_M2:g} kg m^2")
+
+
 def _inertia(sh: Section, file, mesh_inertia):
     if sh.has("inertia_kg_m2") and sh.has("inertia_diag_kg_m2"):
         raise InputError("give either inertia_kg_m2 or inertia_diag_kg_m2, not both", file=file,
@@ -305,6 +320,7 @@ def _inertia(sh: Section, file, mesh_inertia):
     else:
         raise InputError("missing inertia (inertia_kg_m2 or inertia_diag_kg_m2; computed "
                          "automatically only for watertight meshes)", file=file, field="shape.inertia_kg_m2")
+    check_inertia_magnitude(J, file, fld)
     if not np.allclose(J, J.T, rtol=1e-9, atol=1e-12 * max(1.0, np.abs(J).max())):
         raise InputError("inertia matrix is not symmetric", file=file, field=fld, value=J.tolist())
     ev = np.linalg.eigvalsh(J)

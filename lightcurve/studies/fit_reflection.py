@@ -540,6 +540,12 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     InputError — bad inputs (no truth attitude, mismatched estimate, unknown facet…).
     """
     from ..estimation.mcmc import sample_until_converged
+    from ..memory import check_allocation
+
+    if walkers is not None:  # a first, lower-bound estimate (one parameter) before any work
+        check_allocation(8 * int(walkers) * int(max_steps) * 2,
+                         f"MCMC with {int(walkers)} walkers, {int(max_steps)} steps",
+                         field="walkers", value=int(walkers))
 
     own_shape = shape is None or shape == (curve.attrs or {}).get("shape")
     shape = curve.resolve_shape(shape, library_dirs=library_dirs)
@@ -579,6 +585,12 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     D = model.dim
     W = walkers if walkers is not None else max(2 * D + 2, 32)
     W = int(W) + (int(W) % 2)
+    # the stored chain (positions and log-probabilities of every walker at every step) and
+    # one ensemble evaluation (walkers x epochs x facets, a few temporaries)
+    check_allocation(8 * W * int(max_steps) * (D + 1)
+                     + 8 * 4 * W * len(curve) * max(1, int(getattr(shape, "n_facets", 1))),
+                     f"MCMC with {W} walkers, {int(max_steps)} steps, {D} parameters",
+                     field="walkers", value=W)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xEC3E]))
     z_map = model.map_estimate()
     # walkers start from the Laplace approximation at the MAP (a tiny ball would make the

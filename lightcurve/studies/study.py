@@ -173,42 +173,32 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
-    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
-        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
-        in execution order: scenario keys sorted, then run index, then the cells sharing that
-        scenario key in grid order — runs that share a simulated lightcurve (common random
-        numbers) come back to back. The same set as :meth:`tasks`."""
+    def _task(self, c: Cell, i: int, opts: tuple) -> "RunTask":
+        s, fs = run_seeds(self.seed, c, i)
+        return RunTask(c, i, s, fs, self.scenario_texts[(c.dynamics, c.sites)],
+                       str(self.scenario_files[(c.dynamics, c.sites)]), opts,
+                       self.library_dirs, self.site_dirs)
+
+    def iter_tasks(self, runs: int | None = None):
+        """Every :class:`RunTask`, generated lazily in execution order: scenario keys sorted,
+        then run index, then the cells sharing that scenario key in grid order — runs that
+        share a simulated lightcurve (common random numbers) come back to back. The same set
+        as :meth:`tasks`."""
         n = self.runs if runs is None else int(runs)
         opts = tuple(sorted(self.options.items()))
         groups: dict = {}
         for c in self.cells:
             groups.setdefault(c.scenario_key, []).append(c)
         for key in sorted(groups):
-            cells = groups[key]
-            tags = [c.tag for c in cells]
             for i in range(n):
-                for c, tag in zip(cells, tags):
-                    if ids_only:
-                        yield f"{tag}_r{i:05d}"
-                        continue
-                    f = self.scenario_files[(c.dynamics, c.sites)]
-                    txt = self.scenario_texts[(c.dynamics, c.sites)]
-                    s, fs = run_seeds(self.seed, c, i)
-                    yield RunTask(c, i, s, fs, txt, str(f), opts)
+                for c in groups[key]:
+                    yield self._task(c, i, opts)
 
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
         opts = tuple(sorted(self.options.items()))
-        out = []
-        for c in self.cells:
-            f = self.scenario_files[(c.dynamics, c.sites)]
-            txt = self.scenario_texts[(c.dynamics, c.sites)]
-            for i in range(n):
-                s, fs = run_seeds(self.seed, c, i)
-                out.append(RunTask(c, i, s, fs, txt, str(f), opts, self.library_dirs,
-                                   self.site_dirs))
-        return out
+        return [self._task(c, i, opts) for c in self.cells for i in range(n)]
 
 
 def input_hash(study: Study) -> str:
@@ -405,6 +395,12 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     o = root.section("options", {})
     if o.has("particles"):
         opts["particles"] = o.int("particles", min=2, max=10_000_000)
+        from ..filters.invert import BPF_BYTES_PER_PARTICLE
+        from ..memory import check_allocation
+
+        check_allocation(opts["particles"] * BPF_BYTES_PER_PARTICLE,
+                         f"particle filter with {opts['particles']} particles (per worker)",
+                         file=path, field="options.particles", value=opts["particles"])
     if o.has("acs_mode"):
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
     o.check_unknown()
