@@ -15,6 +15,7 @@ is refused (exit 2).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import traceback
@@ -141,7 +142,7 @@ def main(argv=None) -> int:
     from ..process import Terminated, exit_code, handle_termination
 
     try:
-        with handle_termination(), track_inputs():
+        with handle_termination(), track_inputs(), _one_line_warnings():
             from ..plugins import load_plugin
 
             for spec in args.plugin:
@@ -172,6 +173,25 @@ def main(argv=None) -> int:
         hint = "" if args.debug else " (run with --debug for details)"
         print(f"lightcurve: failed: {type(exc).__name__}: {_one_line(exc)}{hint}", file=sys.stderr)
         return 1
+
+
+#: NumPy's floating-point chatter (results carry their own NaN/flag checks)
+_NUMPY_FP = r"(invalid value|divide by zero|overflow|underflow) encountered|Mean of empty slice"
+
+
+@contextlib.contextmanager
+def _one_line_warnings():
+    """Warnings of a command as one ``lightcurve: warning: ...`` line each (no source line,
+    no file path of the package); NumPy floating-point chatter is not shown."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"lightcurve: warning: {_one_line(message)}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=_NUMPY_FP, category=RuntimeWarning)
+        warnings.showwarning = show
+        yield
 
 
 def _one_line(exc: BaseException, limit: int = 2000) -> str:

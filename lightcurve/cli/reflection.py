@@ -6,8 +6,8 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_ints, csv_list, number,
-                    output_not_input, refuse_inapplicable)
+from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_ints, csv_list,
+                    naming_file, number, output_not_input, refuse_inapplicable)
 
 __all__ = ["register"]
 
@@ -17,7 +17,8 @@ def _cmd_fit_reflection(args) -> int:
 
     from ..io.lightcurve_h5 import read_lightcurve
     from ..io.paths import safe_output_path
-    from ..studies.fit_reflection import ConvergenceError, fit_reflection
+    from ..errors import ConvergenceError
+    from ..studies.fit_reflection import fit_reflection
 
     refuse_inapplicable(args, "attitude", {"estimate": {"estimate"}})
     if args.attitude == "estimate" and not args.estimate:
@@ -34,11 +35,13 @@ def _cmd_fit_reflection(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(args.file).stem
     try:
-        fit = fit_reflection(curve, shape=args.shape, attitude=args.attitude,
-                             estimate=args.estimate, facets=facets, kinds=kinds,
-                             prior_frac=args.prior_frac, walkers=args.walkers, seed=args.seed,
-                             max_steps=args.max_steps, tau_factor=args.tau_factor,
-                             progress=say, library_dirs=args.library)
+        with naming_file(args.file):
+            fit = fit_reflection(curve, shape=args.shape, attitude=args.attitude,
+                                 estimate=args.estimate, facets=facets, kinds=kinds,
+                                 prior_frac=args.prior_frac, walkers=args.walkers,
+                                 seed=args.seed, max_steps=args.max_steps,
+                                 tau_factor=args.tau_factor, progress=say,
+                                 library_dirs=args.library)
     except ConvergenceError as exc:
         from ..io.atomic import atomic_write_text
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import rotations as rot
+from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..report.views import EstimateViews
 
@@ -346,7 +347,6 @@ def read_estimate(path) -> Estimate:
     checked before reading)."""
     import json
 
-    from ..errors import InputError
     from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)

@@ -104,8 +104,11 @@ def execute_invert_task(task: InvertTask) -> dict:
             warnings.simplefilter("ignore", RuntimeWarning)
             res["estimate"] = invert(curve, task.method, **dict(task.options))
         res["estimate"].source_file = str(task.file)
-    except InputError as exc:
-        res.update(status="failed", error=str(exc), error_kind="input")
+    except InputError as exc:  # the message always names the input file
+        text = str(exc)
+        if task.file not in text:
+            text = f"{task.file}: {text}"
+        res.update(status="failed", error=text, error_kind="input")
     except Exception as exc:  # noqa: BLE001 - one failing file must not stop the batch
         res.update(status="failed", error=f"{type(exc).__name__}: {exc}", error_kind="runtime",
                    traceback=traceback.format_exc(limit=8))
