@@ -54,8 +54,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.constants import AU_M
 from ..errors import InputError
-from ..geometry.time import AU_M
 
 __all__ = ["PeriodResult", "analyse_period", "reduced_magnitude", "pab_rate_rad_s",
            "INDISTINGUISHABLE_DBIC", "MAX_FREQUENCIES"]

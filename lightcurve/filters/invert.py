@@ -21,14 +21,23 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rotations as rot
+from ..acquisition.global_init import global_initialise
 from ..errors import InputError
 from ..io.lightcurve_h5 import Lightcurve
 from ..io.tomlio import Section, loads_toml
 from ..studies.scenario import scenario_from_lightcurve
 from . import bpf as _bpf
 from ._common import FilterProblem
-from .config import (ATTITUDE_MODES, BPF_KEYWORDS, INITIAL_MODES, METHOD_NAMES, ConfigBase,
-                     ProblemConfig, filter_config_class, split_options)
+from .config import (
+    ATTITUDE_MODES,
+    BPF_KEYWORDS,
+    INITIAL_MODES,
+    METHOD_NAMES,
+    ConfigBase,
+    ProblemConfig,
+    filter_config_class,
+    split_options,
+)
 from .facet_states import FacetParameterStates
 from .gating import set_gate
 from .mekf import run_mekf
@@ -320,8 +329,6 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     if initial_mode(pcfg.initial, curve, pcfg.initial_q, pcfg.initial_omega) == "global":
         # no first guess: the global initialisation (a layer below the filters: it gets the
         # model and a runner of this filter, and imports nothing from here)
-        from ..acquisition.global_init import global_initialise
-
         start = pcfg.replace(initial="given", initial_q=(1.0, 0.0, 0.0, 0.0),
                              initial_omega=(0.0, 0.0, 0.0), global_config=None)
 
