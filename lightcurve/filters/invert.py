@@ -21,14 +21,23 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rotations as rot
+from ..acquisition.global_init import global_initialise
 from ..errors import InputError
 from ..io.lightcurve_h5 import Lightcurve
 from ..io.tomlio import Section, loads_toml
 from ..studies.scenario import scenario_from_lightcurve
 from . import bpf as _bpf
 from ._common import FilterProblem
-from .config import (ATTITUDE_MODES, BPF_KEYWORDS, INITIAL_MODES, METHOD_NAMES, ConfigBase,
-                     ProblemConfig, filter_config_class, split_options)
+from .config import (
+    ATTITUDE_MODES,
+    BPF_KEYWORDS,
+    INITIAL_MODES,
+    METHOD_NAMES,
+    ConfigBase,
+    ProblemConfig,
+    filter_config_class,
+    split_options,
+)
 from .facet_states import FacetParameterStates
 from .gating import set_gate
 from .mekf import run_mekf
@@ -318,19 +327,21 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
         check_allocation(n_p * (BPF_BYTES_PER_PARTICLE + 8 * 7 * len(tuple(bo["keep_clouds"]))),
                          f"particle filter with {n_p} particles", field="particles", value=n_p)
     if initial_mode(pcfg.initial, curve, pcfg.initial_q, pcfg.initial_omega) == "global":
-        start = ("seed", "sigma_theta_deg", "sigma_omega_deg_s", "initial_q", "initial_omega",
-                 "shape", "dynamics", "library_dirs", "site_dirs", "global_config", "initial")
-        handover = {k: v for k, v in pcfg.as_options().items() if k not in start}
-        handover.update(fconf.as_options() if fconf is not None else filt_opts)
-        handover["initial"] = "given"
-        # the global initialisation drives this filter (acquisition sits above filters):
-        # imported here, when it is asked for
-        from ..acquisition.global_init import global_initialise
+        # no first guess: the global initialisation (a layer below the filters: it gets the
+        # model and a runner of this filter, and imports nothing from here)
+        start = pcfg.replace(initial="given", initial_q=(1.0, 0.0, 0.0, 0.0),
+                             initial_omega=(0.0, 0.0, 0.0), global_config=None)
 
-        return global_initialise(curve, method, seed=pcfg.seed, config=pcfg.global_config,
-                                 shape=pcfg.shape, dynamics=pcfg.dynamics,
-                                 filter_kwargs=handover, library_dirs=pcfg.library_dirs,
-                                 site_dirs=pcfg.site_dirs).best
+        def run_from(q0, w0, sigma_theta_deg, sigma_omega_deg_s):
+            p = start.replace(initial_q=tuple(float(x) for x in q0),
+                              initial_omega=tuple(float(x) for x in w0),
+                              sigma_theta_deg=float(sigma_theta_deg),
+                              sigma_omega_deg_s=float(sigma_omega_deg_s))
+            return invert(curve, fconf if fconf is not None else method, problem=p,
+                          **({} if fconf is not None else filt_opts))
+
+        return global_initialise(curve, build_problem(curve, start), run_from, seed=pcfg.seed,
+                                 config=pcfg.global_config).best
     fp = build_problem(curve, pcfg)
     fp.meta["method"] = method
     if fconf is not None:
