@@ -109,33 +109,6 @@ def _check_curve(curve):
                          allowed="> 0")
 
 
-def _check_curve(curve):
-    if not isinstance(curve, Lightcurve):
-        raise InputError("invert needs a lightcurve.io.Lightcurve", field="curve",
-                         value=type(curve).__name__)
-    n = len(curve)
-    t = np.asarray(curve.t, float)
-    for name in ("mag", "mag_sigma"):
-        v = np.asarray(getattr(curve, name))
-        if v.shape != (n,):
-            raise InputError("inconsistent shapes", field=name, value=v.shape, allowed=f"({n},)")
-    for name in ("r_obj_eci_m", "r_site_eci_m", "r_sun_eci_m"):
-        v = np.asarray(getattr(curve, name))
-        if v.shape != (n, 3):
-            raise InputError("inconsistent shapes", field=name, value=v.shape,
-                             allowed=f"({n}, 3)")
-    if n == 0 or not np.any(np.isfinite(curve.mag)):
-        raise InputError("the lightcurve has no visible (finite) magnitude to filter",
-                         field="mag", value=f"{n} rows, 0 finite")
-    if np.any(np.diff(t) < 0):
-        raise InputError("times must be non-decreasing", field="t")
-    fin = np.isfinite(curve.mag)
-    sig = np.asarray(curve.mag_sigma, float)
-    if np.any(~(sig[fin] > 0)):
-        raise InputError("mag_sigma must be > 0 where a magnitude is given", field="mag_sigma",
-                         allowed="> 0")
-
-
 def build_problem(curve, config: ProblemConfig | None = None, **options) -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
