@@ -221,7 +221,7 @@ def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
     return initial
 
 
-def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
+def invert(curve, config="mekf", *, problem: ProblemConfig | None = None, method=None,
            **options) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
@@ -234,6 +234,9 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
         A method name takes the default settings of that filter.
     problem : :class:`~lightcurve.filters.config.ProblemConfig`, optional
         Initial estimate, dynamics, reflection states, gate (default settings).
+    method : "mekf" | "ukf" | "bpf", optional
+        The keyword spelling of a method name (``invert(lc, method="ukf")``), in place of
+        ``config``.
     **options :
         Any field of :class:`~lightcurve.filters.config.ProblemConfig` or of the filter's
         configuration, by name — the keyword form of the call, e.g.
@@ -259,6 +262,11 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     -------
     Estimate
     """
+    if method is not None:
+        if not (isinstance(config, str) and config == "mekf") and config != method:
+            raise InputError("give the filter either as config or as method, not both",
+                             field="method", value=method)
+        config = method
     if isinstance(config, str):
         method, fconf = config, None
     elif isinstance(config, ConfigBase) and hasattr(type(config), "method"):
