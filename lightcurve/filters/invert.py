@@ -121,33 +121,6 @@ def _check_curve(curve):
                          allowed="> 0")
 
 
-def _check_curve(curve):
-    if not isinstance(curve, Lightcurve):
-        raise InputError("invert needs a lightcurve.io.Lightcurve", field="curve",
-                         value=type(curve).__name__)
-    n = len(curve)
-    t = np.asarray(curve.t, float)
-    for name in ("mag", "mag_sigma"):
-        v = np.asarray(getattr(curve, name))
-        if v.shape != (n,):
-            raise InputError("inconsistent shapes", field=name, value=v.shape, allowed=f"({n},)")
-    for name in ("r_obj_eci_m", "r_site_eci_m", "r_sun_eci_m"):
-        v = np.asarray(getattr(curve, name))
-        if v.shape != (n, 3):
-            raise InputError("inconsistent shapes", field=name, value=v.shape,
-                             allowed=f"({n}, 3)")
-    if n == 0 or not np.any(np.isfinite(curve.mag)):
-        raise InputError("the lightcurve has no visible (finite) magnitude to filter",
-                         field="mag", value=f"{n} rows, 0 finite")
-    if np.any(np.diff(t) < 0):
-        raise InputError("times must be non-decreasing", field="t")
-    fin = np.isfinite(curve.mag)
-    sig = np.asarray(curve.mag_sigma, float)
-    if np.any(~(sig[fin] > 0)):
-        raise InputError("mag_sigma must be > 0 where a magnitude is given", field="mag_sigma",
-                         allowed="> 0")
-
-
 def build_problem(curve, config: ProblemConfig | None = None, **options) -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
@@ -260,7 +233,7 @@ def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
     return initial
 
 
-def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
+def invert(curve, config="mekf", *, problem: ProblemConfig | None = None, method=None,
            **options) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
@@ -273,6 +246,9 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
         A method name takes the default settings of that filter.
     problem : :class:`~lightcurve.filters.config.ProblemConfig`, optional
         Initial estimate, dynamics, reflection states, gate (default settings).
+    method : "mekf" | "ukf" | "bpf", optional
+        The keyword spelling of a method name (``invert(lc, method="ukf")``), in place of
+        ``config``.
     **options :
         Any field of :class:`~lightcurve.filters.config.ProblemConfig` or of the filter's
         configuration, by name — the keyword form of the call, e.g.
@@ -298,6 +274,11 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     -------
     Estimate
     """
+    if method is not None:
+        if not (isinstance(config, str) and config == "mekf") and config != method:
+            raise InputError("give the filter either as config or as method, not both",
+                             field="method", value=method)
+        config = method
     if isinstance(config, str):
         method, fconf = config, None
     elif isinstance(config, ConfigBase) and hasattr(type(config), "method"):
