@@ -254,7 +254,8 @@ OPEN_CHOICES = {
     "gyro_frame": "[GB] = I and no gyro scale-factor or misalignment errors (Table 2.3 gives none)",
     "gyro_bias": ("§2.3.2: ω_β = ω_r + ω_d; ω_r ~ N(0, σ_ωr²) per axis constant, ω_d a random "
                   "walk from zero (eq. 2.50)"),
-    "strong_sigma": "§3.2.1.2 'increased measurement uncertainty': σ_V doubled",
+    "strong_sigma": ("§3.2.1.2 'increased measurement uncertainty': EKF σ_V doubled; ECKF the "
+                     "eq. 3.63 maximum error over the whole FOV, |d̂|(1 + σ_Vα + σ_V)"),
     "ekf_init": ("§3.2 does not give the initial estimate: d̂₀ = WAVG direction scaled by the "
                  "largest output, P₀ = I, at the first sample with an output above the shadow "
                  "level"),
