@@ -270,4 +270,16 @@ OPEN_CHOICES = {
     "wheel_distribution": "G_s u_s → u_s by the minimum-norm pseudo-inverse, clipped at 30 mN m",
     "eckf_update": ("§3.2.2.2: the traditional consider update (eq. 3.52) in the sun-line "
                     "ECKF"),
+    "filter_horizon": ("the sun-line and calibration filters' visibility model includes the dual "
+                       "pyramid's structure horizon (§3.2.3 treats it as a second measurement "
+                       "discontinuity; eq. 3.31c/4.27 print the FOV only)"),
+    "star_tracker": "§4.1-4.2 leave its rate and accuracy open: every 10 s, 0.02° per axis",
+    "calibration_random_walk": "eq. 4.14 η_C: left open; zero (constant over one orbit, §4.2)",
+    "calibration_consider": ("eq. 4.28/4.36 considered Earth-Sun and position biases: not carried "
+                             "(their effect, ≤ 0.24° of Sun direction (table 4.5), is below "
+                             "σ_V); the reduced filter's albedo bias σ = 0.1 (§3.2.3's value)"),
+    "calibration_update": ("§4.2 cites §3.2.2.1, which ends with eq. 3.54; we use the traditional "
+                           "consider update (eq. 3.52), as §3.2.2.2 does"),
+    "calibration_scale": ("§4.4 'scale factors are distributed by 30%': each sensor's total factor "
+                          "N(1, 0.3²), no common error (the filter estimates the total)"),
 }
