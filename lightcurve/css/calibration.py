@@ -171,6 +171,17 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
 
 
 @numba.njit(cache=True)
+def _gather_rows(idx, m, H, y, h):
+    """Rows ``idx[:m]`` of the Jacobian and their innovations y − h."""
+    Hm = np.empty((m, H.shape[1]))
+    nu = np.empty(m)
+    for i in range(m):
+        Hm[i] = H[idx[i]]
+        nu[i] = y[idx[i]] - h[idx[i]]
+    return Hm, nu
+
+
+@numba.njit(cache=True)
 def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E,
                    cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
                    nu_out, s_out, u_out, cells_sig, init):
@@ -211,13 +222,10 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
         m += 1
     if m == 0:
         return 0, np.nan, 1.0
-    Hm = np.empty((m, n))
-    nu = np.empty(m)
+    Hm, nu = _gather_rows(idx, m, H, y, h)
     R = np.zeros((m, m))
     for i in range(m):
         k = idx[i]
-        Hm[i] = H[k]
-        nu[i] = y[k] - h[k]
         gk = x[6 + k]
         for j in range(m):
             R[i, j] = gk * x[6 + idx[j]] * Ra[k, idx[j]]
@@ -328,14 +336,10 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
                     m += 1
     if m == 0:
         return 0, np.nan, 1.0
-    Hm = np.empty((m, n))
-    nu = np.empty(m)
+    Hm, nu = _gather_rows(idx, m, H, y, h)
     R = np.zeros((m, m))
     for i in range(m):
-        k = idx[i]
-        Hm[i] = H[k]
-        nu[i] = y[k] - h[k]
-        R[i, i] = Rk[k]
+        R[i, i] = Rk[idx[i]]
     cons = np.zeros(n, dtype=np.bool_)
     for i in range(6 + 3 * N, n):
         cons[i] = True
