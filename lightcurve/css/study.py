@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_path, atomic_write_text
+from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
 from ..io.tomlio import Section, load_toml
 from . import okeefe2015 as ok
 from .truth import ESTIMATORS, MU_EARTH, R_EARTH_M, VARIANTS
@@ -270,13 +270,17 @@ def _write_task(out: Path, res: dict):
             if not np.isscalar(v):
                 arrays[f"{k}::{n}"] = v
     path = out / "runs" / f"{res['task_id']}.npz"
-    with atomic_path(path, suffix=".npz") as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    with atomic_path(path, suffix=".npz") as tmp:  # the temporary name ends in .npz
+        np.savez_compressed(tmp, **arrays)
 
 
 def _read_task(path: Path) -> dict:
-    with np.load(path) as z:
+    from ..io.safe_open import open_regular
+
+    # the study's own run file, but in a user-chosen folder: a regular file, size-capped;
+    # NumPy arrays only (no pickle)
+    with open_regular(path, max_bytes=1 << 30, what="run file", track=False) as fh, \
+            np.load(fh, allow_pickle=False) as z:
         meta = json.loads(bytes(z["meta"]).decode())
         cases = {k: dict(v) for k, v in meta["scalars"].items()}
         for name in z.files:
@@ -288,11 +292,15 @@ def _read_task(path: Path) -> dict:
 
 
 def _prepare(out: Path, spec: StudySpec, force: bool):
+    from ..io.safe_open import read_text
+
     meta = out / "study.json"
-    if meta.exists():
+    if meta.exists() or meta.is_symlink():
+        # the folder's own state file, in a user-chosen folder: a regular file only
+        text = read_text(meta, max_bytes=256 * 1024 * 1024, what="study.json", track=False)
         try:
-            old = json.loads(meta.read_text()).get("study_hash")
-        except (OSError, ValueError):
+            old = json.loads(text).get("study_hash")
+        except (ValueError, AttributeError):
             old = None
         if old != spec.hash:
             if not force:
@@ -306,8 +314,8 @@ def _prepare(out: Path, spec: StudySpec, force: bool):
             for f in ("summary.json", "report.html"):
                 (out / f).unlink(missing_ok=True)
     (out / "runs").mkdir(parents=True, exist_ok=True)
-    for stale in (out / "runs").glob(".*"):
-        stale.unlink(missing_ok=True)
+    # temporary files of killed runs (never a live writer's: lightcurve.io.atomic)
+    clean_stale_temp(out / "runs")
     atomic_write_text(meta, json.dumps({"format": "lightcurve-css-study", "format_version": 1,
                                         "study_hash": spec.hash, "name": spec.name,
                                         "study_toml": spec.text, "source": spec.source},
@@ -318,13 +326,22 @@ def run_study(spec: StudySpec, out_dir, *, runs=None, workers=None, scheduler=No
               dask_local=None, force=False, progress=True) -> dict:
     """Run (or resume) a study into ``out_dir`` and write ``summary.json`` and
     ``report.html``; returns the summary.  Executors as :func:`lightcurve.studies.runner.
-    iter_results` (``workers`` default: the number of cores)."""
-    from ..studies.runner import iter_results, limit_blas_threads, progress_bar
+    iter_results` (``workers`` default: the number of cores). The folder is locked while
+    the study runs (:mod:`lightcurve.io.locks`)."""
+    from ..io.locks import folder_lock
 
     out = Path(out_dir)
     n = spec.runs if runs is None else int(runs)
     if n < 1:
         raise InputError("runs must be >= 1", field="runs", value=n, allowed=">= 1")
+    with folder_lock(out, what="study folder"):
+        return _run_locked(spec, out, n, workers, scheduler, dask_local, force, progress)
+
+
+def _run_locked(spec, out, n, workers, scheduler, dask_local, force, progress) -> dict:
+    """:func:`run_study` while holding the folder's lock."""
+    from ..studies.runner import iter_results, limit_blas_threads, progress_bar
+
     _prepare(out, spec, force)
     tasks = study_tasks(spec, n)
     done = {p.stem for p in (out / "runs").glob("*.npz")}
@@ -564,7 +581,7 @@ def load_study(path) -> StudySpec:
     sc = doc.section("scenario")
     spec = StudySpec(
         name=st.str("name", "css-study"), experiment=st.str("experiment", ""),
-        runs=st.int("runs", 100, min=1, max=100000), seed=st.int("seed", 1, min=0),
+        runs=st.int("runs", 100, min=1, max=100000), seed=st.int("seed", 1, min=0, max=2**63 - 1),
         settle_s=st.float("settle_s", 300.0, min=0.0))
     st.check_unknown()
     if spec.experiment and spec.experiment not in ok.THESIS_RESULTS:

@@ -65,7 +65,8 @@ def _refresh_numba_cache_stamp():
 
     here = Path(__file__)
     deps = ("sunline_thesis.py", "sunline_ekf.py", "albedo.py", "control.py", "gyro.py",
-            "single_point.py", "_linalg.py", "../rotations.py", "../estimation/kalman.py")
+            "single_point.py", "_linalg.py", "../rotations.py", "../estimation/kalman.py",
+            "../earth/albedo.py", "../core/rotations.py", "../core/kalman.py")
     try:
         newest = max((here.parent / d).stat().st_mtime for d in deps if (here.parent / d).exists())
         if newest > here.stat().st_mtime:
