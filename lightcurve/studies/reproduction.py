@@ -48,7 +48,10 @@ def _load(dirs):
     for d in dirs:
         p = Path(d) / "summary.json"
         s = json.loads(p.read_text(encoding="utf-8"))
-        out[s.get("experiment") or Path(d).name] = s
+        key = s.get("experiment") or Path(d).name
+        if key in out or str(s.get("study", "")).startswith("ablation"):
+            key = s.get("study") or Path(d).name   # an ablation of an experiment: by its name
+        out[key] = s
     return out
 
 
@@ -242,6 +245,16 @@ def css_section(study_dirs, *, timing=None, tables4=None) -> str:
                   f"{s['failures']} failed runs.  Verdict: {v}", ""]
         lines += _table(s)
         lines.append("")
+    extra = [k for k in studies if k not in _EXPERIMENT_TITLE]
+    if extra:
+        lines += ["### Ablations", "", "Studies that switch one error source of an experiment "
+                  "off (their [simulation]/[scenario] differences are in their study.json).", ""]
+        for k in extra:
+            s = studies[k]
+            lines += [f"#### {k}", "", f"{s['runs']} runs per case, truth albedo `{s['albedo']}`.",
+                      ""]
+            lines += _table(s)
+            lines.append("")
     lines += _timing_section(timing)
     lines += _tables4_section(tables4)
     lines += ["### Tables 4.4, 4.5, 5.1–5.2 and fig. 5.5", "",
