@@ -3,8 +3,8 @@
 Prints ONE JSON line. Three parts (all truth shapes perturbed by 10 % per parameter, §10.1,
 the filters using the nominal shape):
 
-1. ``geo_model1`` — nadir GEO IC2 (pipelines/thesis/geo-ic2-nadir-controlled-1site.toml, our
-   ASSUMED GEO case) with Model 1 site biases (fig. 10.3): innovation χ²/dof w.r.t. the
+1. ``geo_model1`` — nadir GEO IC2 of ch. 10 (pipelines/thesis/geo-ch10-ic2-nadir-controlled-1site
+   .toml, Bernard §9.3.5 and §10.1) with Model 1 site biases (fig. 10.3): innovation χ²/dof w.r.t. the
    measurement noise alone (ν²/σ²), NIS (ν²/S), and post-fit residuals
    ``y − m(q̂) − b̂`` RMS / σ, attitude known and attitude estimated.
 2. ``sec10_7`` — LEO IC1 fast spin, controlled, 1 site (eclipse ignored as in the thesis),
@@ -17,8 +17,8 @@ the filters using the nominal shape):
 
 Usage: ``python benchmarks/reflection_kf.py [--seeds 10] [--parts geo,107,108] [--scenario PATH]``
 (nice -n 10 on a shared machine); ``--scenario`` replaces the LEO file of the ``107`` part, e.g.
-pipelines/thesis/leo-ic1-fast-spin-controlled-1site-inertial-rates.toml (rates read in inertial
-axes, the −Z facet question). The ``107`` output also gives the per-facet fraction of epochs lit
+pipelines/thesis/leo-ch10-fast-spin-eci-controlled-1site.toml (the §10.1 start, body = ECI: the
+−Z facet is lit and seen). The ``107`` output also gives the per-facet fraction of epochs lit
 and visible (truth of the first seed).
 """
 
@@ -45,7 +45,7 @@ from lightcurve.studies.scenario import load_scenario  # noqa: E402
 from lightcurve.studies.simulate import simulate  # noqa: E402
 
 THESIS = data_dir("pipelines") / "thesis"
-GEO = THESIS / "geo-ic2-nadir-controlled-1site.toml"
+GEO = THESIS / "geo-ch10-ic2-nadir-controlled-1site.toml"
 LEO = THESIS / "leo-ic1-fast-spin-controlled-1site.toml"
 REFL = '\n[reflection]\nperturb = true\nsigma_frac = 0.1\nparams = ["xi", "a", "m", "A"]\n'
 
@@ -55,7 +55,7 @@ def _scenario(path, add_reflection, params=("xi", "a", "m", "A")):
     inserted when ``add_reflection``."""
     txt = Path(path).read_text()
     refl = REFL.replace('"xi", "a", "m", "A"', ", ".join(f'"{k}"' for k in params))
-    if not add_reflection:
+    if not add_reflection or "[reflection]" in txt:
         return load_scenario(path)
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / Path(path).name

@@ -15,6 +15,11 @@ and the (diagonal) Jacobian are ``ξ = 1/(1+e^{−z})``, ``dξ/dz = ξ(1−ξ)``
 ``dm/dz = m``. (The shape files bound m ≤ 1; the log map lets m exceed 1, where the Beckmann
 formula is still defined — stated, not hidden.)
 
+Parameters on a closed bound of their range (ξ = 0 or 1 — Table 9.2's −Z facet is fully
+diffuse, ξ = 1) have no finite unbounded coordinate: they are held fixed at that value and left
+out of the state (listed in ``held``); the §10.1 truth draw
+(:func:`lightcurve.studies.fit_reflection.perturb_reflection`) holds them fixed too.
+
 Prior (§10.1): the truth perturbation is ``p ~ N(p₀, (frac·p₀)²)``, p₀ the shape file's value,
 frac = 10 % by default. The filters' initial state is ``z₀ = z(p₀)`` with covariance
 ``diag(σ_z²)``, ``σ_z = frac · p₀ · dz/dp(p₀)``, i.e. ``frac/(1−p₀)`` for the logits and
@@ -279,20 +284,32 @@ class FacetParameterStates:
         fidx = select_ct_facets(shape, facets, "estimated (Model 3)", field="reflection")
         self.shape = shape
         self.fidx = np.ascontiguousarray(fidx, dtype=np.int64)
-        names, kc, fc = [], [], []
+        _, areas, _, params = shape.kernel_arrays()
+        self._areas0 = np.ascontiguousarray(areas, dtype=float)
+        self._params0 = np.ascontiguousarray(params, dtype=float)
+        names, kc, fc, held = [], [], [], []
         for kind in self.kinds:
+            col = _KIND_COL[kind]
             for i in self.fidx:
+                p = self._areas0[i] if col == 3 else self._params0[i, col]
+                if kind in LOGIT_KINDS and p in (0.0, 1.0):
+                    # on a closed bound (Table 9.2's −Z: ξ = 1, fully diffuse): no unbounded
+                    # coordinate reaches it, so the parameter is held fixed at its value
+                    held.append(f"{kind}[{int(i)}]")
+                    continue
                 names.append(f"{kind}[{int(i)}]")
-                kc.append(_KIND_COL[kind])
+                kc.append(col)
                 fc.append(int(i))
+        if not names:
+            raise InputError("every selected reflection parameter lies on a bound (held fixed): "
+                             "nothing to estimate", field="reflection", value=",".join(held))
         self.names = names
+        #: parameters on a closed bound of their range (ξ = 0 or 1), held at that value
+        self.held = held
         self.dim = len(names)
         self.kind_col = np.asarray(kc, np.int64)
         self.facet = np.asarray(fc, np.int64)
         self.logit = self.kind_col < 2
-        _, areas, _, params = shape.kernel_arrays()
-        self._areas0 = np.ascontiguousarray(areas, dtype=float)
-        self._params0 = np.ascontiguousarray(params, dtype=float)
         self.p_nominal = np.where(self.kind_col == 3, self._areas0[self.facet],
                                   self._params0[self.facet, np.minimum(self.kind_col, 2)])
         for d in range(self.dim):
@@ -450,4 +467,4 @@ class FacetParameterStates:
                 "prior_frac": self.prior_frac, "p_nominal": self.p_nominal.tolist(),
                 "prior_sigma_p": self.prior_sd_p.tolist(),
                 "prior_sigma_z": self.prior_sd_z.tolist(),
-                "process_noise_z2_per_s": self.process_noise}
+                "process_noise_z2_per_s": self.process_noise, "held_fixed": list(self.held)}

@@ -68,7 +68,10 @@ def _ct_product(ns, no, nh, c, xi, a, m):
     use ô·ĥ in both (= ŝ·ĥ by construction of ĥ).
     """
     diff = xi * a * _INV_PI * ns * no
-    if xi >= 1.0 or nh <= 0.0 or c <= 0.0:
+    # no shortcut at ξ = 1 (Table 9.2's fully diffuse −Z): the (1 − ξ) weight zeroes the
+    # specular part there, and keeping the formula affine in ξ makes finite differences of ξ
+    # across the bound agree with the analytic ∂P/∂ξ (lightcurve.photometry.partials)
+    if nh <= 0.0 or c <= 0.0:
         return diff
     nh2 = nh * nh
     D = math.exp((nh2 - 1.0) / (nh2 * m * m)) / (math.pi * m * m * nh2 * nh2)

@@ -224,7 +224,9 @@ def flux_partials_nb(sx, sy, sz, ox, oy, oz, normals, areas, ids, params, P, dxi
             cos2 = ns * no
             dxi[f] = a / math.pi * cos2
             da[f] = xi / math.pi * cos2
-            if xi < 1.0 and nh > 0.0 and c > 0.0:
+            # specular quantities also at ξ = 1 (Table 9.2's −Z): the value has no specular
+            # part there, but ∂P/∂ξ = a(n̂·ŝ)(n̂·ô)/π − FDG/4 still needs FDG
+            if nh > 0.0 and c > 0.0:
                 nh2 = nh * nh
                 D = math.exp((nh2 - 1.0) / (nh2 * m * m)) / (math.pi * m * m * nh2 * nh2)
                 dD_dnh = D * (2.0 / (m * m * nh ** 3) - 4.0 / nh)
@@ -475,7 +477,7 @@ def _partials_block(shape, qa, sun_dir_eci, obs_dir_eci, range_obs_m, range_sun_
         xi, a, m = (shape.params[ct, j] for j in range(3))
         nsc, noc, nhc, cc = ns[:, ct], no[:, ct], nh[:, ct], c[:, ct]
         nv = nvec[:, ct]
-        spec = (xi < 1.0) & (nhc > 0) & (cc > 0)
+        spec = (nhc > 0) & (cc > 0)   # also at ξ = 1: ∂P/∂ξ needs FDG there
         nhs = np.where(spec, nhc, 1.0)
         cs = np.where(spec, cc, 1.0)
         nh2 = nhs * nhs

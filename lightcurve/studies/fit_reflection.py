@@ -142,9 +142,14 @@ class ReflectionPosteriorModel:
         K = self.fidx.size
         self.nominal = {"xi": shape.params[fidx, 0].copy(), "a": shape.params[fidx, 1].copy(),
                         "m": shape.params[fidx, 2].copy(), "A": shape.areas_m2[fidx].copy()}
-        self.names, self._slot = [], []
+        self.names, self._slot, self.held = [], [], []
         for kind in kinds:
             for j in range(K):
+                if kind in _LOGIT and self.nominal[kind][j] in (0.0, 1.0):
+                    # on a closed bound (ξ = 1 for a fully diffuse facet): held fixed, as the
+                    # truth draw (perturb_reflection) and Model 3 hold it
+                    self.held.append(f"{kind}[{int(fidx[j])}]")
+                    continue
                 self.names.append(f"{kind}[{int(fidx[j])}]")
                 self._slot.append((kind, j))
         self.dim = len(self.names)
@@ -634,8 +639,11 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
 def perturb_reflection(shape, rng, frac=0.1, kinds=KINDS, facets=None):
     """Perturbed copy of ``shape`` (Bernard §10.1): each Cook–Torrance parameter p of the chosen
     facets ← p + N(0, (frac·p)²), redrawn (up to 100 times) until in range (ξ, a in (0,1), m, A
-    > 0). Returns (shape_copy, dict kind -> (F,) new values; NaN for ξ, a, m of facets whose
-    BRDF is not Cook–Torrance)."""
+    > 0). A parameter on a closed bound of its range (ξ = 0 or 1, e.g. Table 9.2's fully
+    diffuse −Z, ξ = 1) is held fixed: a symmetric perturbation cannot stay in range there (the
+    filters' Model 3 holds it fixed as well, :mod:`lightcurve.filters.facet_states`). Returns
+    (shape_copy, dict kind -> (F,) new values; NaN for ξ, a, m of facets whose BRDF is not
+    Cook–Torrance)."""
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     ct = (shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0)
     sel = np.zeros(shape.n_facets, bool)
@@ -647,6 +655,8 @@ def perturb_reflection(shape, rng, frac=0.1, kinds=KINDS, facets=None):
     for k in kinds:
         for i in np.flatnonzero(sel):
             p0 = new[k][i]
+            if k in _LOGIT and p0 in (0.0, 1.0):
+                continue  # on a closed bound: held fixed (docstring)
             for _ in range(100):
                 p = p0 + frac * p0 * rng.standard_normal()
                 if p > 0 and (p < 1 or k not in _LOGIT):

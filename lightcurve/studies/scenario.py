@@ -19,7 +19,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
-__all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario"]
+__all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
+           "eta_sigma_from_drift", "orbital_period_s"]
 
 
 @dataclass
@@ -42,6 +43,18 @@ class AttitudeSpec:
     ``frame = "nadir"`` makes ``euler321_deg`` relative to the nadir (LVLH) frame at the epoch
     (z to the Earth's centre, y along the negative orbit normal) and ``omega_deg_s`` relative to
     it, so zero angles and rates give a nadir-pointing object turning at the orbit rate.
+
+    ``acs_mode`` (controlled): ``"random_walk"`` (default; ζ accumulates,
+    ``q_k = exp(ζ_k) ⊗ exp(ωΔt) ⊗ q_{k−1}``) or ``"jitter"`` (Bernard eq. 7.10: the true attitude
+    is the commanded constant-rate profile perturbed by ζ_k at each measurement time, without
+    accumulation). ``torque_forms`` (uncontrolled): ``"physical"`` (default) or ``"thesis"``
+    (Bernard eq. 4.16–4.21 as written; see :class:`lightcurve.dynamics.truth.UncontrolledTruth`).
+    ``drift_deg_per_orbit`` (uncontrolled, instead of ``eta_sigma_deg_s2``): the process noise is
+    sized so that η alone gives a 1σ attitude error of this many degrees per axis after one
+    orbital period T (Bernard §9.2.4: 2° LEO, 10° MEO, 15° GEO), i.e. for white η of PSD σ_η²
+    the double integral has variance ``σ_η² T³/3`` (gyroscopic coupling neglected), so
+    ``σ_η = d √(3/T³)`` (:func:`eta_sigma_from_drift`); T from the osculating semi-major axis
+    at the epoch.
 
     ``omega_frame`` (TOML ``[attitude] omega_frame``, default ``"body"``) says in which axes the
     file gave the rates. ``"body"``: the file's ``omega_deg_s`` are body-axis components and are
@@ -71,6 +84,16 @@ class AttitudeSpec:
     omega_frame: str = "body"
     #: the rates exactly as written in the file (deg/s, in ``omega_frame`` axes); None = omega_deg_s
     omega_input_deg_s: np.ndarray | None = None
+    #: controlled truth: how the ACS error ζ acts — "random_walk" (accumulates) or "jitter"
+    #: (perturbs the commanded profile without accumulating, Bernard eq. 7.10)
+    acs_mode: str = "random_walk"
+    #: uncontrolled truth: forms of the named torques — "physical" or "thesis" (Bernard
+    #: eq. 4.16–4.21 as written: SRP reflectivities R_d = ξ, R_s = 1 − ξ; drag along the facet
+    #: normal with the orbital velocity)
+    torque_forms: str = "physical"
+    #: uncontrolled truth: 1σ attitude drift per axis after one orbital period that sized
+    #: ``eta_sigma_deg_s2`` (Bernard §9.2.4); None when the file gave η directly
+    drift_deg_per_orbit: float | None = None
 
 
 @dataclass
@@ -141,6 +164,26 @@ _DYNAMICS = ("controlled", "uncontrolled", "law")
 #: most epochs a scenario may schedule (same cap as geometry.schedules.cadence_grid)
 _MAX_EPOCHS = 50_000_000
 _TORQUES = ("gravity_gradient", "srp", "drag")
+_ACS_MODES = ("random_walk", "jitter")
+_TORQUE_FORMS = ("physical", "thesis")
+
+
+def orbital_period_s(orbit, epoch_utc) -> float:
+    """Osculating period 2π√(a³/μ) (s) of ``orbit`` at ``epoch_utc`` (a from the vis-viva
+    equation with the epoch state; μ = 3.986004418e14 m³/s²)."""
+    from ..dynamics.torques import MU_EARTH
+
+    r, v = orbit.positions(epoch_utc, np.array([0.0]))
+    rn, vn = float(np.linalg.norm(r[0])), float(np.linalg.norm(v[0]))
+    a = 1.0 / (2.0 / rn - vn * vn / MU_EARTH)
+    return float(2.0 * np.pi * np.sqrt(a ** 3 / MU_EARTH))
+
+
+def eta_sigma_from_drift(drift_deg: float, period_s: float) -> float:
+    """σ_η (deg/s^{3/2}) of white angular-acceleration noise whose double integral has a 1σ of
+    ``drift_deg`` (deg, per axis) after ``period_s`` seconds: ``σ_η = d √(3/T³)``
+    (variance of ∫∫η over T is σ_η² T³/3; Bernard §9.2.4 sizes the process noise this way)."""
+    return float(drift_deg) * float(np.sqrt(3.0 / float(period_s) ** 3))
 
 
 def load_scenario(path, library_dirs=None, site_dirs=None) -> Scenario:
@@ -229,7 +272,19 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         frame=at.str("frame", "inertial", choices=("inertial", "nadir")),
         eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
         inertia_kg_m2=at.matrix("inertia_kg_m2", None, shape=(3, 3)),
+        acs_mode=at.str("acs_mode", "random_walk", choices=_ACS_MODES),
+        torque_forms=at.str("torque_forms", "physical", choices=_TORQUE_FORMS),
     )
+    if at.has("drift_deg_per_orbit"):
+        if at.has("eta_sigma_deg_s2"):
+            raise InputError("give either eta_sigma_deg_s2 or drift_deg_per_orbit, not both",
+                             file=file, field="attitude.drift_deg_per_orbit")
+        if orbit is None:
+            raise InputError("drift_deg_per_orbit needs an [orbit] (its period sizes the "
+                             "process noise)", file=file, field="attitude.drift_deg_per_orbit")
+        att.drift_deg_per_orbit = at.float("drift_deg_per_orbit", min=0.0, max=180.0)
+        att.eta_sigma_deg_s2 = eta_sigma_from_drift(att.drift_deg_per_orbit,
+                                                    orbital_period_s(orbit, epoch))
     torques = at.raw("torques", ["gravity_gradient"] if dyn == "uncontrolled" else [])
     if not isinstance(torques, list) or any(t not in _TORQUES for t in torques):
         raise InputError("unknown torque model", file=file, field="attitude.torques", value=torques,
