@@ -44,7 +44,9 @@ def _cmd_invert(args) -> int:
                        reflection_facets=(None if args.reflection_facets is None else
                                           csv_ints(args.reflection_facets,
                                                     "--reflection-facets")),
-                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
+                       gate=(None if args.gate is None else
+                             {"mode": args.gate, "false_alarm": args.gate_false_alarm}),
+                       variant=args.variant)
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -96,8 +98,13 @@ def register(sub) -> None:
                    "when the attitude is estimated (default)")
     p.add_argument("--ess-threshold", type=number(0.0, 1.0), default=0.5,
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
-    p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",
-                   help="controlled model: ACS noise as attitude random walk or jitter")
+    p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default=None,
+                   help="controlled model: ACS noise as attitude random walk or jitter "
+                   "(Bernard eq. 7.10; default: the file's scenario, else random_walk)")
+    p.add_argument("--variant", choices=("thesis", "robust"), default=None,
+                   help="filters: robust = our improved filters (innovation gate, ...); thesis "
+                   "= Bernard (2021) ch. 7 MEKF/UKF as written, no gate (default: the file's "
+                   "scenario [filter] variant, else robust)")
     p.add_argument("--pseudo-noise", type=number(0.0), default=0.0,
                    help="rate pseudo-noise PSD, (rad/s)^2/s (default 0)")
     p.add_argument("--alpha", type=number(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
@@ -125,11 +132,12 @@ def register(sub) -> None:
     p.add_argument("--attitude-known", action="store_true",
                    help="hold attitude and rate at the file's truth and estimate only the "
                    "reflection states (thesis sec. 10.7 parameter-only runs; needs --reflection)")
-    p.add_argument("--gate", choices=("auto", "reject", "inflate", "off"), default="auto",
+    p.add_argument("--gate", choices=("auto", "reject", "inflate", "off"), default=None,
                    help="innovation (outlier) gate: skip a magnitude whose normalised innovation "
                    "squared exceeds the chi-square threshold (reject), use it with inflated noise "
                    "(inflate), or no gate; auto = reject in the UKF, inflate in the MEKF and the "
-                   "particle filter (default auto; counts in summary.json)")
+                   "particle filter (default auto; off with --variant thesis; counts in "
+                   "summary.json)")
     p.add_argument("--gate-false-alarm", type=number(0.0, 0.5, lo_open=True), default=1e-4,
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")

@@ -14,6 +14,14 @@ magnitude biases (``"random-walk"``, ``"model1"``, ``"model2"``,
 (``"model3"``, :mod:`lightcurve.filters.facet_states`). ``attitude="truth"`` is the
 "attitude known" mode of §10.7: q, ω are held at the file's truth and only the reflection
 states are estimated.
+
+``variant`` (:data:`VARIANTS`): ``"robust"`` (default) runs our improved filters (innovation
+gate, …); ``"thesis"`` runs Bernard's ch. 7 filters as written — the MEKF of Tables 7.1–7.2
+and the UKF of Tables 7.3–7.4 (:mod:`lightcurve.filters.ukf_thesis`) without any innovation
+gate. Unless given, the variant is the stored scenario's ``[filter] variant``, else robust.
+``init_seed`` seeds the initial-estimate draw alone (default: ``seed``): §9.3.1 starts every
+filter of a Monte Carlo run from the same initial estimate, which a study gets by giving all
+filters of a run one ``init_seed``.
 """
 
 from __future__ import annotations
@@ -27,15 +35,17 @@ from ._common import FilterProblem
 from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
 from .result import Estimate
 
-__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES"]
+__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES", "VARIANTS", "resolve_variant"]
 
 METHODS = ("mekf", "ukf", "bpf")
 #: ``invert(attitude=…)``: estimate attitude and rate, or hold them at the file's truth (§10.7)
 ATTITUDE_MODES = ("estimate", "truth")
+#: ``invert(variant=…)``: our improved filters, or Bernard's (2021) ch. 7 filters as written
+VARIANTS = ("robust", "thesis")
 
 
-def _scenario_attitude(curve):
-    """The [attitude] table of the scenario TOML stored in the file ({} if none)."""
+def _scenario_table(curve, name):
+    """The [name] table of the scenario TOML stored in the file ({} if none)."""
     txt = getattr(curve, "scenario_toml", "") or ""
     if not txt.strip():
         return {}
@@ -43,10 +53,45 @@ def _scenario_attitude(curve):
 
     try:
         doc = tomllib.loads(txt)
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, RecursionError):
         return {}
-    at = doc.get("attitude", {})
-    return at if isinstance(at, dict) else {}
+    t = doc.get(name, {})
+    return t if isinstance(t, dict) else {}
+
+
+def resolve_variant(curve, variant=None) -> str:
+    """The filter variant: ``variant`` if given, else the stored scenario's ``[filter]
+    variant``, else ``"robust"``; InputError for anything else."""
+    v = variant if variant is not None else _scenario_table(curve, "filter").get("variant",
+                                                                                 "robust")
+    if v not in VARIANTS:
+        raise InputError("unknown filter variant", field="variant", value=v,
+                         allowed=", ".join(VARIANTS))
+    return v
+
+
+def _scenario_attitude(curve):
+    """The [attitude] table of the scenario TOML stored in the file ({} if none)."""
+    return _scenario_table(curve, "attitude")
+
+
+def _scenario_eta_deg(curve, at):
+    """η level (deg/s^{3/2}) of the stored scenario: ``eta_sigma_deg_s2``, or sized from
+    ``drift_deg_per_orbit`` and the [orbit]'s period (Bernard §9.2.4; the simulator's rule,
+    :func:`lightcurve.studies.scenario.eta_sigma_from_drift`)."""
+    if "drift_deg_per_orbit" not in at:
+        return float(at.get("eta_sigma_deg_s2", 0.0))
+    from ..geometry.orbits import orbit_from_section
+    from ..studies.scenario import eta_sigma_from_drift, orbital_period_s
+
+    orb = _scenario_table(curve, "orbit")
+    try:
+        orbit = orbit_from_section(orb)
+    except (InputError, ValueError, TypeError):
+        raise InputError("drift_deg_per_orbit needs the scenario's [orbit] to size the process "
+                         "noise", field="attitude.drift_deg_per_orbit") from None
+    return eta_sigma_from_drift(float(at["drift_deg_per_orbit"]),
+                                orbital_period_s(orbit, curve.epoch_utc))
 
 
 def _check_curve(curve):
@@ -78,15 +123,16 @@ def _check_curve(curve):
 
 def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                   initial_q=None, initial_omega=None, shape=None, dynamics=None,
-                  acs_sigma_deg=None, acs_mode="random_walk", pseudo_noise=0.0,
+                  acs_sigma_deg=None, acs_mode=None, pseudo_noise=0.0,
                   eta_sigma_deg_s2=None, inertia_kg_m2=None, substep_s=0.5,
-                  attitude="estimate") -> FilterProblem:
+                  attitude="estimate", init_seed=None) -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
     Parameters mirror :func:`invert`; ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` /
-    ``dynamics`` default to the scenario stored in the lightcurve file (ACS 0 and
-    "controlled" when the file has none). ``attitude="truth"`` sets
-    ``FilterProblem.attitude_known`` (needs truth in the file).
+    ``dynamics`` / ``acs_mode`` default to the scenario stored in the lightcurve file (ACS 0,
+    "controlled" and "random_walk" when the file has none). ``attitude="truth"`` sets
+    ``FilterProblem.attitude_known`` (needs truth in the file). ``init_seed`` seeds the
+    initial-estimate perturbation (default ``seed``).
     """
     _check_curve(curve)
     if attitude not in ATTITUDE_MODES:
@@ -116,14 +162,18 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
         acs = float(at.get("acs_sigma_deg", 0.0)) if acs_sigma_deg is None else float(acs_sigma_deg)
         if not (acs >= 0 and np.isfinite(acs)):
             raise InputError("ACS sigma must be >= 0", field="acs_sigma_deg", value=acs)
-        dyn = ControlledDynamics(np.radians(acs), acs_mode=acs_mode, pseudo_noise=pseudo_noise)
+        mode = at.get("acs_mode", "random_walk") if acs_mode is None else acs_mode
+        if mode not in ("random_walk", "jitter"):
+            raise InputError("unknown ACS noise model", field="acs_mode", value=mode,
+                             allowed="random_walk, jitter")
+        dyn = ControlledDynamics(np.radians(acs), acs_mode=mode, pseudo_noise=pseudo_noise)
     else:
         J = inertia_kg_m2
         if J is None:
             J = at.get("inertia_kg_m2")
         if J is None:
             J = shape.inertia_kg_m2
-        eta = float(at.get("eta_sigma_deg_s2", 0.0)) if eta_sigma_deg_s2 is None \
+        eta = _scenario_eta_deg(curve, at) if eta_sigma_deg_s2 is None \
             else float(eta_sigma_deg_s2)
         dyn = UncontrolledDynamics(J, eta_psd=np.radians(eta) ** 2, substep_s=substep_s,
                                    pseudo_noise=pseudo_noise)
@@ -136,7 +186,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     if not (sw > 0 and np.isfinite(sw)):
         raise InputError("must be > 0", field="sigma_omega_deg_s", value=sw)
     st_r, sw_r = np.radians(st), np.radians(sw)
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x1A77]))
+    rng = np.random.default_rng(np.random.SeedSequence(
+        [int(seed if init_seed is None else init_seed), 0x1A77]))
     dth = rng.standard_normal(3) * st_r
     dw = rng.standard_normal(3) * sw_r
     if initial_q is None:
@@ -159,7 +210,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
         if not np.all(np.isfinite(w0)):
             raise InputError("initial_omega must be finite", field="initial_omega")
     P0 = np.diag([st_r ** 2] * 3 + [sw_r ** 2] * 3)
-    meta = {"seed": int(seed), "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
+    meta = {"seed": int(seed), "init_seed": int(seed if init_seed is None else init_seed),
+            "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
             "dynamics": dyn_kind, "acs_sigma_deg": float(np.degrees(dyn.acs_sigma)),
             "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", "")}
     if attitude == "truth":
@@ -172,12 +224,12 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
 def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
            particles=10_000, roughening=0.2, resampling="systematic", ess_threshold=0.5,
            initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
-           acs_mode="random_walk", pseudo_noise=0.0, eta_sigma_deg_s2=None, inertia_kg_m2=None,
+           acs_mode=None, pseudo_noise=0.0, eta_sigma_deg_s2=None, inertia_kg_m2=None,
            alpha=1.0, beta=2.0, kappa=0.0, error="grp", jacobian="analytic",
            keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
            reflection_process_noise=0.0, reflection_facets=None,
            reflection_kinds=("xi", "a", "m", "A"), gate=None,
-           rejuvenation="auto") -> Estimate:
+           rejuvenation="auto", variant=None, init_seed=None) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -202,7 +254,8 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     shape : Shape or str, optional (default ``curve.attrs["shape"]``)
     dynamics : {"controlled", "uncontrolled"}, optional (default: the file's scenario)
     acs_sigma_deg : float, optional — ACS noise 1σ (deg); default the scenario's.
-    acs_mode : {"random_walk", "jitter"} — see :mod:`lightcurve.filters.models`.
+    acs_mode : {"random_walk", "jitter"}, optional — see :mod:`lightcurve.filters.models`;
+        default the stored scenario's ``[attitude] acs_mode`` (random_walk when absent).
     pseudo_noise : float — rate pseudo-noise PSD, (rad/s)²/s.
     eta_sigma_deg_s2 : float, optional — uncontrolled η level (deg/s^{3/2} as a PSD root).
     inertia_kg_m2 : (3,3), optional — uncontrolled inertia (default scenario, then shape).
@@ -227,7 +280,11 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         (outlier) gate and unlit/below-horizon screening of :mod:`lightcurve.filters.gating`;
         None = its defaults (NIS > 15.14, false-alarm rate 1e-4; reject in the UKF, inflate
         in the MEKF and the BPF). Counts land in
-        ``est.meta["gate"]`` and :meth:`Estimate.summary`.
+        ``est.meta["gate"]`` and :meth:`Estimate.summary`. The thesis variant has no gate
+        (``"off"`` unless given).
+    variant : {"robust", "thesis"}, optional — module docstring (default: the stored
+        scenario's ``[filter] variant``, else robust).
+    init_seed : int, optional — seed of the initial-estimate draw alone (default ``seed``).
 
     Returns
     -------
@@ -236,13 +293,17 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     if method not in METHODS:
         raise InputError("unknown filter method", field="method", value=method,
                          allowed=", ".join(METHODS))
+    variant = resolve_variant(curve, variant)
     problem = build_problem(curve, seed=seed, sigma_theta_deg=sigma_theta_deg,
                             sigma_omega_deg_s=sigma_omega_deg_s, initial_q=initial_q,
                             initial_omega=initial_omega, shape=shape, dynamics=dynamics,
                             acs_sigma_deg=acs_sigma_deg, acs_mode=acs_mode,
                             pseudo_noise=pseudo_noise, eta_sigma_deg_s2=eta_sigma_deg_s2,
-                            inertia_kg_m2=inertia_kg_m2, attitude=attitude)
+                            inertia_kg_m2=inertia_kg_m2, attitude=attitude, init_seed=init_seed)
     problem.meta["method"] = method
+    problem.meta["variant"] = variant
+    if gate is None and variant == "thesis":
+        gate = "off"       # ch. 7's filters have no innovation gate
     if gate is not None:   # innovation gate / epoch screening settings (filters.gating)
         from .gating import set_gate
 
@@ -276,6 +337,11 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
 
         return run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
     if method == "ukf":
+        if variant == "thesis":
+            from .ukf_thesis import run_ukf_thesis
+
+            return run_ukf_thesis(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias,
+                                  facets=facets)
         from .ukf import run_ukf
 
         return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)

@@ -140,6 +140,10 @@ def execute_task(task: RunTask) -> dict:
             kw["particles"] = int(opts["particles"])
         if "acs_mode" in opts:
             kw["acs_mode"] = opts["acs_mode"]
+        if "variant" in opts:
+            kw["variant"] = opts["variant"]
+        if task.init_seed is not None:
+            kw["init_seed"] = int(task.init_seed)
         if c.reflection != "none":
             kw["reflection"] = c.reflection
         with warnings.catch_warnings():
@@ -457,7 +461,8 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     Only the runs 0…runs−1 of each cell are used (a study extended and then summarised with
     fewer runs ignores the extra files). Cells keep the study's grid order.
     """
-    from .metrics import rss_envelope
+    from .agreement import agreement, thesis_color
+    from .metrics import FULL_RUNS, rss_envelope
 
     out = Path(out_dir)
     n = study.runs if runs is None else int(runs)
@@ -479,6 +484,7 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
             rss.append(np.linalg.norm(r["att_error_deg"], axis=1))
         entry = cell_summary(c.as_dict(), mets, fails)
         entry["missing"] = int(n - len(mets) - fails)
+        entry["thesis_color"] = thesis_color(study.thesis_table, c.as_dict())
         if errors:
             entry["first_error"] = errors[0]
         cells.append(entry)
@@ -493,7 +499,16 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     summary = {"format": _SUMMARY_FORMAT, "format_version": 1, "study": study.name,
                "study_hash": study.hash, **_code_fields(), "seed": study.seed,
                "runs_per_cell": n,
+               # the traffic-light rule is defined for 100 runs; fewer runs scale it
+               # (lightcurve.studies.metrics.traffic_light) and the table is indicative
+               "indicative": bool(n < FULL_RUNS),
+               "variant": study.options.get("variant", "robust"),
                "grid_keys": list(GRID_KEYS), "cells": cells}
+    if study.thesis_table is not None:
+        summary["thesis_figure"] = study.thesis_table.figure
+        summary["thesis_title"] = study.thesis_table.title
+        summary["agreement"] = agreement(cells)
+        summary["not_run_grey"] = [c.as_dict() for c in study.skipped_cells]
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
     if write_report:
         from ..report.html import write_study_report

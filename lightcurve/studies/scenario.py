@@ -4,7 +4,9 @@ Sections (documented in docs/formats.md): ``[scenario]`` (epoch_utc, duration_s,
 seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (library name or
 mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
-``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
+``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[filter]``
+(``variant = "robust" | "thesis"``: the filters ``invert`` runs on the simulated file by
+default, :mod:`lightcurve.filters.invert`), ``[effects]``
 (physics effects switched on; see the diagnosis issue), ``[reflection]`` (truth reflection
 parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
@@ -373,6 +375,10 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         if meas.ignore_eclipse and "penumbra" in effects and effects["penumbra"].get("enabled", True):
             raise InputError("the penumbra effect contradicts measurement.ignore_eclipse = true",
                              file=file, field="effects.penumbra")
+    flt = root.section("filter", None)
+    if flt is not None:   # [filter] variant: the default of invert (lightcurve.filters.invert)
+        flt.str("variant", "robust", choices=("robust", "thesis"))
+        flt.check_unknown()
     refl = root.section("reflection", None)
     if refl is not None:
         kinds = refl.raw("params", ["xi", "a", "m", "A"])
