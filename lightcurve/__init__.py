@@ -21,7 +21,8 @@ __all__ = ["InputError", "ConvergenceError", "__version__", "simulate", "read_li
 
 
 def simulate(scenario, seed=None):
-    """Simulate a lightcurve from a :class:`~lightcurve.studies.scenario.Scenario` or a TOML path.
+    """Simulate a lightcurve from a :class:`~lightcurve.studies.scenario.Scenario`, a TOML path
+    or a bundled scenario name (``"default"``, ``"thesis"``, ``"thesis/<case>"``).
 
     Returns a :class:`Lightcurve`; ``seed`` overrides the scenario's seed.
     """
@@ -29,7 +30,9 @@ def simulate(scenario, seed=None):
     from .studies.simulate import simulate as _simulate
 
     if not isinstance(scenario, Scenario):
-        scenario = load_scenario(scenario)
+        from .cli.simulate import resolve_scenario
+
+        scenario = load_scenario(resolve_scenario(scenario))
     return _simulate(scenario, seed=seed)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._args import number
+from ._args import add_model_options, number
 
 __all__ = ["register"]
 
@@ -13,7 +13,7 @@ def _cmd_compare(args) -> int:
     from ..studies.runner import run_study
     from ..studies.study import load_study
 
-    study = load_study(args.study)
+    study = load_study(args.study, library_dirs=args.library, site_dirs=args.sites)
     summary = run_study(study, args.output, runs=args.runs, workers=args.workers,
                         scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
                         progress=not args.quiet)
@@ -58,4 +58,6 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true",
                    help="discard stored runs of a different (changed) study instead of refusing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_compare)
+    add_model_options(p, shape=False)
+    p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
+                   "run the same command again to resume")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._args import SEED, number
+from ._args import SEED, add_model_options, number
 
 __all__ = ["register"]
 
@@ -15,7 +15,8 @@ def _cmd_diagnose(args) -> int:
     d = diagnose_recording(args.recording, args.scenario, free=args.free,
                            exclude=[e.strip() for e in (args.exclude or "").split(",") if e.strip()],
                            cross_validation=False if args.no_cv else None, progress=say,
-                           max_effects=args.max_effects, seed=args.seed)
+                           max_effects=args.max_effects, seed=args.seed, shape=args.shape,
+                           library_dirs=args.library, site_dirs=args.sites)
     jpath, hpath = write_report(d, args.output)
     js = d.summary()
     print(f"verdict: {js['verdict']}; baseline chi2/dof {js['baseline']['chi2_dof']:.3g}; chosen: "
@@ -42,7 +43,8 @@ def register(sub) -> None:
     p.add_argument("--scenario", default=None, metavar="MODEL.toml",
                    help="the model (scenario TOML; its [effects] are switched off; an optional "
                    "[diagnosis] table sets free/exclude/max_effects/min_delta_bic). Default for HDF5: "
-                   "the file's own scenario. For a CSS recording: optionally a CSS sensor "
+                   "the file's own scenario (with the shape and sites the file carries). For a "
+                   "CSS recording: optionally a CSS sensor "
                    "configuration TOML (the model's nominal sensors; default: the file's)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
     p.add_argument("--free", default=None,
@@ -53,5 +55,6 @@ def register(sub) -> None:
                    help="at most this many effects in the final model (1 or 2; default 2)")
     p.add_argument("--no-cv", action="store_true", help="skip the leave-one-night-out cross-validation")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the random fit starts (default 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    add_model_options(p)
     p.set_defaults(func=_cmd_diagnose)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._args import SEED, csv_ints, csv_list, number
+from ._args import (SEED, add_model_options, csv_ints, csv_list, initial_omega_rad_s, initial_q,
+                    number)
 
 __all__ = ["register"]
 
@@ -14,6 +15,17 @@ def _cmd_invert(args) -> int:
     from ..studies.batch import expand_inputs, invert_files
 
     n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+    start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
+    if args.initial_q is not None:
+        start["initial_q"] = initial_q(args.initial_q)
+    if args.initial_omega_deg_s is not None:
+        start["initial_omega"] = initial_omega_rad_s(args.initial_omega_deg_s)
+    if args.shape is not None:
+        start["shape"] = args.shape
+    if args.library:
+        start["library_dirs"] = tuple(args.library)
+    if args.sites:
+        start["site_dirs"] = tuple(args.sites)
     bar = n_files > 1 and not args.quiet
 
     def report(text, kind="info"):
@@ -46,7 +58,7 @@ def _cmd_invert(args) -> int:
                                                     "--reflection-facets")),
                        gate=(None if args.gate is None else
                              {"mode": args.gate, "false_alarm": args.gate_false_alarm}),
-                       variant=args.variant)
+                       variant=args.variant, **start)
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -63,7 +75,10 @@ def register(sub) -> None:
         "error, final 3-sigma bounds, whether every component ended inside 3 sigma, "
         "divergence flag, runtime; or the error of a file that failed — the others go on). "
         "The initial estimate is the file's truth perturbed by --sigma-theta-deg / "
-        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9). Many files run in parallel on "
+        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or, for recordings without "
+        "truth, --initial-q / --initial-omega-deg-s with those sigmas as their uncertainty. "
+        "The shape is the one the file carries unless --shape is given. Many files run in "
+        "parallel on "
         "the executors of 'compare' (process pool, Dask); the results do not depend on the "
         "executor. Exit code 2 if an input was rejected, 1 if a run failed.")
     p.add_argument("files", nargs="+", metavar="FILE.h5",
@@ -86,6 +101,17 @@ def register(sub) -> None:
                    help="1-sigma initial attitude error per axis, deg (default 3)")
     p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
+    p.add_argument("--initial-q", default=None, metavar="Q1,Q2,Q3,Q4",
+                   help="initial attitude estimate (inertial->body quaternion, scalar first, "
+                   "at the first epoch) instead of the file's perturbed truth; needed for "
+                   "recordings without truth. Its 1-sigma error is --sigma-theta-deg. Write "
+                   "--initial-q=-0.5,... when the first value is negative")
+    p.add_argument("--initial-omega-deg-s", default=None, metavar="WX,WY,WZ",
+                   help="initial body-rate estimate, deg/s body axes (default: the file's "
+                   "perturbed truth; needed without truth). Its 1-sigma error is "
+                   "--sigma-omega-deg-s. Write --initial-omega-deg-s=-1,... when the first "
+                   "value is negative")
+    add_model_options(p)
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
     p.add_argument("--roughening", type=number(0.0), default=0.2,
                    help="BPF roughening constant G (Bernard table 7.9; used with --rejuvenation "
@@ -142,4 +168,5 @@ def register(sub) -> None:
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
     p.add_argument("--plot", action="store_true", help="also write a PNG per file")
-    p.set_defaults(func=_cmd_invert)
+    p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
+                   "listed in {output}/summary.json; run the command again on the others")

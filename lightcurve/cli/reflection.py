@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import SEED, csv_ints, csv_list, number
+from ._args import SEED, add_model_options, csv_ints, csv_list, number, output_not_input
 
 __all__ = ["register"]
 
@@ -21,6 +21,7 @@ def _cmd_fit_reflection(args) -> int:
     if args.attitude == "estimate" and not args.estimate:
         raise InputError("--attitude estimate needs --estimate FILE.h5 (an 'invert' result)",
                          field="--estimate")
+    output_not_input(args.output, args.file, args.estimate)
     curve = read_lightcurve(args.file)
     kinds = csv_list(args.params, "--params")
     facets = list(csv_ints(args.facets, "--facets")) if args.facets else None
@@ -35,7 +36,7 @@ def _cmd_fit_reflection(args) -> int:
                              estimate=args.estimate, facets=facets, kinds=kinds,
                              prior_frac=args.prior_frac, walkers=args.walkers, seed=args.seed,
                              max_steps=args.max_steps, tau_factor=args.tau_factor,
-                             progress=say)
+                             progress=say, library_dirs=args.library)
     except ConvergenceError as exc:
         from ..io.atomic import atomic_write_text
 
@@ -83,7 +84,7 @@ def register(sub) -> None:
     p.add_argument("--attitude", choices=("truth", "estimate"), default="truth",
                    help="attitude history to hold fixed (default: truth)")
     p.add_argument("--estimate", metavar="EST.h5", help="'invert' result file for --attitude estimate")
-    p.add_argument("--shape", help="shape name or TOML (default: the file's attrs['shape'])")
+    add_model_options(p, sites=False)
     p.add_argument("--params", default="xi,a,m,A",
                    help="comma-separated parameters per facet among xi,a,m,A (default: all)")
     p.add_argument("--facets", help="comma-separated facet indices (default: every Cook-Torrance facet)")

@@ -32,6 +32,7 @@ import numpy as np
 
 from .baseline import bic_gain, fit_baseline, fit_terms
 from .candidates import params_to_json, score_candidates
+from ..report.views import DiagnosisViews
 from .residuals import consistency, find_segments
 
 __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIMING_EFFECTS",
@@ -40,8 +41,8 @@ __all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIM
 TIMING_EFFECTS = ("light_time", "clock_offset", "exposure_smearing")
 
 
-@dataclass
-class Diagnosis:
+@dataclass(repr=False)
+class Diagnosis(DiagnosisViews):
     """Everything :func:`~.report.write_report` needs."""
 
     problem: object
@@ -201,22 +202,24 @@ def cross_validate(problem, final_fit, *, max_nfev: int = 60, progress=None) -> 
 # ----------------------------------------------------------------------------------------
 # from files
 # ----------------------------------------------------------------------------------------
-def load_model_scenario(path):
+def load_model_scenario(path, *, library_dirs=None, site_dirs=None, shape=None):
     """Load a scenario TOML for diagnosis: the scenario with its ``[effects]`` switched off
     (the model whose missing physics is being looked for) and the ``[diagnosis]`` table, if
     any (keys ``free`` (list of words, see :func:`~.problem.parse_free`), ``exclude`` (effect
     names not to propose), ``max_effects`` (1 or 2), ``min_delta_bic`` (> 0)). Returns
-    ``(scenario, options)``."""
+    ``(scenario, options)``. ``library_dirs``/``site_dirs``: extra shape-library and observatory
+    folders; ``shape``: a resolved Shape replacing the scenario's ``[shape]``."""
     from pathlib import Path
 
     from ..io.tomlio import Section, load_toml
     from ..studies.scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
+    doc, text = load_toml(path, with_text=True)
     diag = doc.pop("diagnosis", None)
     had_effects = bool(doc.pop("effects", None))
-    sc = parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"))
+    sc = parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                        site_dirs=site_dirs, shape=shape)
     opts = {}
     if diag is not None:
         sec = Section(diag, file=path, name="diagnosis")
@@ -245,20 +248,27 @@ def load_model_scenario(path):
 
 
 def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progress=None,
-                       cross_validation=None, max_effects=None, min_delta_bic=None, seed=0):
+                       cross_validation=None, max_effects=None, min_delta_bic=None, seed=0,
+                       shape=None, library_dirs=None, site_dirs=None):
     """Diagnose a recording file against a model.
 
-    ``recording``: our lightcurve HDF5 (model = the file's own scenario or ``scenario``;
-    attitude = the file's truth), a CSS recording (HDF5 with ``format = "lightcurve-css"``,
-    detected from the file: :func:`diagnose_css_recording`) or a CSV recording (needs ``scenario``; attitude = the
-    scenario's law or noise-free dynamics). ``free``: comma-separated words
-    (:func:`~.problem.parse_free`); default ``none`` for files with a truth attitude,
-    ``reflection`` for CSV recordings. Returns a :class:`Diagnosis`.
+    ``recording``: our lightcurve HDF5 (model = the file's own scenario — with the shape and
+    sites the file carries — or ``scenario``; attitude = the file's truth, else the model's
+    attitude from the scenario epoch), a CSS recording (HDF5 with ``format = "lightcurve-css"``,
+    detected from the file: :func:`diagnose_css_recording`) or a CSV recording (needs
+    ``scenario``; attitude = the scenario's law or noise-free dynamics). ``free``:
+    comma-separated words (:func:`~.problem.parse_free`); default ``none`` for files with a
+    truth attitude, ``reflection`` otherwise. ``shape`` (a Shape, library name or shape TOML)
+    replaces the model's shape; ``library_dirs`` / ``site_dirs`` are extra shape-library and
+    observatory folders. Files without truth that give exposure times are modelled with the
+    model's body rates, so the timing effects are evaluated for them. A file with a
+    photometric band (``attrs["band"]``, from ``lightcurve import``) is modelled with that
+    band's Sun magnitude (``attrs["sun_mag"]``). Returns a :class:`Diagnosis`.
     """
     from pathlib import Path
 
     from ..errors import InputError
-    from ..studies.scenario import parse_scenario
+    from ..studies.scenario import scenario_from_lightcurve
     from .problem import magnitude_problem, parse_free
 
     recording = Path(recording)
@@ -268,43 +278,44 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
         return diagnose_css_recording(recording, scenario, free=free, exclude=exclude,
                                       progress=progress, max_effects=max_effects,
                                       min_delta_bic=min_delta_bic, seed=seed)
+    from ..studies.evaluate import model_attitude
+
     opts = {}
     sc = None
-    if scenario is not None:
-        sc, opts = load_model_scenario(scenario)
+    if shape is not None and not hasattr(shape, "n_facets"):
+        from ..photometry import load_shape
+
+        shape = load_shape(str(shape), library_dirs=library_dirs)
     if recording.suffix.lower() in (".h5", ".hdf5"):
         from ..io.lightcurve_h5 import read_lightcurve
 
         lc = read_lightcurve(recording)
-        if sc is None:
-            if not lc.scenario_toml:
-                raise InputError("the file has no embedded scenario: give --scenario", file=recording)
-            from ..io.tomlio import loads_toml
-
-            doc = loads_toml(lc.scenario_toml, file=f"{recording}:scenario")
-            doc.pop("effects", None)
-            doc.pop("diagnosis", None)
-            sc = parse_scenario(doc, file=str(recording))
-        default_free = "none"
+        if scenario is not None:
+            sc, opts = load_model_scenario(scenario, library_dirs=library_dirs,
+                                           site_dirs=site_dirs, shape=shape)
+        else:
+            sc = scenario_from_lightcurve(lc, recording, drop=("effects", "diagnosis"),
+                                          library_dirs=library_dirs, site_dirs=site_dirs,
+                                          shape=shape)
+        default_free = "none" if lc.has_truth else "reflection"
         q = lc.truth_q
         omega = lc.truth_omega_rad_s
         if q is None:
-            from ..studies.evaluate import model_attitude
-
-            q = model_attitude(sc, lc)
-            omega = None
+            q, omega = model_attitude(sc, lc, return_omega=True)
     else:
-        if sc is None:
+        if scenario is None:
             raise InputError("a CSV recording needs --scenario MODEL.toml (shape, attitude, sites)",
                              file=recording)
+        sc, opts = load_model_scenario(scenario, library_dirs=library_dirs, site_dirs=site_dirs,
+                                       shape=shape)
         from ..io.recording import read_recording
-        from ..studies.evaluate import model_attitude
 
         # rows in the Earth's full shadow are kept (counted, warned) for shadow/clock effects
-        lc = read_recording(recording, sc, unlit="keep")
-        q = model_attitude(sc, lc)
-        omega = None
+        lc = read_recording(recording, sc, unlit="keep", site_dirs=site_dirs)
+        q, omega = model_attitude(sc, lc, return_omega=True)
         default_free = "reflection"
+    if not lc.has_truth and (lc.exposure_s is None or not np.any(np.isfinite(lc.exposure_s))):
+        omega = None  # no exposure times: the timing effects stay off (module docstring)
     words = parse_free(free if free is not None else opts.get("free", default_free), sc.shape)
     skip = {}
     if omega is None:
@@ -313,7 +324,8 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
                           "rate and the object's velocity, unknown for this recording")
     for name in list(exclude) + list(opts.get("exclude", [])):
         skip[name] = "excluded by the user"
-    prob = magnitude_problem(lc, sc.shape, q=q, omega=omega, sun_mag=sc.measurement.sun_mag,
+    sun_mag = float(lc.attrs["sun_mag"]) if "band" in (lc.attrs or {}) else sc.measurement.sun_mag
+    prob = magnitude_problem(lc, sc.shape, q=q, omega=omega, sun_mag=sun_mag,
                              ignore_eclipse=sc.measurement.ignore_eclipse, free=words,
                              label=recording.name)
     if sc.measurement.ignore_eclipse:

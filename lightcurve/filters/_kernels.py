@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..photometry.kernels import brdf_product_nb
+from ..core.photometry import brdf_product_nb
 
 __all__ = [
     "const_rate_nb", "rk4_torque_free_nb", "apply_noise_nb", "perturb_rotvec_nb",

@@ -92,7 +92,7 @@ Extra states (Bernard ch. 8; issue 6)
   attitude cloud is compact (largest per-axis σ of its GRP error < ``joint_max_spread_deg``,
   default 25°); a wider cloud gets the separate roughening. Applied at every resampling, the
   kernel's shrinkage toward the mean merged the modes of wide multimodal clouds: σθ = 60°
-  attitude-only runs (pipelines/default.toml, seeds 0–19) then ended ≈ 170° off in 19 of 20.
+  attitude-only runs (the thesis LEO fast-spin case, seeds 0–19) then ended ≈ 170° off in 19 of 20.
   Measured, 10⁴ particles, 20 seeds per row; final attitude inside 3σ (diverged) and median
   final RSS error for separate → auto with the threshold at 10° / 25° (default):
   LEO fast spin controlled 1 site (seeds 3000–3019) σθ 3°: 10/20 → 19/20 / 19/20, 0.67° →
@@ -363,11 +363,11 @@ def _flux_numpy(shape, sb, ob, areas=None, prm=None):
 
     sb, ob (N,3) body-frame unit vectors; ``areas`` (N,F) m² and ``prm`` (N,F,P) per-particle
     kernel arrays (Model 3) replace the shape's when given. The same formulas as
-    :mod:`lightcurve.photometry.kernels` (Cook–Torrance in the DESIGN.md form: Beckmann D,
+    `lightcurve.core.photometry` (Cook–Torrance in the DESIGN.md form: Beckmann D,
     G = min(1, 2(n̂·ĥ)(n̂·ô)/(ô·ĥ), 2(n̂·ĥ)(n̂·ŝ)/(ô·ĥ)), standard Fresnel with n from F0);
     returns None when a facet uses another BRDF.
     """
-    from ..photometry.kernels import COOK_TORRANCE, LAMBERT
+    from ..core.photometry import COOK_TORRANCE, LAMBERT
 
     n, areas0, ids, prm0 = shape.kernel_arrays()
     areas = areas0 if areas is None else areas

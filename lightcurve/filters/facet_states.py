@@ -53,8 +53,8 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
-from ..photometry.kernels import COOK_TORRANCE, brdf_product_nb
-from ..photometry.partials import kernel_capable, magnitude_partials_q_nb
+from ..core.photometry import COOK_TORRANCE, brdf_product_nb, magnitude_partials_q_nb
+from ..photometry.partials import kernel_capable
 from ..rotations import qrot_xyz_nb
 from ._kernels import _fill_facet_arrays, _flux
 
@@ -451,8 +451,7 @@ class FacetParameterStates:
         with np.errstate(divide="ignore", invalid="ignore"):
             mp = magnitude_partials(self.shape_at(z), q[None, :], model.s_eci[k:k + 1],
                                     model.o_eci[k:k + 1], model.range_obs[k:k + 1],
-                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag,
-                                    backend="numpy")
+                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag)
         cols = (mp.dm_dxi[0], mp.dm_da[0], mp.dm_dm[0], mp.dm_dA[0])
         dm_dp = np.array([cols[c][f] for c, f in zip(self.kind_col, self.facet)])
         m = float(mp.m[0]) + float(model.lit_offset[k])

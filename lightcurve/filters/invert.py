@@ -45,7 +45,7 @@ VARIANTS = ("robust", "thesis")
 
 
 def _scenario_table(curve, name):
-    """The [name] table of the scenario TOML stored in the file ({} if none)."""
+    """The raw [name] table of the scenario TOML stored in the file ({} if none)."""
     txt = getattr(curve, "scenario_toml", "") or ""
     if not txt.strip():
         return {}
@@ -70,28 +70,24 @@ def resolve_variant(curve, variant=None) -> str:
     return v
 
 
-def _scenario_attitude(curve):
-    """The [attitude] table of the scenario TOML stored in the file ({} if none)."""
-    return _scenario_table(curve, "attitude")
+def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
+    """The ``[attitude]`` of the scenario stored in the file, through the validated scenario
+    loader (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as
+    the resolved shape): keys ``dynamics``, ``acs_sigma_deg``, ``acs_mode``,
+    ``eta_sigma_deg_s2`` (sized from ``drift_deg_per_orbit`` there when the file gives that,
+    Bernard §9.2.4) and ``inertia_kg_m2`` when the scenario sets it. ``{}`` when the file has
+    no scenario."""
+    if not (getattr(curve, "scenario_toml", "") or "").strip():
+        return {}
+    from ..studies.scenario import scenario_from_lightcurve
 
-
-def _scenario_eta_deg(curve, at):
-    """η level (deg/s^{3/2}) of the stored scenario: ``eta_sigma_deg_s2``, or sized from
-    ``drift_deg_per_orbit`` and the [orbit]'s period (Bernard §9.2.4; the simulator's rule,
-    :func:`lightcurve.studies.scenario.eta_sigma_from_drift`)."""
-    if "drift_deg_per_orbit" not in at:
-        return float(at.get("eta_sigma_deg_s2", 0.0))
-    from ..geometry.orbits import orbit_from_section
-    from ..studies.scenario import eta_sigma_from_drift, orbital_period_s
-
-    orb = _scenario_table(curve, "orbit")
-    try:
-        orbit = orbit_from_section(orb)
-    except (InputError, ValueError, TypeError):
-        raise InputError("drift_deg_per_orbit needs the scenario's [orbit] to size the process "
-                         "noise", field="attitude.drift_deg_per_orbit") from None
-    return eta_sigma_from_drift(float(at["drift_deg_per_orbit"]),
-                                orbital_period_s(orbit, curve.epoch_utc))
+    at = scenario_from_lightcurve(curve, (curve.attrs or {}).get("file"), shape=shape,
+                                  library_dirs=library_dirs, site_dirs=site_dirs).attitude
+    out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
+           "acs_mode": at.acs_mode, "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
+    if at.inertia_kg_m2 is not None:
+        out["inertia_kg_m2"] = at.inertia_kg_m2
+    return out
 
 
 def _check_curve(curve):
@@ -125,14 +121,17 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                   initial_q=None, initial_omega=None, shape=None, dynamics=None,
                   acs_sigma_deg=None, acs_mode=None, pseudo_noise=0.0,
                   eta_sigma_deg_s2=None, inertia_kg_m2=None, substep_s=0.5,
-                  attitude="estimate", init_seed=None) -> FilterProblem:
+                  attitude="estimate", library_dirs=None, site_dirs=None,
+                  init_seed=None) -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
     Parameters mirror :func:`invert`; ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` /
     ``dynamics`` / ``acs_mode`` default to the scenario stored in the lightcurve file (ACS 0,
-    "controlled" and "random_walk" when the file has none). ``attitude="truth"`` sets
-    ``FilterProblem.attitude_known`` (needs truth in the file). ``init_seed`` seeds the
-    initial-estimate perturbation (default ``seed``).
+    "controlled" and "random_walk" when the file has none). ``init_seed`` seeds the
+    initial-estimate perturbation (default ``seed``). ``attitude="truth"`` sets
+    ``FilterProblem.attitude_known`` (needs truth in the file). The shape is
+    :meth:`Lightcurve.resolve_shape` (``shape`` > the file's stored shape > its
+    ``attrs["shape"]`` from the library, with ``library_dirs``).
     """
     _check_curve(curve)
     if attitude not in ATTITUDE_MODES:
@@ -141,19 +140,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     if attitude == "truth" and not curve.has_truth:
         raise InputError("attitude known (truth) needs a lightcurve with truth_q and "
                          "truth_omega_rad_s", field="attitude", value=attitude)
-    if shape is None:
-        name = (curve.attrs or {}).get("shape", "")
-        if not name:
-            raise InputError("the lightcurve names no shape (attrs['shape']); pass shape=",
-                             field="attrs.shape")
-        from ..photometry import load_shape
-
-        shape = load_shape(str(name))
-    elif isinstance(shape, str):
-        from ..photometry import load_shape
-
-        shape = load_shape(shape)
-    at = _scenario_attitude(curve)
+    shape = curve.resolve_shape(shape, library_dirs=library_dirs)
+    at = _scenario_attitude(curve, shape, library_dirs=library_dirs, site_dirs=site_dirs)
     dyn_kind = dynamics or at.get("dynamics", "controlled")
     if dyn_kind not in ("controlled", "uncontrolled"):
         raise InputError("unknown dynamics", field="dynamics", value=dyn_kind,
@@ -173,7 +161,7 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
             J = at.get("inertia_kg_m2")
         if J is None:
             J = shape.inertia_kg_m2
-        eta = _scenario_eta_deg(curve, at) if eta_sigma_deg_s2 is None \
+        eta = float(at.get("eta_sigma_deg_s2", 0.0)) if eta_sigma_deg_s2 is None \
             else float(eta_sigma_deg_s2)
         dyn = UncontrolledDynamics(J, eta_psd=np.radians(eta) ** 2, substep_s=substep_s,
                                    pseudo_noise=pseudo_noise)
@@ -192,8 +180,11 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     dw = rng.standard_normal(3) * sw_r
     if initial_q is None:
         if not curve.has_truth:
-            raise InputError("no truth in the lightcurve: give initial_q (and initial_omega)",
-                             field="initial_q")
+            # truth-free data (a recording): the filter needs a starting attitude from the user
+            # (or from a global initialisation step, when one exists)
+            raise InputError("the lightcurve has no truth attitude to start from: give an "
+                             "initial estimate (initial_q, initial_omega; CLI --initial-q "
+                             "Q1,Q2,Q3,Q4 --initial-omega-deg-s WX,WY,WZ)", field="initial_q")
         q0 = rot.quat_mult(rot.rotvec_to_quat(dth), rot.quat_normalize(curve.truth_q[0]))
     else:
         q0 = np.asarray(initial_q, float).reshape(4)
@@ -202,7 +193,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                              value=q0.tolist())
     if initial_omega is None:
         if curve.truth_omega_rad_s is None:
-            raise InputError("no truth rate in the lightcurve: give initial_omega",
+            raise InputError("the lightcurve has no truth rate to start from: give "
+                             "initial_omega (CLI --initial-omega-deg-s WX,WY,WZ)",
                              field="initial_omega")
         w0 = curve.truth_omega_rad_s[0] + dw
     else:
@@ -213,7 +205,8 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
     meta = {"seed": int(seed), "init_seed": int(seed if init_seed is None else init_seed),
             "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
             "dynamics": dyn_kind, "acs_sigma_deg": float(np.degrees(dyn.acs_sigma)),
-            "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", "")}
+            "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", ""),
+            "epoch_utc": curve.epoch_utc}
     if attitude == "truth":
         meta["attitude"] = "truth"
     return FilterProblem(model=model, dynamics=dyn, q0=q0, omega0=w0, P0=P0,
@@ -229,7 +222,8 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
            keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
            reflection_process_noise=0.0, reflection_facets=None,
            reflection_kinds=("xi", "a", "m", "A"), gate=None,
-           rejuvenation="auto", variant=None, init_seed=None) -> Estimate:
+           rejuvenation="auto", library_dirs=None, site_dirs=None, variant=None,
+           init_seed=None) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -251,7 +245,11 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     initial_q, initial_omega :
         User initial estimate (inertial→body quaternion; rad/s body axes) instead of the
         perturbed truth.
-    shape : Shape or str, optional (default ``curve.attrs["shape"]``)
+    shape : Shape or str, optional
+        Default: the shape the file carries, else ``curve.attrs["shape"]`` from the library.
+    library_dirs, site_dirs : optional
+        Extra shape-library / observatory folders for a shape named by ``shape`` or by the
+        file, and for the file's scenario.
     dynamics : {"controlled", "uncontrolled"}, optional (default: the file's scenario)
     acs_sigma_deg : float, optional — ACS noise 1σ (deg); default the scenario's.
     acs_mode : {"random_walk", "jitter"}, optional — see :mod:`lightcurve.filters.models`;
@@ -299,7 +297,9 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
                             initial_omega=initial_omega, shape=shape, dynamics=dynamics,
                             acs_sigma_deg=acs_sigma_deg, acs_mode=acs_mode,
                             pseudo_noise=pseudo_noise, eta_sigma_deg_s2=eta_sigma_deg_s2,
-                            inertia_kg_m2=inertia_kg_m2, attitude=attitude, init_seed=init_seed)
+                            inertia_kg_m2=inertia_kg_m2, attitude=attitude,
+                            library_dirs=library_dirs, site_dirs=site_dirs,
+                            init_seed=init_seed)
     problem.meta["method"] = method
     problem.meta["variant"] = variant
     if gate is None and variant == "thesis":
@@ -335,22 +335,44 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     if method == "mekf":
         from .mekf import run_mekf
 
-        return run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
-    if method == "ukf":
-        if variant == "thesis":
-            from .ukf_thesis import run_ukf_thesis
+        est = run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
+    elif method == "ukf" and variant == "thesis":
+        from .ukf_thesis import run_ukf_thesis
 
-            return run_ukf_thesis(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias,
-                                  facets=facets)
+        est = run_ukf_thesis(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias,
+                             facets=facets)
+    elif method == "ukf":
         from .ukf import run_ukf
 
-        return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
-    from .bpf import run_bpf
+        est = run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
+    else:
+        from .bpf import run_bpf
 
-    extra = {"bias": bias, "facets": facets, "attitude": attitude,
-             "rejuvenation": rejuvenation}
-    problem.meta.update({"particles": int(particles), "roughening": float(roughening),
-                         "resampling": resampling, "ess_threshold": float(ess_threshold)})
-    return run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
-                   resampling=resampling, ess_threshold=ess_threshold, keep_clouds=keep_clouds,
-                   **extra)
+        extra = {"bias": bias, "facets": facets, "attitude": attitude,
+                 "rejuvenation": rejuvenation}
+        problem.meta.update({"particles": int(particles), "roughening": float(roughening),
+                             "resampling": resampling, "ess_threshold": float(ess_threshold)})
+        est = run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
+                      resampling=resampling, ess_threshold=ess_threshold,
+                      keep_clouds=keep_clouds, **extra)
+    attach_measurements(est, curve, problem.model)
+    return est
+
+
+def attach_measurements(est, curve, model) -> None:
+    """Record what a real-data plot of ``est`` needs (:class:`Estimate` fields): the epoch,
+    the source file, the measured magnitudes, their σ and sites, and ``mag_post`` — the
+    measurement model's magnitude at the posterior attitude of every epoch (nominal shape,
+    no bias states; +inf where no light reaches the observer)."""
+    est.epoch_utc = str(curve.epoch_utc)
+    est.source_file = str((curve.attrs or {}).get("file", "") or "")
+    est.mag = np.asarray(curve.mag, float).copy()
+    est.mag_sigma = np.asarray(curve.mag_sigma, float).copy()
+    est.site = np.asarray(curve.site, np.int64).copy()
+    est.site_names = list(curve.site_names)
+    q = np.asarray(est.q, float)
+    post = np.full(len(curve), np.nan)
+    for k in range(len(curve)):
+        if np.all(np.isfinite(q[k])):
+            post[k] = float(model.predict_q(q[k], k)[0])
+    est.mag_post = post

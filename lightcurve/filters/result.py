@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import rotations as rot
 from ..io.atomic import atomic_path
+from ..report.views import EstimateViews
 
 __all__ = ["Estimate", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
            "FLAG_RESAMPLED", "FLAG_NIS", "FLAG_OUTLIER", "FLAG_INFLATED", "FLAG_GATE_RELEASED",
@@ -49,8 +50,8 @@ FLAG_BELOW_HORIZON = 1024
 _FAIL = FLAG_REFUSED | FLAG_COLLAPSE
 
 
-@dataclass
-class Estimate:
+@dataclass(repr=False)
+class Estimate(EstimateViews):
     """Result of one filter run (module docstring for meanings and units).
 
     Attributes
@@ -78,6 +79,15 @@ class Estimate:
     refl_names : list of Model 3 state names (``"xi[5]"`` …) or None
     refl_z, refl_z_sigma : (N,D) Model 3 states in unconstrained coordinates (logit/ln) and 1σ
     refl_p, refl_p_sigma : (N,D) the same in physical units (ξ, a, m dimensionless; A m²)
+    epoch_utc : str — ISO 8601 UTC epoch that ``t`` counts from ('' if unknown)
+    source_file : str — the lightcurve file inverted ('' if unknown)
+    mag, mag_sigma : (N,) measured magnitudes and their 1σ (mag) or None
+    site : (N,) int site index of every epoch, ``site_names`` the site ids, or None
+    mag_post : (N,) model magnitude at the posterior attitude of every epoch (mag; nominal
+        shape, no bias states; +inf where no light reaches the observer) or None
+
+    Derived: :attr:`mag_pred` = ``mag − innovations`` (the prior prediction ŷ used by the
+    update) and :attr:`nis` = ``ν² / S`` (normalised innovation squared, χ²₁ when consistent).
     """
 
     method: str
@@ -107,9 +117,30 @@ class Estimate:
     refl_z_sigma: np.ndarray | None = None
     refl_p: np.ndarray | None = None
     refl_p_sigma: np.ndarray | None = None
+    epoch_utc: str = ""
+    source_file: str = ""
+    mag: np.ndarray | None = None
+    mag_sigma: np.ndarray | None = None
+    site: np.ndarray | None = None
+    site_names: list | None = None
+    mag_post: np.ndarray | None = None
 
     def __len__(self):
         return int(self.t.shape[0])
+
+    @property
+    def mag_pred(self) -> np.ndarray | None:
+        """(N,) prior predicted magnitude ``ŷ = y − ν`` (mag; NaN where no update)."""
+        if self.mag is None:
+            return None
+        return np.asarray(self.mag, float) - np.asarray(self.innovations, float)
+
+    @property
+    def nis(self) -> np.ndarray:
+        """(N,) normalised innovation squared ``ν² / S`` (NaN where no update)."""
+        v = np.asarray(self.innovation_var, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(v > 0, np.asarray(self.innovations, float) ** 2 / v, np.nan)
 
     # ------------------------------------------------------------------------------------
     def attach_truth(self, truth_q, truth_omega_rad_s, extra_att_var=0.0):
@@ -225,7 +256,12 @@ class Estimate:
                                     ("refl_z", "logit/ln of the facet parameters"),
                                     ("refl_z_sigma", "logit/ln units"),
                                     ("refl_p", "xi, a, m dimensionless; A m^2"),
-                                    ("refl_p_sigma", "xi, a, m dimensionless; A m^2")):
+                                    ("refl_p_sigma", "xi, a, m dimensionless; A m^2"),
+                                    ("mag", "mag, measured"), ("mag_sigma", "mag, 1 sigma"),
+                                    ("site", "index into site_names"),
+                                    ("mag_post", "mag, model at the posterior attitude"),
+                                    ("mag_pred", "mag, prior prediction y - innovation"),
+                                    ("nis", "innovation^2 / innovation_var")):
                     v = getattr(self, name)
                     if v is None:
                         continue
@@ -233,6 +269,10 @@ class Estimate:
                     d.attrs["units"] = units
                 if self.refl_names is not None:
                     h.attrs["refl_names_json"] = json.dumps(list(self.refl_names))
+                h.attrs["epoch_utc"] = str(self.epoch_utc)
+                h.attrs["source_file"] = str(self.source_file)
+                if self.site_names is not None:
+                    h.attrs["site_names_json"] = json.dumps([str(x) for x in self.site_names])
                 if self.clouds:
                     g = h.create_group("clouds")
                     g.attrs["units"] = "deg, particle error rotation vectors, body axes"
@@ -242,31 +282,38 @@ class Estimate:
 
 
 def read_estimate(path) -> Estimate:
-    """Read an HDF5 estimate written by :meth:`Estimate.write`."""
+    """Read an HDF5 estimate written by :meth:`Estimate.write` (opened through
+    :func:`lightcurve.io.safe_open.open_hdf5`: regular file, no external data, declared sizes
+    checked before reading)."""
     import json
 
-    import h5py
-
     from ..errors import InputError
+    from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)
-    try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"cannot open estimate file: {exc}", file=path) from None
-    with h:
+    cap = 4 * 10**8  # elements per dataset (the particle clouds are the largest)
+    with open_hdf5(path) as h:
         if h.attrs.get("format") != "lightcurve-estimate":
             raise InputError("not a lightcurve estimate file", file=path, field="format",
                              value=h.attrs.get("format"), allowed="lightcurve-estimate")
-        kw = {n: (np.asarray(h[n]) if n in h else None) for n in (
-            "t", "q", "omega_rad_s", "cov", "att_sigma_deg", "omega_sigma_rad_s", "innovations",
-            "innovation_var", "n_eff", "flags", "att_error_deg", "omega_error_rad_s", "nees",
-            "bias", "bias_sigma", "refl_z", "refl_z_sigma", "refl_p", "refl_p_sigma")}
+        kw = {n: (None if n not in h else np.asarray(read_dataset(h, n, max_elements=cap,
+                                                                    file=path)))
+              for n in ("t", "q", "omega_rad_s", "cov", "att_sigma_deg", "omega_sigma_rad_s",
+                        "innovations", "innovation_var", "n_eff", "flags", "att_error_deg",
+                        "omega_error_rad_s", "nees", "bias", "bias_sigma", "refl_z",
+                        "refl_z_sigma", "refl_p", "refl_p_sigma", "mag", "mag_sigma", "site",
+                        "mag_post")}
+        kw["epoch_utc"] = str(h.attrs.get("epoch_utc", ""))
+        kw["source_file"] = str(h.attrs.get("source_file", ""))
+        if "site_names_json" in h.attrs:
+            kw["site_names"] = json.loads(str(h.attrs["site_names_json"]))
         if "refl_names_json" in h.attrs:
             kw["refl_names"] = json.loads(str(h.attrs["refl_names_json"]))
         clouds = None
         if "clouds" in h:
-            clouds = {int(n.split("_")[1]): np.asarray(h["clouds"][n]) for n in h["clouds"]}
+            clouds = {int(n.split("_")[1]): np.asarray(read_dataset(h, f"clouds/{n}",
+                                                                    max_elements=cap, file=path))
+                      for n in h["clouds"]}
         return Estimate(method=str(h.attrs["method"]), skipped_nan=int(h.attrs["skipped_nan"]),
                         clouds=clouds,
                         diverged=bool(h.attrs["diverged"]),

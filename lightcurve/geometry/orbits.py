@@ -40,6 +40,7 @@ __all__ = [
     "zonal_acceleration",
     "propagate_orbit",
     "tle_positions",
+    "satellite_positions",
     "check_tle",
     "geodetic_height_m",
     "positions_from_topocentric",
@@ -399,17 +400,28 @@ def tle_positions(line1: str, line2: str, epoch_utc, t_s):
     its epoch, growing by km per day). Raises :class:`InputError` for a malformed TLE or when
     SGP4 reports an error (e.g. decayed) at any requested time.
     """
+    return satellite_positions(_earth_satellite(line1, line2), epoch_utc, t_s)
+
+
+def satellite_positions(sat, epoch_utc, t_s):
+    """GCRS position (m) and velocity (m/s), each ``(N, 3)``, of a skyfield ``EarthSatellite``
+    (SGP4, TEME → GCRS by skyfield) at ``epoch_utc + t_s`` (or at a skyfield ``Time``).
+
+    Raises :class:`InputError` when SGP4 reports an error (e.g. decayed) at any time.
+    """
     from .time import _is_time, skyfield_times
 
-    sat = _earth_satellite(line1, line2)
     t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     p = sat.at(t)
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T
     if not np.all(np.isfinite(r)):
         msg = getattr(p, "message", None)
-        raise InputError(f"SGP4 failed for this TLE at some requested times: {msg}",
-                         field="line1/line2")
+        msgs = sorted({str(m) for m in np.atleast_1d(np.asarray(msg, dtype=object))
+                       if m is not None}) if msg is not None else []
+        bad = int(np.sum(~np.all(np.isfinite(r), axis=1)))
+        raise InputError(f"SGP4 failed for this element set at {bad} of {r.shape[0]} requested "
+                         f"times: {'; '.join(msgs) or 'no position'}", field="line1/line2")
     return np.ascontiguousarray(r), np.ascontiguousarray(v)
 
 

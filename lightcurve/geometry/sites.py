@@ -39,6 +39,7 @@ __all__ = [
     "load_sites",
     "get_site",
     "site_from_section",
+    "inline_site_id",
     "site_position_gcrs",
     "site_position_velocity_gcrs",
     "site_itrs_m",
@@ -140,11 +141,34 @@ class Site:
         return "\n".join(lines)
 
 
+def inline_site_id(table, position: int | None = None) -> str:
+    """The id of an inline site table (the id rule, docs/formats.md "Sites").
+
+    1. its ``id`` key when given (validated by :func:`site_from_section`);
+    2. else its ``name`` turned into an id: lower case, every run of characters other than
+       ``a-z``, ``0-9``, ``_`` and ``-`` replaced by one ``-``, leading/trailing ``-`` removed
+       (``"My Site 2"`` → ``"my-site-2"``);
+    3. else ``site-<k>`` for the k-th (1-based) ``[[sites]]`` entry of a scenario
+       (``position`` = k − 1), or ``"inline"`` for a table outside a scenario.
+    """
+    data = table.data if isinstance(table, Section) else dict(table)
+    sid = data.get("id")
+    if isinstance(sid, str):
+        return sid
+    name = data.get("name")
+    if isinstance(name, str):
+        slug = re.sub(r"[^a-z0-9_\-]+", "-", name.strip().lower()).strip("-")
+        if slug and _ID_RE.match(slug):
+            return slug
+    return "inline" if position is None else f"site-{int(position) + 1}"
+
+
 def site_from_section(sec: Section, *, site_id: str | None = None) -> Site:
     """Build a :class:`Site` from a validated TOML table (a site file or an inline table).
 
-    Inline tables in scenarios need only ``lat_deg``, ``lon_deg``, ``height_m``; ``id``
-    defaults to ``site_id`` or ``"inline"``.
+    Inline tables need only ``lat_deg``, ``lon_deg``, ``height_m``; without ``id`` the id is
+    ``site_id`` (callers pass :func:`inline_site_id`; a site file passes its file stem) or
+    ``"inline"``.
     """
     sid = sec.str("id", site_id or "inline")
     if not _ID_RE.match(sid):
@@ -256,9 +280,9 @@ def get_site(spec, dirs=None) -> Site:
                              allowed=", ".join(sorted(sites)) or "(no sites in the catalog)")
         return sites[spec]
     if isinstance(spec, Section):
-        return site_from_section(spec)
+        return site_from_section(spec, site_id=inline_site_id(spec))
     if isinstance(spec, dict):
-        return site_from_section(Section(spec, name="site"))
+        return site_from_section(Section(spec, name="site"), site_id=inline_site_id(spec))
     raise InputError("expected a site id or a table with lat_deg, lon_deg, height_m",
                      field="site", value=spec)
 

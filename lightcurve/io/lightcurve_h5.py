@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..report.views import LightcurveViews
 from .atomic import atomic_path
 
 __all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
@@ -22,8 +23,8 @@ __all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
 FORMAT_VERSION = 1
 
 
-@dataclass
-class Lightcurve:
+@dataclass(repr=False)
+class Lightcurve(LightcurveViews):
     """Apparent-magnitude time series with its observation geometry.
 
     Attributes (N measurements, K sites)
@@ -42,8 +43,14 @@ class Lightcurve:
     truth_q : (N, 4) or None, inertial→body quaternion (scalar first)
     truth_omega_rad_s : (N, 3) or None, body angular velocity in body axes
     truth_mag : (N,) or None, noise-free magnitude
-    scenario_toml : str, the scenario that produced the file ('' for imported recordings)
-    attrs : dict, further metadata (e.g. shape name, r_percent)
+    scenario_toml : str, the scenario that produced (or models) the file ('' when none)
+    attrs : dict, further metadata (e.g. shape name, r_percent, band, sun_mag, object_id)
+    camera : (N,) int or None, index into ``camera_names`` (None: one camera per site)
+    camera_names : list[str] or None, camera ids (each belongs to one site)
+    exposure_s : (N,) float or None, exposure duration (s; NaN where unknown); ``t`` is then
+        the mid-exposure time
+    shape : Shape or None, the resolved shape (facets, materials, mesh) the file carries
+        (:mod:`lightcurve.io.shape_h5`); every command uses it unless told otherwise
     """
 
     epoch_utc: str
@@ -63,8 +70,16 @@ class Lightcurve:
     truth_mag: np.ndarray | None = None
     scenario_toml: str = ""
     attrs: dict = field(default_factory=dict)
+    camera: np.ndarray | None = None
+    camera_names: list | None = None
+    exposure_s: np.ndarray | None = None
+    shape: object = None
 
     def __post_init__(self):
+        if not isinstance(self.epoch_utc, str):  # datetime, numpy.datetime64, skyfield/astropy Time
+            from ..geometry.time import epoch_iso
+
+            self.epoch_utc = epoch_iso(self.epoch_utc)
         self.validate()
 
     # ------------------------------------------------------------------------------------
@@ -167,16 +182,19 @@ class Lightcurve:
         self.site_names = [str(s) for s in self.site_names]
         if n and (self.site.min() < 0 or self.site.max() >= k):
             raise err("site", "site index out of range", allowed=f"0..{k - 1}")
-        if n > 1:  # the same site measuring twice at one instant: a duplicated row
+        self._validate_cameras(err, n)
+        if n > 1:  # the same camera measuring twice at one instant: a duplicated row
             same = (np.diff(self.t) == 0)
             if np.any(same):
-                order = np.lexsort((self.site, self.t))
-                dup = (np.diff(self.t[order]) == 0) & (np.diff(self.site[order]) == 0)
+                cam = self.camera if self.camera is not None else np.zeros(n, np.int64)
+                order = np.lexsort((cam, self.site, self.t))
+                dup = ((np.diff(self.t[order]) == 0) & (np.diff(self.site[order]) == 0)
+                       & (np.diff(cam[order]) == 0))
                 if np.any(dup):
                     j = int(order[int(np.argmax(dup)) + 1])
-                    raise err("t", f"duplicated measurement: row {j} repeats the time and site of "
-                              "another row", value=float(self.t[j]),
-                              allowed="one measurement per (time, site)")
+                    raise err("t", f"duplicated measurement: row {j} repeats the time, site and "
+                              "camera of another row", value=float(self.t[j]),
+                              allowed="one measurement per (time, site, camera)")
         try:
             self.site_lla_deg_m = np.asarray(self.site_lla_deg_m, dtype=float).reshape(k, 3)
         except ValueError:
@@ -192,6 +210,35 @@ class Lightcurve:
             nq = np.linalg.norm(self.truth_q, axis=1)
             if np.any(np.abs(nq - 1) > 1e-6):
                 raise err("truth_q", "quaternions must have unit norm")
+
+    def _validate_cameras(self, err, n) -> None:
+        """Camera indices, names and exposure times (all optional)."""
+        if (self.camera is None) != (self.camera_names is None):
+            raise err("camera", "camera and cameras/name must both be present or both absent")
+        if self.camera is not None:
+            f = np.asarray(self.camera, dtype=float)
+            if f.shape != (n,) or not np.all(np.isfinite(f) & (f == np.round(f))):
+                raise err("camera", f"expected ({n},) integer camera indices", value=f.shape)
+            self.camera = f.astype(np.int64)
+            self.camera_names = [str(c) for c in self.camera_names]
+            kc = len(self.camera_names)
+            if n and (self.camera.min() < 0 or self.camera.max() >= kc):
+                raise err("camera", "camera index out of range", allowed=f"0..{kc - 1}")
+            if len(set(self.camera_names)) != kc:
+                raise err("cameras/name", "camera ids must be distinct", value=self.camera_names)
+            for c in range(kc):  # a camera belongs to one site
+                sites = np.unique(self.site[self.camera == c])
+                if sites.size > 1:
+                    raise err("camera", f"camera {self.camera_names[c]!r} appears at several sites",
+                              value=[self.site_names[i] for i in sites],
+                              allowed="one site per camera id")
+        if self.exposure_s is not None:
+            e = np.asarray(self.exposure_s, dtype=float)
+            if e.shape != (n,):
+                raise err("exposure_s", f"expected shape ({n},), got {e.shape}")
+            if np.any(np.isinf(e) | (e < 0)) or np.any(e > 3600.0):
+                raise err("exposure_s", "exposure times must be in [0, 3600] s (NaN = unknown)")
+            self.exposure_s = e
 
     def _check_time_span(self, err) -> None:
         """The epoch parses and every time lies inside the DE421 ephemeris (1899-07-30 to
@@ -210,6 +257,33 @@ class Lightcurve:
                 raise err("t", f"time at row {k} is outside the DE421 ephemeris",
                           value=float(self.t[k]), allowed=f"[{lo:.0f}, {hi:.0f}] s from epoch_utc "
                           "(1899-07-30 to 2053-10-08 UTC)")
+
+    def resolve_shape(self, shape=None, library_dirs=None):
+        """The shape to model this lightcurve with.
+
+        In this order: ``shape`` when given (a :class:`Shape`, a library name or a shape TOML
+        path, looked up in ``library_dirs`` then the bundled library); else the shape the file
+        carries (:attr:`shape`); else the library shape named by ``attrs["shape"]``.
+
+        Raises
+        ------
+        InputError
+            No shape given, stored or named; or the named shape cannot be loaded.
+        """
+        from ..photometry import load_shape
+
+        if shape is not None:
+            return shape if not isinstance(shape, (str, Path, tuple)) else \
+                load_shape(shape if isinstance(shape, tuple) else str(shape),
+                           library_dirs=library_dirs)
+        if self.shape is not None:
+            return self.shape
+        name = (self.attrs or {}).get("shape", "")
+        if not name:
+            raise InputError("the lightcurve carries no shape and names none: give a shape "
+                             "(--shape NAME|FILE.toml, with --library DIR for a user library)",
+                             field="shape")
+        return load_shape(str(name), library_dirs=library_dirs, library_only=True)  # a name from data
 
     def count_unusable(self) -> dict:
         """Counts of rows a filter must skip: ``{"nan_mag": ...}`` (NaN = not measured)."""
@@ -244,6 +318,17 @@ class Lightcurve:
                     g["lit_fraction"] = self.lit_fraction
                 if self.elevation_rad is not None:
                     g["elevation_rad"] = self.elevation_rad
+                if self.camera is not None:
+                    h["camera"] = self.camera.astype(np.int32)
+                    h.create_group("cameras")["name"] = np.array(self.camera_names,
+                                                                 dtype=h5py.string_dtype())
+                if self.exposure_s is not None:
+                    h["exposure_s"] = self.exposure_s
+                    h["exposure_s"].attrs["units"] = "s (NaN = unknown); t is mid-exposure"
+                if self.shape is not None:
+                    from .shape_h5 import write_shape
+
+                    write_shape(h.create_group("shape"), self.shape)
                 if self.truth_q is not None:
                     g = h.create_group("truth")
                     g["q"] = self.truth_q
@@ -259,52 +344,44 @@ _MAX_ROWS = 50_000_000
 def read_lightcurve(path) -> Lightcurve:
     """Read and validate a lightcurve HDF5 file written by :meth:`Lightcurve.write`.
 
+    The file is opened through :func:`lightcurve.io.safe_open.open_hdf5` (regular file only;
+    external links, external storage, virtual datasets and never-written datasets refused).
+    Every dataset's declared shape is checked against the row count of ``t`` and the total
+    against the memory limit (:func:`lightcurve.memory.check_allocation`) before any of them
+    is read.
+
     Raises :class:`InputError` (naming the file and dataset) for a missing, truncated or
     corrupted file, a wrong format version, missing datasets or inconsistent shapes.
     """
-    import h5py
+    from .safe_open import open_hdf5, read_attr, read_dataset
 
     path = Path(path)
-    if not path.exists():
-        raise InputError("file not found", file=path)
     try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file (truncated or corrupted?): {exc}", file=path) from None
-    try:
-        with h:
+        with open_hdf5(path) as h:
             ver = h.attrs.get("format_version")
             if ver is None:
                 raise InputError("missing root attribute", file=path, field="format_version")
             if int(ver) != FORMAT_VERSION:
                 raise InputError("unsupported format version", file=path, field="format_version",
                                  value=int(ver), allowed=str(FORMAT_VERSION))
+            _check_declared_shapes(h, path)
 
             def ds(name, required=True):
-                if name not in h:
-                    if required:
-                        raise InputError("missing dataset", file=path, field=name)
-                    return None
-                d = h[name]
-                if not isinstance(d, h5py.Dataset):
-                    raise InputError("expected a dataset", file=path, field=name)
-                if d.size > _MAX_ROWS * 4:
-                    raise InputError("dataset too large", file=path, field=name, value=d.shape)
-                try:
-                    return d[()]
-                except (OSError, RuntimeError) as exc:
-                    raise InputError(f"cannot read dataset (corrupted?): {exc}", file=path, field=name) from None
+                return read_dataset(h, name, max_elements=_MAX_ROWS * 4, file=path,
+                                    required=required)
 
             names = ds("sites/name")
             names = [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(names)]
-            meta = {k[5:]: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()
-                    if k.startswith("meta_")}
-            epoch = h.attrs.get("epoch_utc")
+            meta = {}
+            for k in h.attrs:
+                if k.startswith("meta_"):
+                    meta[k[5:]] = read_attr(h, k, file=path)
+            epoch = read_attr(h, "epoch_utc", file=path)
             if epoch is None:
                 raise InputError("missing root attribute", file=path, field="epoch_utc")
-            scen = h.attrs.get("scenario", "")
+            scen = read_attr(h, "scenario", "", file=path)
             kw = dict(
-                epoch_utc=epoch.decode() if isinstance(epoch, bytes) else str(epoch),
+                epoch_utc=str(epoch),
                 t=ds("t"), mag=ds("mag"), mag_sigma=ds("mag_sigma"), site=ds("site"),
                 site_names=names, site_lla_deg_m=ds("sites/lla_deg_m"),
                 r_obj_eci_m=ds("geometry/r_obj_eci_m"), r_site_eci_m=ds("geometry/r_site_eci_m"),
@@ -313,9 +390,23 @@ def read_lightcurve(path) -> Lightcurve:
                 elevation_rad=ds("geometry/elevation_rad", False),
                 truth_q=ds("truth/q", False), truth_omega_rad_s=ds("truth/omega_rad_s", False),
                 truth_mag=ds("truth/mag", False),
-                scenario_toml=scen.decode() if isinstance(scen, bytes) else str(scen),
+                scenario_toml=str(scen),
                 attrs=meta,
+                camera=ds("camera", False), exposure_s=ds("exposure_s", False),
             )
+            cams = ds("cameras/name", False)
+            kw["camera_names"] = None if cams is None else [
+                c.decode() if isinstance(c, bytes) else str(c) for c in np.atleast_1d(cams)]
+            if "shape" in h:
+                import h5py
+
+                from .shape_h5 import read_shape
+
+                if not isinstance(h["shape"], h5py.Group):
+                    raise InputError("expected a group", file=path, field="shape")
+                kw["shape"] = read_shape(h["shape"], file=path)
+            else:
+                kw["shape"] = None
     except InputError:
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py: damaged file
@@ -333,3 +424,41 @@ def read_lightcurve(path) -> Lightcurve:
     except (ValueError, TypeError) as exc:
         raise InputError(f"inconsistent datasets: {exc}", file=path) from None
     return lc
+
+
+#: per-row datasets and their trailing shapes (checked against ``t`` before any is read)
+_ROW_DATASETS = (("t", ()), ("mag", ()), ("mag_sigma", ()), ("site", ()),
+                 ("geometry/r_obj_eci_m", (3,)), ("geometry/r_site_eci_m", (3,)),
+                 ("geometry/r_sun_eci_m", (3,)), ("geometry/lit_fraction", ()),
+                 ("geometry/elevation_rad", ()), ("truth/q", (4,)), ("truth/omega_rad_s", (3,)),
+                 ("truth/mag", ()))
+
+
+def _check_declared_shapes(h, path) -> None:
+    """Every per-row dataset declares (N, ...) with N = rows of ``t`` <= the row cap, and all
+    of them together fit the memory limit — checked from the declared shapes, nothing read."""
+    import h5py
+
+    from ..memory import check_allocation
+
+    t = h.get("t")
+    if not isinstance(t, h5py.Dataset):
+        raise InputError("missing dataset" if t is None else "expected a dataset", file=path,
+                         field="t")
+    if len(t.shape) != 1:
+        raise InputError("expected a 1-D array of times", file=path, field="t",
+                         value=tuple(int(x) for x in t.shape))
+    n = int(t.shape[0])
+    if n > _MAX_ROWS:
+        raise InputError("too many rows", file=path, field="t", value=n,
+                         allowed=f"<= {_MAX_ROWS} rows")
+    total = 0
+    for name, tail in _ROW_DATASETS:
+        d = h.get(name)
+        if not isinstance(d, h5py.Dataset):
+            continue  # missing or wrong kind: reported when read
+        if tuple(int(x) for x in d.shape) != (n, *tail):
+            raise InputError(f"expected shape {(n, *tail)} (rows of t), got "
+                             f"{tuple(int(x) for x in d.shape)}", file=path, field=name)
+        total += n * int(np.prod(tail, dtype=np.int64)) * 8  # read as float64 / int64
+    check_allocation(2 * total, f"reading {n} rows", file=path, field="t", value=n)

@@ -39,6 +39,7 @@ class ThesisTable:
     title: str
     cells: dict = field(default_factory=dict)
     source: str = ""
+    text: str = ""      # the file's text as read (part of a study's input hash)
 
     def color(self, filter, dynamics, sites, sigma_theta_deg, sigma_omega_deg_s, r_percent):
         """The published colour of one cell, or None (not in the table)."""
@@ -51,11 +52,12 @@ def load_thesis_table(path) -> ThesisTable:
     from ..io.tomlio import Section, load_toml
 
     path = Path(path)
-    root = Section(load_toml(path), file=path)
+    doc, text = load_toml(path, with_text=True)
+    root = Section(doc, file=path)
     fig = root.str("figure")
     title = root.str("title", "")
     root.str("columns", "")
-    tab = ThesisTable(figure=fig, title=title, source=str(path))
+    tab = ThesisTable(figure=fig, title=title, source=str(path), text=text)
     rows = root.sections("row")
     if not rows:
         raise InputError("a thesis table needs [[row]] entries", file=path, field="row")

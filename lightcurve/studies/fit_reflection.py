@@ -57,7 +57,7 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
-from ..photometry.kernels import COOK_TORRANCE, _ct_product
+from ..core.photometry import COOK_TORRANCE, cook_torrance_xyz
 
 __all__ = ["KINDS", "ReflectionPosteriorModel", "ReflectionFit", "ConvergenceError",
            "fit_reflection", "synthetic_reflection_case", "perturb_reflection", "reflection_sbc"]
@@ -96,8 +96,8 @@ def _walker_mags_nb(ns, no, nh, c, fidx, xi, a, m, A, fixed_flux, offset):
             for j in range(K):
                 f = fidx[j]
                 if ns[k, f] > 0.0 and no[k, f] > 0.0:
-                    s += A[w, j] * _ct_product(ns[k, f], no[k, f], nh[k, f], c[k],
-                                               xi[w, j], a[w, j], m[w, j])
+                    s += A[w, j] * cook_torrance_xyz(ns[k, f], no[k, f], nh[k, f], c[k],
+                                                     xi[w, j], a[w, j], m[w, j], False)[0]
             out[w, k] = offset[k] - 2.5 * np.log10(s) if s > 0.0 else np.inf
     return out
 
@@ -418,20 +418,23 @@ class ReflectionFit:
         atomic_write_text(path, json.dumps(self.summary(), indent=2) + "\n")
         return path
 
-    def corner_plot(self, path, max_params=12):
+    def corner_plot(self, path, max_params=8):
         """Corner plot (matplotlib; histograms on the diagonal, sample scatter below) of at most
-        ``max_params`` parameters (identified first), truth marked when known. Returns path."""
+        ``max_params`` parameters (identified first; the title says how many of how many),
+        prior centre dotted, truth in red when known. Screen-sized (≤ 12 in). Returns path."""
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
         from ..io.atomic import atomic_path
+        from ..report.style import DPI
 
         order = list(np.flatnonzero(self.identified)) + list(np.flatnonzero(~self.identified))
         sel = order[:max_params]
         D = len(sel)
-        fig, axes = plt.subplots(D, D, figsize=(1.9 * D + 1, 1.9 * D + 1), squeeze=False)
+        side = min(1.9 * D + 1.2, 11.5)
+        fig, axes = plt.subplots(D, D, figsize=(side, side), squeeze=False)
         S = self.samples_p
         for r, i in enumerate(sel):
             for cidx, j in enumerate(sel):
@@ -455,10 +458,17 @@ class ReflectionFit:
                 if cidx == 0 and r > 0:
                     ax.set_ylabel(self.names[i], fontsize=8)
                 ax.tick_params(labelsize=6)
-        fig.suptitle("reflection-parameter posterior (red: truth, dotted: prior centre)", fontsize=9)
+        shown = (f"all {D} parameters" if D == len(self.names) else
+                 f"{D} of {len(self.names)} parameters (identified first; all of them are in "
+                 "the JSON)")
+        legend = "dotted grey: prior centre" + (", red: truth" if self.truth is not None else
+                                                "; no truth known")
+        fig.suptitle(f"reflection-parameter posterior: {shown}\n{legend}; n.i. = not "
+                     "identified by the data", fontsize=9)
+        fig.tight_layout()
         path = Path(path)
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=90, format=path.suffix.lstrip(".") or "png")
+            fig.savefig(tmp, dpi=DPI, format=path.suffix.lstrip(".") or "png")
         plt.close(fig)
         return path
 
@@ -508,13 +518,16 @@ _LEVELS = (0.005, 0.025, 0.16, 0.5, 0.84, 0.975, 0.995)
 def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets=None, kinds=KINDS,
                    prior_frac=0.1, walkers=None, seed=0, block=500, max_steps=20_000,
                    min_steps=1000, tau_factor=50.0, identify_ratio=0.5, n_predictive=200,
-                   truth=None, allow_unconverged=False, progress=None) -> ReflectionFit:
+                   truth=None, allow_unconverged=False, progress=None,
+                   library_dirs=None) -> ReflectionFit:
     """Sample the posterior of facet reflection parameters (module docstring).
 
     Parameters
     ----------
     curve : Lightcurve
-    shape : Shape, str or None — default ``curve.attrs["shape"]``.
+    shape : Shape, str or None — default the shape the file carries, else
+        ``curve.attrs["shape"]`` (:meth:`Lightcurve.resolve_shape`; ``library_dirs`` are extra
+        shape-library folders for a named shape).
     attitude : {"truth", "estimate"} — use ``curve.truth_q`` or ``estimate.q`` (an
         :class:`~lightcurve.filters.result.Estimate` at the curve's times, or its file path).
         The attitude is held fixed: an estimate's own uncertainty is *not* marginalised, so the
@@ -528,7 +541,9 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     identify_ratio : float — identified when posterior sd / prior sd (in z) is below this.
     n_predictive : int — posterior draws for the predictive bands.
     truth : (D,) physical true parameters (in ``model.names`` order) or None (default: the
-        file's ``attrs["reflection_truth"]`` when it was simulated with ``[reflection]``).
+        file's ``attrs["reflection_truth"]`` when it was simulated with ``[reflection]``; for
+        a file simulated without it and fitted with its own shape, the shape file's values,
+        which made the data).
     allow_unconverged : bool — return an unconverged posterior instead of raising.
 
     Raises
@@ -537,16 +552,9 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     InputError — bad inputs (no truth attitude, mismatched estimate, unknown facet…).
     """
     from ..estimation.mcmc import sample_until_converged
-    from ..photometry import load_shape
 
-    if shape is None:
-        name = (curve.attrs or {}).get("shape", "")
-        if not name:
-            raise InputError("the lightcurve names no shape (attrs['shape']); give one",
-                             field="attrs.shape")
-        shape = load_shape(str(name))
-    elif isinstance(shape, str):
-        shape = load_shape(shape)
+    own_shape = shape is None or shape == (curve.attrs or {}).get("shape")
+    shape = curve.resolve_shape(shape, library_dirs=library_dirs)
     if attitude == "truth":
         if not curve.has_truth:
             raise InputError("the lightcurve has no truth attitude; use --attitude estimate",
@@ -577,6 +585,9 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
         except (ValueError, KeyError, IndexError, TypeError):
             raise InputError("unreadable reflection truth in the lightcurve file",
                              field="attrs.reflection_truth") from None
+    elif truth is None and own_shape and curve.has_truth and (curve.attrs or {}).get("seed") is not None:
+        # simulated without [reflection]: the data were made with the shape file's values
+        truth = [float(v) for v in model.p_nominal]
     D = model.dim
     W = walkers if walkers is not None else max(2 * D + 2, 32)
     W = int(W) + (int(W) % 2)

@@ -22,7 +22,7 @@ from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
 __all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
-           "eta_sigma_from_drift", "orbital_period_s"]
+           "eta_sigma_from_drift", "orbital_period_s", "scenario_from_lightcurve"]
 
 
 @dataclass
@@ -188,17 +188,42 @@ def eta_sigma_from_drift(drift_deg: float, period_s: float) -> float:
     return float(drift_deg) * float(np.sqrt(3.0 / float(period_s) ** 3))
 
 
-def load_scenario(path, library_dirs=None, site_dirs=None) -> Scenario:
-    """Load and validate a scenario TOML file; relative mesh paths resolve against its folder."""
+def load_scenario(path, library_dirs=None, site_dirs=None, *, shape=None) -> Scenario:
+    """Load and validate a scenario TOML file; relative mesh paths resolve against its folder.
+
+    ``shape``: a resolved :class:`~lightcurve.photometry.Shape` used instead of the file's
+    ``[shape]`` (whose keys are still validated), e.g. the shape a lightcurve file carries.
+    """
     path = Path(path)
-    doc = load_toml(path)
-    return parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"),
-                          library_dirs=library_dirs, site_dirs=site_dirs)
+    doc, text = load_toml(path, with_text=True)
+    return parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                          site_dirs=site_dirs, shape=shape)
 
 
 def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs=None,
-                   site_dirs=None) -> Scenario:
-    """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`."""
+                   site_dirs=None, *, embedded: bool = False, shape=None,
+                   sites=None) -> Scenario:
+    """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`.
+
+    Parameters
+    ----------
+    library_dirs, site_dirs : optional
+        Extra shape-library and observatory folders (searched before the bundled ones).
+    embedded : bool
+        True for a scenario read from inside a data file (the ``scenario`` attribute of a
+        lightcurve HDF5 file): it may name a library shape only, never a mesh or shape file by
+        path, so a received file cannot make the program read an arbitrary file.
+    shape : Shape, optional
+        A resolved shape used instead of loading ``[shape]`` (its keys are still validated;
+        ``areas_m2`` is then not applied: the given shape is final).
+    sites : mapping id -> Site, optional
+        Sites consulted first for ``[[sites]] name = "<id>"`` references (e.g. the sites a
+        lightcurve file carries), before ``site_dirs`` and the bundled catalogue.
+
+    Site ids (docs/formats.md "Sites"): a ``name`` without coordinates is a catalogue id;
+    an inline table's id follows :func:`lightcurve.geometry.sites.inline_site_id`. Two
+    entries with one id are an error.
+    """
     from ..geometry.orbits import orbit_from_section
     from ..geometry.sites import get_site
     from ..geometry.time import parse_epoch
@@ -242,6 +267,11 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
 
     sh = root.section("shape")
     base = Path(str(file)).parent if file and not str(file).startswith("<") else Path.cwd()
+    if embedded and (sh.has("mesh") or sh.has("materials")):
+        raise InputError("a scenario stored in a data file may not name mesh or material "
+                         "files", file=file, field="shape.mesh" if sh.has("mesh") else
+                         "shape.materials", allowed="a library shape name (shape.name); give "
+                         "the model scenario as a file instead")
     if sh.has("mesh"):
         mesh = base / sh.str("mesh")
         materials = base / sh.str("materials")
@@ -250,13 +280,15 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         spec = sh.str("name")
     areas = sh.vector("areas_m2", None, min=0.0, min_open=True)
     sh.check_unknown()
-    try:
-        shape = load_shape(spec, library_dirs=library_dirs)
-    except InputError:
-        raise
-    except (FileNotFoundError, KeyError) as exc:
-        raise InputError(f"cannot load shape: {exc}", file=file, field="shape") from None
-    if areas is not None:  # facet areas overriding the library's (e.g. a published unit-area fit)
+    given_shape = shape is not None
+    if not given_shape:
+        try:
+            shape = load_shape(spec, library_dirs=library_dirs, library_only=embedded)
+        except InputError:
+            raise
+        except (FileNotFoundError, KeyError) as exc:
+            raise InputError(f"cannot load shape: {exc}", file=file, field="shape") from None
+    if areas is not None and not given_shape:  # facet areas overriding the library's
         if areas.size != shape.n_facets:
             raise InputError(f"expected {shape.n_facets} facet areas", file=file,
                              field="shape.areas_m2", value=areas.tolist())
@@ -322,18 +354,29 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         att.omega_deg_s = quat_rotate(q0, att.omega_input_deg_s)  # linear: deg/s in, deg/s out
     at.check_unknown()
 
+    from ..geometry.sites import inline_site_id, site_from_section
+
+    known = dict(sites or {})
     sites = []
-    for s in root.sections("sites"):
+    for k_site, s in enumerate(root.sections("sites")):
         if s.has("name") and isinstance(s.data.get("name"), str) and not s.has("lat_deg"):
             sid = s.str("name")
             try:
-                site = get_site(sid, dirs=site_dirs)
+                site = known[sid] if sid in known else get_site(sid, dirs=site_dirs)
             except InputError as exc:  # name the scenario file and the [[sites]] entry
+                allowed = exc.allowed
+                if known:
+                    allowed = ", ".join(sorted(known)) + ", " + (allowed or "")
                 raise InputError(exc.bare_message, file=file, field=f"{s.name}.name", value=sid,
-                                 allowed=exc.allowed) from None
+                                 allowed=allowed) from None
         else:
             inline = {k: s.raw(k) for k in ("name", "id", "lat_deg", "lon_deg", "height_m") if s.has(k)}
-            site = get_site(Section(inline, file=file, name=s.name), dirs=site_dirs)
+            site = site_from_section(Section(inline, file=file, name=s.name),
+                                     site_id=inline_site_id(inline, k_site))
+        if any(x.site.id == site.id for x in sites):
+            raise InputError("two [[sites]] entries with one id (give each inline site its own "
+                             "id or name)", file=file, field=f"{s.name}", value=site.id,
+                             allowed="distinct site ids")
         windows = s.raw("windows_s", [[0.0, duration if duration is not None else 0.0]])
         ok = isinstance(windows, list) and all(
             isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
@@ -396,3 +439,51 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     return Scenario(epoch_utc=epoch, duration_s=duration, cadence_s=cadence, seed=seed, orbit=orbit,
                     shape=shape, attitude=att, sites=sites, measurement=meas, effects=effects,
                     recording=rec, name=name, source=str(file), text=text or "", reflection=refl)
+
+
+def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, site_dirs=None,
+                             scenario=None, shape=None) -> Scenario:
+    """The validated scenario of a lightcurve file, resolved from what the file carries.
+
+    ``scenario``: a scenario TOML path given by the user (it overrides the file's own
+    scenario text); otherwise the scenario text stored in the file (root attribute
+    ``scenario``). Either way ``shape`` (a resolved Shape from the caller) or else the shape
+    the file carries (:attr:`Lightcurve.shape`) replaces the scenario's ``[shape]`` when present, and the file's sites (ids and WGS84 coordinates)
+    answer the scenario's ``[[sites]] name = "<id>"`` references before ``site_dirs`` and the
+    catalogue — so a received file needs neither the shape library nor the site folder it was
+    made with. ``drop``: top-level tables removed before validation (e.g. ``("effects",
+    "diagnosis")``).
+
+    Raises
+    ------
+    InputError
+        No scenario (neither given nor stored), or an invalid one (naming the file).
+    """
+    from ..geometry.sites import Site
+
+    src = str(file) if file is not None else "<lightcurve>"
+    if scenario is not None:
+        path = Path(scenario)
+        doc, text = load_toml(path, with_text=True)   # read once (regular file, size cap)
+        fname = path
+        embedded = False
+    else:
+        text = getattr(curve, "scenario_toml", "") or ""
+        if not text.strip():
+            raise InputError("the file has no embedded scenario: give --scenario MODEL.toml",
+                             file=src, field="scenario")
+        fname = f"{src}:scenario"
+        doc = loads_toml(text, file=fname)
+        embedded = True      # from inside a data file: library shapes only, no file paths
+    for key in drop:
+        doc.pop(key, None)
+    lla = np.asarray(curve.site_lla_deg_m, float).reshape(-1, 3)
+    known = {}
+    for sid, (lat, lon, h) in zip(curve.site_names, lla):
+        try:
+            known[sid] = Site(sid, sid, float(lat), float(lon), float(h), source=f"{src}")
+        except InputError:
+            continue
+    return parse_scenario(doc, file=fname, text=text, library_dirs=library_dirs,
+                          site_dirs=site_dirs, sites=known, embedded=embedded,
+                          shape=shape if shape is not None else getattr(curve, "shape", None))

@@ -71,7 +71,12 @@ def initial_attitude(scenario: Scenario):
 
 def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v_obj_eci_m=None,
                    r_sun_eci_m=None, lit_fraction=None):
-    """Truth quaternions (N,4) and body rates (N,3, rad/s) at sorted unique times ``t_s``."""
+    """Truth quaternions (N,4) and body rates (N,3, rad/s) at sorted unique times ``t_s``.
+
+    ``t_s`` counts seconds from the scenario epoch and must be ≥ 0: the initial attitude
+    (:func:`initial_attitude`) holds AT the epoch (``t0_s = 0``) and is propagated to every
+    requested time, whatever the first requested time is.
+    """
     from ..dynamics import ControlledTruth, UncontrolledTruth
     at = scenario.attitude
     if at.dynamics == "law":  # attitude prescribed by geometry (lightcurve.dynamics.laws)
@@ -84,12 +89,14 @@ def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v
         return q, law_body_rates(q, t_s)
     q0, w0 = initial_attitude(scenario)
     if at.dynamics == "controlled":
-        model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng, mode=at.acs_mode)
+        model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng, t0_s=0.0,
+                                mode=at.acs_mode)
         return model.simulate(t_s)
     J = at.inertia_kg_m2 if at.inertia_kg_m2 is not None else scenario.shape.inertia_kg_m2
     model = UncontrolledTruth(q0, w0, J, torques=at.torques, eta_sigma_rad_s2=np.radians(at.eta_sigma_deg_s2),
                               rng=rng, shape=scenario.shape, orbit=scenario.orbit,
-                              epoch_utc=scenario.epoch_utc, torque_forms=at.torque_forms)
+                              epoch_utc=scenario.epoch_utc, t0_s=0.0,
+                              torque_forms=at.torque_forms)
     return model.simulate(t_s)
 
 
@@ -121,6 +128,7 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     seed = scenario.seed if seed is None else int(seed)
     rng_att, rng_noise = _rngs(seed)
     meas = scenario.measurement
+    nominal_shape = scenario.shape  # the file carries the nominal (model) shape
     refl_truth = None
     refl = getattr(scenario, "reflection", None)
     if refl is not None and refl.perturb:
@@ -220,6 +228,7 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
                "seed": seed, "ignore_eclipse": int(meas.ignore_eclipse), "sun_mag": meas.sun_mag,
                "dropped_below_horizon": counts.below_horizon, "dropped_site_daylight": counts.site_daylight,
                "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": n_no_reflection},
+        shape=nominal_shape,
     )
     if effects_json is not None:
         lc.attrs["effects"] = effects_json

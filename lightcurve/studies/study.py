@@ -149,6 +149,8 @@ class RunTask:
     scenario_text: str
     scenario_file: str
     options: tuple = ()  # sorted (name, value) pairs of [options]
+    library_dirs: tuple = ()  # extra shape-library folders (absolute paths)
+    site_dirs: tuple = ()     # extra observatory folders (absolute paths)
     init_seed: int | None = None  # initial-estimate seed shared by the filters (thesis variant)
 
     @property
@@ -170,6 +172,11 @@ class Study:
     options: dict = field(default_factory=dict)
     source: str = ""
     text: str = ""
+    #: extra shape-library / observatory folders (``lightcurve compare --library/--sites``)
+    library_dirs: tuple = ()
+    site_dirs: tuple = ()
+    #: fingerprints of the shapes resolved from ``library_dirs`` (part of the input hash)
+    shape_fingerprints: dict = field(default_factory=dict)
     #: the published table of the grid (:class:`lightcurve.studies.agreement.ThesisTable`)
     thesis_table: object = None
     #: text of the table file (part of the input hash: it decides which cells run)
@@ -187,6 +194,29 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
+    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
+        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
+        in execution order: scenario keys sorted, then run index, then the cells sharing that
+        scenario key in grid order — runs that share a simulated lightcurve (common random
+        numbers) come back to back. The same set as :meth:`tasks`."""
+        n = self.runs if runs is None else int(runs)
+        opts = tuple(sorted(self.options.items()))
+        groups: dict = {}
+        for c in self.cells:
+            groups.setdefault(c.scenario_key, []).append(c)
+        for key in sorted(groups):
+            cells = groups[key]
+            tags = [c.tag for c in cells]
+            for i in range(n):
+                for c, tag in zip(cells, tags):
+                    if ids_only:
+                        yield f"{tag}_r{i:05d}"
+                        continue
+                    f = self.scenario_files[(c.dynamics, c.sites)]
+                    txt = self.scenario_texts[(c.dynamics, c.sites)]
+                    s, fs = run_seeds(self.seed, c, i)
+                    yield RunTask(c, i, s, fs, txt, str(f), opts)
+
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
@@ -199,7 +229,8 @@ class Study:
             for i in range(n):
                 s, fs = run_seeds(self.seed, c, i)
                 init = init_seed(self.seed, c, i) if shared_init else None
-                out.append(RunTask(c, i, s, fs, txt, str(f), opts, init))
+                out.append(RunTask(c, i, s, fs, txt, str(f), opts, self.library_dirs,
+                                   self.site_dirs, init))
         return out
 
 
@@ -214,6 +245,21 @@ def input_hash(study: Study) -> str:
     for k in sorted(study.scenario_texts):
         h.update(f"\0{k[0]}|{k[1]}\0".encode())
         h.update(study.scenario_texts[k].encode())
+    for k in sorted(study.shape_fingerprints):  # shapes from --library folders (content)
+        h.update(f"\0shape {k[0]}|{k[1]}\0{study.shape_fingerprints[k]}".encode())
+    return h.hexdigest()
+
+
+def shape_fingerprint(shape) -> str:
+    """Hex SHA-256 of a resolved shape's geometry, mass properties and materials."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    for a in (shape.areas_m2, shape.normals_body, shape.centers_body_m, shape.inertia_kg_m2):
+        h.update(np.ascontiguousarray(a, float).tobytes())
+    h.update(repr((shape.name, float(shape.mass_kg),
+                   [(m.name, m.brdf_name, sorted(m.params.items())) for m in shape.materials])
+                  ).encode())
     return h.hexdigest()
 
 
@@ -305,8 +351,42 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
     return out
 
 
-def load_study(path) -> Study:
+def _fill_template(template: str, file, **values) -> str:
+    """``template`` with its ``{name}`` placeholders replaced by ``values``.
+
+    Only bare placeholders are allowed: no attribute or index access (``{dynamics.x}``), no
+    conversion and no format spec (``{sites:>300}`` would pad a path to any length).
+    """
+    import string
+
+    def bad(why):
+        return InputError(f"bad placeholder in the scenario template ({why})", file=file,
+                          field="study.scenario", value=template,
+                          allowed="text with {dynamics} and {sites} placeholders only")
+
+    out = []
+    try:
+        parts = list(string.Formatter().parse(template))
+    except ValueError as exc:
+        raise bad(str(exc)) from None
+    for literal, name, spec, conv in parts:
+        out.append(literal)
+        if name is None:
+            continue
+        if name not in values:
+            raise bad(f"unknown placeholder {{{name}}}")
+        if spec or conv:
+            raise bad(f"{{{name}}} with a format spec or conversion")
+        out.append(str(values[name]))
+    return "".join(out)
+
+
+def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     """Load and validate a study TOML (module docstring); every scenario file is parsed.
+
+    ``library_dirs`` / ``site_dirs``: extra shape-library and observatory folders for the
+    scenarios (they travel with every run task; with ``library_dirs`` the resolved shapes'
+    content is part of the input hash, so a changed library shape is a changed study).
 
     Reflection models: every value of ``grid.reflection`` is a filter option
     (:data:`REFLECTION_MODELS`); the simulated lightcurves do not depend on it (common random
@@ -323,8 +403,7 @@ def load_study(path) -> Study:
     from .scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
-    text = path.read_text(encoding="utf-8")
+    doc, text = load_toml(path, with_text=True)
     root = Section(doc, file=path)
     st = root.section("study")
     name = st.str("name", path.stem)
@@ -344,7 +423,7 @@ def load_study(path) -> Study:
             raise InputError("thesis table not found", file=path, field="study.thesis_table",
                              value=str(tp))
         table = load_thesis_table(tp)
-        table_text = tp.read_text(encoding="utf-8")
+        table_text = table.text
 
     g = root.section("grid")
     axes = {
@@ -370,24 +449,24 @@ def load_study(path) -> Study:
     o.check_unknown()
     root.check_unknown()
 
-    files, texts = {}, {}
+    lib = tuple(str(Path(d).resolve()) for d in (library_dirs or ()))
+    sdirs = tuple(str(Path(d).resolve()) for d in (site_dirs or ()))
+    files, texts, prints = {}, {}, {}
     for dyn in axes["dynamics"]:
         for ns in axes["sites"]:
-            try:
-                rel = template.format(dynamics=dyn, sites=ns)
-            except (KeyError, IndexError, ValueError) as exc:
-                raise InputError(f"bad placeholder in the scenario template ({exc}); use "
-                                 "{dynamics} and {sites}", file=path, field="study.scenario",
-                                 value=template) from None
+            rel = _fill_template(template, path, dynamics=dyn, sites=ns)
             f = Path(rel)
             if not f.is_absolute():
                 f = path.parent / f
-            if not f.is_file():
+            if not f.exists():
                 raise InputError("scenario file not found", file=path, field="study.scenario",
                                  value=str(f), allowed="an existing scenario TOML for every "
                                  "(dynamics, sites) of the grid")
-            txt = f.read_text(encoding="utf-8")
-            sc = parse_scenario(txt, file=f)
+            doc_f, txt = load_toml(f, with_text=True)  # regular file, size cap
+            sc = parse_scenario(doc_f, file=f, text=txt, library_dirs=lib or None,
+                                site_dirs=sdirs or None)
+            if lib:
+                prints[(dyn, ns)] = shape_fingerprint(sc.shape)
             if sc.attitude.dynamics != dyn:
                 raise InputError(f"scenario {f.name} has dynamics {sc.attitude.dynamics!r}, the "
                                  f"grid cell needs {dyn!r}", file=path, field="study.scenario",
@@ -406,5 +485,6 @@ def load_study(path) -> Study:
         cells = [c for c in cells if c not in skipped]
     return Study(name=name, seed=seed, runs=runs, cells=cells, scenario_files=files,
                  scenario_texts=texts, options=opts, source=str(path), text=text,
+                 library_dirs=lib, site_dirs=sdirs, shape_fingerprints=prints,
                  thesis_table=table, thesis_table_text=table_text, skipped_cells=skipped)
 
