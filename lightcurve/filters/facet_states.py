@@ -53,7 +53,12 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
-from ..core.photometry import COOK_TORRANCE, brdf_product_nb, magnitude_partials_q_nb
+from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, brdf_product_nb,
+                               magnitude_partials_q_nb)
+
+#: kernel ids of the Cook–Torrance forms whose ξ, a, m Model 3 can estimate (physical and
+#: Bernard eq. 5.8 diffuse term)
+CT_IDS = (COOK_TORRANCE, COOK_TORRANCE_THESIS)
 from ..photometry.partials import kernel_capable
 from ..rotations import qrot_xyz_nb
 from ._kernels import _fill_facet_arrays, _flux
@@ -224,15 +229,17 @@ def check_kinds(kinds):
     return kinds
 
 
-def select_ct_facets(shape, facets, purpose, field="facets"):
+def select_ct_facets(shape, facets, purpose, field="facets", ids=(COOK_TORRANCE,)):
     """Indices of the Cook–Torrance facets (area > 0) whose parameters are estimated.
 
     ``facets`` None → all of them; otherwise each index must be such a facet (InputError
     naming it and the allowed ones). ``purpose`` completes the message when the shape has
-    none ("estimated (Model 3)", "fitted"). Returns a sorted int64 array.
+    none ("estimated (Model 3)", "fitted"). ``ids``: the accepted kernel ids (default the
+    physical Cook–Torrance only; Model 3 also takes the eq. 5.8 form, :data:`CT_IDS`). Returns a
+    sorted int64 array.
     """
     F = shape.n_facets
-    ct = np.flatnonzero((shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0))
+    ct = np.flatnonzero(np.isin(shape.model_ids, ids) & (shape.areas_m2 > 0))
     if facets is None:
         fidx = ct
     else:
@@ -281,7 +288,8 @@ class FacetParameterStates:
         if not (self.process_noise >= 0 and np.isfinite(self.process_noise)):
             raise InputError("process noise must be >= 0", field="process_noise",
                              value=process_noise)
-        fidx = select_ct_facets(shape, facets, "estimated (Model 3)", field="reflection")
+        fidx = select_ct_facets(shape, facets, "estimated (Model 3)", field="reflection",
+                                ids=CT_IDS)
         self.shape = shape
         self.fidx = np.ascontiguousarray(fidx, dtype=np.int64)
         _, areas, _, params = shape.kernel_arrays()
@@ -389,7 +397,7 @@ class FacetParameterStates:
             else:
                 name = KINDS[c]
                 if name not in kw:
-                    kw[name] = np.where(self.shape.model_ids == COOK_TORRANCE,
+                    kw[name] = np.where(np.isin(self.shape.model_ids, CT_IDS),
                                         self.shape.params[:, c], np.nan)
                 kw[name][f] = p[d]
         return self.shape.copy_with(areas_m2=areas, check=False, **kw)

@@ -58,9 +58,9 @@ def reflection_prior_variance(shape, q, model, frac=0.1, epochs=None):
     with np.errstate(divide="ignore", invalid="ignore"):
         mp = magnitude_partials(shape, np.asarray(q, float), model.s_eci[idx], model.o_eci[idx],
                                 model.range_obs[idx], model.range_sun[idx], sun_mag=model.sun_mag)
-    from ..core.photometry import COOK_TORRANCE
+    from .facet_states import CT_IDS
 
-    ct = shape.model_ids == COOK_TORRANCE
+    ct = np.isin(shape.model_ids, CT_IDS)
     var = (mp.dm_dA * frac * shape.areas_m2[None, :]) ** 2
     for name, col in (("dm_dxi", 0), ("dm_da", 1), ("dm_dm", 2)):
         d = getattr(mp, name)[:, ct] * frac * shape.params[ct, col][None, :]

@@ -101,11 +101,14 @@ def _scenario(text: str, file: str, library_dirs: tuple = (), site_dirs: tuple =
 
 @functools.lru_cache(maxsize=32)
 def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
-                library_dirs: tuple = (), site_dirs: tuple = ()):
+                library_dirs: tuple = (), site_dirs: tuple = (), cook_torrance: str = ""):
+    from .scenario import with_cook_torrance_form
     from .simulate import simulate
 
     sc = _scenario(text, file, library_dirs, site_dirs)
     sc = replace(sc, measurement=replace(sc.measurement, r_percent=float(r_percent)))
+    if cook_torrance:   # study [options] cook_torrance: the diffuse form of truth and filters
+        sc = replace(sc, shape=with_cook_torrance_form(sc.shape, cook_torrance))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the thesis cases ignore the eclipse on purpose
         return simulate(sc, seed=sim_seed)
@@ -141,10 +144,10 @@ def execute_task(task: RunTask) -> dict:
            "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
            "status": "ok", "error": ""}
     try:
+        opts = dict(task.options)
         lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
                          int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
-                         tuple(getattr(task, "site_dirs", ())))
-        opts = dict(task.options)
+                         tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""))
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])

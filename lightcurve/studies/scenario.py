@@ -2,7 +2,8 @@
 
 Sections (documented in docs/formats.md): ``[scenario]`` (epoch_utc, duration_s, cadence_s,
 seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (library name or
-mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
+mesh + materials; ``cook_torrance = "physical" | "thesis"`` selects the diffuse term,
+:func:`with_cook_torrance_form`), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
 ``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[filter]``
 (``variant = "robust" | "thesis"``: the filters ``invert`` runs on the simulated file by
@@ -22,7 +23,8 @@ from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
 __all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
-           "eta_sigma_from_drift", "orbital_period_s", "scenario_from_lightcurve"]
+           "eta_sigma_from_drift", "orbital_period_s", "scenario_from_lightcurve",
+           "with_cook_torrance_form", "COOK_TORRANCE_FORMS"]
 
 
 @dataclass
@@ -170,6 +172,35 @@ _ACS_MODES = ("random_walk", "jitter")
 _TORQUE_FORMS = ("physical", "thesis")
 
 
+#: ``[shape] cook_torrance``: the Cook–Torrance diffuse term of the shape's materials
+COOK_TORRANCE_FORMS = ("physical", "thesis")
+_CT_BRDF = {"physical": "cook_torrance", "thesis": "cook_torrance_bernard"}
+
+
+def with_cook_torrance_form(shape, form: str):
+    """A copy of ``shape`` whose Cook–Torrance materials use the ``form`` diffuse term:
+    ``"physical"`` (``cook_torrance``, f_d = ξ a/π) or ``"thesis"`` (``cook_torrance_bernard``,
+    Bernard eq. 5.8 as printed, f_d = ξ a (n̂·ŝ)/π); other materials are kept. Same parameters."""
+    from ..photometry.facets import Shape
+    from ..photometry.materials import Material
+
+    if form not in _CT_BRDF:
+        raise ValueError(f"form: expected one of {', '.join(_CT_BRDF)}, got {form!r}")
+    mats, changed = [], False
+    for m in shape.materials:
+        if m.brdf_name in _CT_BRDF.values() and m.brdf_name != _CT_BRDF[form]:
+            mats.append(Material.create(m.name, _CT_BRDF[form], **dict(m.params)))
+            changed = True
+        else:
+            mats.append(m)
+    if not changed:
+        return shape
+    return Shape(shape.name, shape.areas_m2, shape.normals_body, shape.centers_body_m, mats,
+                 shape.mass_kg, shape.inertia_kg_m2, convex=shape.convex,
+                 tangents_body=shape.tangents_body, description=shape.description,
+                 source=shape.source, vertices_m=shape.vertices_m, faces=shape.faces)
+
+
 def orbital_period_s(orbit, epoch_utc) -> float:
     """Osculating period 2π√(a³/μ) (s) of ``orbit`` at ``epoch_utc`` (a from the vis-viva
     equation with the epoch state; μ = 3.986004418e14 m³/s²)."""
@@ -279,6 +310,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     else:
         spec = sh.str("name")
     areas = sh.vector("areas_m2", None, min=0.0, min_open=True)
+    ct_form = sh.str("cook_torrance", "physical", choices=COOK_TORRANCE_FORMS)
     sh.check_unknown()
     given_shape = shape is not None
     if not given_shape:
@@ -293,6 +325,8 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
             raise InputError(f"expected {shape.n_facets} facet areas", file=file,
                              field="shape.areas_m2", value=areas.tolist())
         shape = shape.copy_with(areas_m2=areas)
+    if ct_form == "thesis" and not given_shape:
+        shape = with_cook_torrance_form(shape, "thesis")
 
     at = root.section("attitude")
     dyn = at.str("dynamics", "controlled", choices=_DYNAMICS)

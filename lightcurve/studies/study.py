@@ -31,6 +31,9 @@ grid of settings; every combination of the grid values is one *cell*, and each c
                                           # (default: each scenario's [attitude] acs_mode)
     variant = "thesis"                    # filters: "robust" (default) or "thesis" (Bernard
                                           # ch. 7 as written; lightcurve.filters.invert)
+    cook_torrance = "thesis"              # diffuse term of the shape's Cook–Torrance materials
+                                          # for truth and filters: "physical" (default) or
+                                          # "thesis" (eq. 5.8 as printed)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -446,6 +449,8 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
     if o.has("variant"):
         opts["variant"] = o.str("variant", choices=("robust", "thesis"))
+    if o.has("cook_torrance"):
+        opts["cook_torrance"] = o.str("cook_torrance", choices=("physical", "thesis"))
     o.check_unknown()
     root.check_unknown()
 

@@ -9,7 +9,9 @@ the package's photometry or rotations:
 * magnitude: eq. 5.2 with the Sun's distance, eq. 5.5–5.7, 5.9–5.15 and Table 9.2 (typed here),
   facets 0.01 m² (§9.3.1), with the two slips DESIGN.md does not copy: the diffuse term is
   ``a/π`` (eq. 5.8 without its extra n̂·ŝ, which the magnitude equation already carries) and
-  eq. 5.10's second denominator is ``c(g − c) + 1`` (standard Fresnel).
+  eq. 5.10's second denominator is ``c(g − c) + 1`` (standard Fresnel);
+* and with ``[shape] cook_torrance = "thesis"`` the diffuse term exactly as eq. 5.8 prints it,
+  ``a (n̂·ŝ)/π``.
 """
 
 from __future__ import annotations
@@ -17,10 +19,11 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 from scipy.stats import chi2
 
 from lightcurve._paths import data_dir
-from lightcurve.studies.scenario import load_scenario
+from lightcurve.studies.scenario import load_scenario, parse_scenario
 from lightcurve.studies.simulate import simulate
 
 FILE = data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml"
@@ -69,8 +72,9 @@ def log_angle_vec(R):
     return th * v / (2 * np.sin(th))
 
 
-def cook_torrance_product(n, s, o, xi, a, m):
-    """(n̂·ŝ)(n̂·v̂) R of eq. 5.7 with eq. 5.8 (as a/π), 5.9–5.15; a = F0 (§5.1.1)."""
+def cook_torrance_product(n, s, o, xi, a, m, eq58=False):
+    """(n̂·ŝ)(n̂·v̂) R of eq. 5.7 with eq. 5.8 (as a/π, or as printed, a (n̂·ŝ)/π, with
+    ``eq58``), 5.9–5.15; a = F0 (§5.1.1)."""
     ns, no = n @ s, n @ o
     h = (s + o) / np.linalg.norm(s + o)
     cg = n @ h                                                  # cos γ, eq. 5.14
@@ -80,13 +84,17 @@ def cook_torrance_product(n, s, o, xi, a, m):
     nr = (1 + np.sqrt(a)) / (1 - np.sqrt(a))                    # eq. 5.12
     g = np.sqrt(nr ** 2 + c ** 2 - 1)
     F = 0.5 * (g - c) ** 2 / (g + c) ** 2 * (1 + (c * (g + c) - 1) ** 2 / (c * (g - c) + 1) ** 2)
-    Rd = a / np.pi
+    Rd = a * ns / np.pi if eq58 else a / np.pi
     Rs = F * D * G / (4 * ns * no)                              # eq. 5.9
     return ns * no * (xi * Rd + (1 - xi) * Rs)
 
 
-def test_leo_fast_spin_truth_magnitudes_match_the_thesis_equations_to_1e_9_mag():
-    sc = load_scenario(FILE)
+@pytest.mark.parametrize("form", ["physical", "thesis"])
+def test_leo_fast_spin_truth_magnitudes_match_the_thesis_equations_to_1e_9_mag(form):
+    text = FILE.read_text()
+    if form == "thesis":
+        text = text.replace('name = "cube_1u"', 'name = "cube_1u"\ncook_torrance = "thesis"')
+    sc = parse_scenario(text, file=str(FILE))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")   # the pass is in the Earth's umbra: ignored (thesis)
         lc = simulate(sc, seed=7)
@@ -102,7 +110,7 @@ def test_leo_fast_spin_truth_magnitudes_match_the_thesis_equations_to_1e_9_mag()
         for nt, (xi, a, m) in TABLE_9_2.items():
             n = np.array(nt, float)
             if n @ s > 0 and n @ o > 0:                                 # eq. 5.5
-                flux += 0.01 * cook_torrance_product(n, s, o, xi, a, m)
+                flux += 0.01 * cook_torrance_product(n, s, o, xi, a, m, form == "thesis")
         # eq. 5.2/5.6 with I_sun at the object's distance from the Sun
         m_ref[k] = (-26.74 - 2.5 * np.log10(flux / (vr @ vr))
                     + 5 * np.log10(np.linalg.norm(rs) / AU))
