@@ -10,7 +10,12 @@ exact form is an ASSUMPTION shared with :mod:`lightcurve.studies.fit_reflection`
 
     z_ξ = logit ξ,   z_a = logit a,   z_m = ln m,   z_A = ln A,
 
-so every filter state, sigma point or particle maps to physical values in range. The inverse
+so every filter state, sigma point or particle maps to physical values in range. Bernard
+eq. 8.41–8.44 writes the bounded maps as ``p = ½ tanh z̃ + ½`` = logistic(2 z̃): the same map
+up to the factor 2 on the coordinate, which a Kalman or particle filter does not see (the state
+and its covariance scale together). Eq. 8.43 bounds m to (0, 1) that way too; ``bounded_m=True``
+(the thesis variant, :func:`lightcurve.filters.invert.invert`) uses the logit for m as well,
+the default keeps ln m (m > 0). The inverse
 and the (diagonal) Jacobian are ``ξ = 1/(1+e^{−z})``, ``dξ/dz = ξ(1−ξ)``; ``m = e^z``,
 ``dm/dz = m``. (The shape files bound m ≤ 1; the log map lets m exceed 1, where the Beckmann
 formula is still defined — stated, not hidden.)
@@ -278,8 +283,12 @@ class FacetParameterStates:
     fidx (K,) estimated facet indices.
     """
 
-    def __init__(self, shape, *, facets=None, kinds=KINDS, prior_frac=0.1, process_noise=0.0):
+    def __init__(self, shape, *, facets=None, kinds=KINDS, prior_frac=0.1, process_noise=0.0,
+                 bounded_m=False):
         self.kinds = tuple(k for k in KINDS if k in check_kinds(kinds))   # canonical order
+        #: m through a bounded (0,1) map (Bernard eq. 8.43, the thesis variant) instead of ln
+        self.bounded_m = bool(bounded_m)
+        bounded = LOGIT_KINDS + (("m",) if self.bounded_m else ())
         self.prior_frac = float(prior_frac)
         if not (self.prior_frac > 0 and np.isfinite(self.prior_frac)):
             raise InputError("prior fraction must be > 0", field="reflection_frac",
@@ -300,7 +309,7 @@ class FacetParameterStates:
             col = _KIND_COL[kind]
             for i in self.fidx:
                 p = self._areas0[i] if col == 3 else self._params0[i, col]
-                if kind in LOGIT_KINDS and p in (0.0, 1.0):
+                if kind in bounded and p in (0.0, 1.0):
                     # on a closed bound (Table 9.2's −Z: ξ = 1, fully diffuse): no unbounded
                     # coordinate reaches it, so the parameter is held fixed at its value
                     held.append(f"{kind}[{int(i)}]")
@@ -317,7 +326,7 @@ class FacetParameterStates:
         self.dim = len(names)
         self.kind_col = np.asarray(kc, np.int64)
         self.facet = np.asarray(fc, np.int64)
-        self.logit = self.kind_col < 2
+        self.logit = (self.kind_col < 2) | ((self.kind_col == 2) & self.bounded_m)
         self.p_nominal = np.where(self.kind_col == 3, self._areas0[self.facet],
                                   self._params0[self.facet, np.minimum(self.kind_col, 2)])
         for d in range(self.dim):
@@ -470,7 +479,8 @@ class FacetParameterStates:
         """JSON-ready description of the states."""
         return {"model": "model3", "names": list(self.names),
                 "facets": [int(i) for i in self.fidx], "kinds": list(self.kinds),
-                "transform": {k: ("logit" if k in LOGIT_KINDS else "log") for k in self.kinds},
+                "transform": {k: ("logit" if k in LOGIT_KINDS or (k == "m" and self.bounded_m)
+                                  else "log") for k in self.kinds},
                 "prior_frac": self.prior_frac, "p_nominal": self.p_nominal.tolist(),
                 "prior_sigma_p": self.prior_sd_p.tolist(),
                 "prior_sigma_z": self.prior_sd_z.tolist(),

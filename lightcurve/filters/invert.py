@@ -329,9 +329,18 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
 
             facets = FacetParameterStates(problem.model.shape, facets=reflection_facets,
                                           kinds=reflection_kinds, prior_frac=fr,
-                                          process_noise=reflection_process_noise)
+                                          process_noise=reflection_process_noise,
+                                          bounded_m=variant == "thesis")
         else:
-            bias = SiteBias.from_problem(reflection, problem, frac=fr)
+            if variant == "thesis" and reflection == "random-walk":
+                raise NotImplementedError(
+                    "thesis-variant random-walk bias: the noise strength of Bernard eq. 8.4 "
+                    "(second derivatives of the magnitude in the facet parameters, attitude and "
+                    "observer motion) is not implemented; the robust variant's constant strength "
+                    "σ_b²/T is a different model")
+            # eq. 8.12 has no cap on Model 2's τ: the thesis variant leaves it uncapped
+            bias = SiteBias.from_problem(reflection, problem, frac=fr,
+                                         tau_max_s=np.inf if variant == "thesis" else None)
     if method == "mekf":
         from .mekf import run_mekf
 
