@@ -26,6 +26,7 @@ from . import (
     invert,
     recordings,
     reflection,
+    reproduction,
     selfcheck,
     shapes,
     simulate,
@@ -36,7 +37,7 @@ __all__ = ["main", "build_parser", "iter_commands"]
 
 _REGISTRARS = (selfcheck.register, sites.register, shapes.register, simulate.register,
                css.register, invert.register, diagnose.register, compare.register,
-               reflection.register, recordings.register)
+               reflection.register, recordings.register, reproduction.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -130,6 +130,9 @@ def cell_summary(cell: dict, runs: list, failures: int) -> dict:
         "color": traffic_light(counts, n),
         "rss_att_deg_median": _pct(rss, 50),
         "rss_att_deg_p95": _pct(rss, 95),
+        # share of finished runs ending below 5° RSS attitude error ("converged"; the
+        # threshold of the BPF acceptance runs, used for the thesis's robustness claims)
+        "below_5deg": (float(np.mean(np.asarray(rss, float) < 5.0)) if n else float("nan")),
         "rss_omega_deg_s_median": _pct(rssw, 50),
         "rss_omega_deg_s_p95": _pct(rssw, 95),
         "diverged": int(sum(bool(r["diverged"]) for r in runs)),
