@@ -125,7 +125,7 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
         else:
             Qs = np.repeat(q[None, :], S, axis=0)
             Ws = np.repeat(w[None, :], S, axis=0)
-        Phi, Qd, phib = layout_transition(dyn, L, bias, facets, w, dt) if dt != 0.0 else \
+        _, Qd, phib = layout_transition(dyn, L, bias, facets, w, dt) if dt != 0.0 else \
             (np.eye(nx), np.zeros((nx, nx)), np.ones(nb) if nb else None)
         cols = []
         if na:
