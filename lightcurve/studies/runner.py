@@ -155,6 +155,11 @@ def execute_task(task: RunTask) -> dict:
             kw["acs_mode"] = opts["acs_mode"]
         if "variant" in opts:
             kw["variant"] = opts["variant"]
+        if "gate" in opts:
+            kw["gate"] = opts["gate"]
+        for k in ("alpha", "beta", "kappa"):
+            if k in opts and c.filter == "ukf":
+                kw[k] = float(opts[k])
         if task.init_seed is not None:
             kw["init_seed"] = int(task.init_seed)
         if c.reflection != "none":

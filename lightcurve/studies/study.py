@@ -34,6 +34,10 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     cook_torrance = "thesis"              # diffuse term of the shape's Cook–Torrance materials
                                           # for truth and filters: "physical" (default) or
                                           # "thesis" (eq. 5.8 as printed)
+    gate = "off"                          # innovation gate (default: the variant's)
+    alpha = 1.0                           # UKF α, β, κ (default 1, 2, 0)
+    shared_init = true                    # one initial estimate for all filters of a run
+                                          # (default: true with variant = "thesis")
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -224,7 +228,7 @@ class Study:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
         opts = tuple(sorted(self.options.items()))
-        shared_init = self.options.get("variant") == "thesis"
+        shared_init = self.options.get("shared_init", self.options.get("variant") == "thesis")
         out = []
         for c in self.cells:
             f = self.scenario_files[(c.dynamics, c.sites)]
@@ -451,6 +455,14 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         opts["variant"] = o.str("variant", choices=("robust", "thesis"))
     if o.has("cook_torrance"):
         opts["cook_torrance"] = o.str("cook_torrance", choices=("physical", "thesis"))
+    if o.has("gate"):
+        opts["gate"] = o.str("gate", choices=("auto", "reject", "inflate", "off"))
+    for k in ("alpha", "beta", "kappa"):
+        if o.has(k):
+            opts[k] = o.float(k, min=0.0 if k == "alpha" else None,
+                              min_open=k == "alpha", max=None)
+    if o.has("shared_init"):
+        opts["shared_init"] = o.bool("shared_init")
     o.check_unknown()
     root.check_unknown()
 

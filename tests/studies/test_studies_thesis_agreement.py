@@ -143,3 +143,21 @@ def test_study_pairs_share_everything_but_the_variant(name):
     assert a.seed == b.seed and a.cells == b.cells and a.runs == b.runs == 100
     assert a.scenario_files == b.scenario_files
     assert len(a.cells) + len(a.skipped_cells) == 96
+
+
+def test_ablation_options(tmp_path):
+    """[options] gate, alpha/beta/kappa, shared_init reach the tasks (the ablations of the
+    disagreeing cells switch one of them at a time)."""
+    from lightcurve.errors import InputError
+
+    st = _small_study(tmp_path, "thesis")
+    txt = st.text.replace('[options]\n', '[options]\ngate = "auto"\nalpha = 0.5\nshared_init = false\n')
+    f = tmp_path / "abl.toml"
+    f.write_text(txt)
+    ab = load_study(f)
+    assert ab.options == {"variant": "thesis", "cook_torrance": "thesis", "gate": "auto",
+                          "alpha": 0.5, "shared_init": False}
+    assert all(t.init_seed is None for t in ab.tasks(1))
+    f.write_text(txt.replace('gate = "auto"', 'gate = "sometimes"'))
+    with pytest.raises(InputError, match="gate"):
+        load_study(f)
