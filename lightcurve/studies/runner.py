@@ -101,7 +101,8 @@ def _scenario(text: str, file: str, library_dirs: tuple = (), site_dirs: tuple =
 
 @functools.lru_cache(maxsize=32)
 def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
-                library_dirs: tuple = (), site_dirs: tuple = (), cook_torrance: str = ""):
+                library_dirs: tuple = (), site_dirs: tuple = (), cook_torrance: str = "",
+                truth_acs_mode: str = ""):
     from .scenario import with_cook_torrance_form
     from .simulate import simulate
 
@@ -109,6 +110,8 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
     sc = replace(sc, measurement=replace(sc.measurement, r_percent=float(r_percent)))
     if cook_torrance:   # study [options] cook_torrance: the diffuse form of truth and filters
         sc = replace(sc, shape=with_cook_torrance_form(sc.shape, cook_torrance))
+    if truth_acs_mode:  # study [options] truth_acs_mode: the controlled truth's ζ model
+        sc = replace(sc, attitude=replace(sc.attitude, acs_mode=truth_acs_mode))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the thesis cases ignore the eclipse on purpose
         return simulate(sc, seed=sim_seed)
@@ -147,7 +150,8 @@ def execute_task(task: RunTask) -> dict:
         opts = dict(task.options)
         lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
                          int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
-                         tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""))
+                         tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
+                         opts.get("truth_acs_mode", ""))
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])

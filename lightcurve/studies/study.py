@@ -38,6 +38,7 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     alpha = 1.0                           # UKF α, β, κ (default 1, 2, 0)
     shared_init = true                    # one initial estimate for all filters of a run
                                           # (default: true with variant = "thesis")
+    truth_acs_mode = "random_walk"        # controlled TRUTH model (default: the scenario's)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -463,6 +464,8 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
                               min_open=k == "alpha", max=None)
     if o.has("shared_init"):
         opts["shared_init"] = o.bool("shared_init")
+    if o.has("truth_acs_mode"):
+        opts["truth_acs_mode"] = o.str("truth_acs_mode", choices=("random_walk", "jitter"))
     o.check_unknown()
     root.check_unknown()
 
