@@ -15,8 +15,10 @@ text (Crassidis & Markley 2003 as Bernard tabulates it, Tables 7.3–7.4, eq. 7.
   ``Q_η,d = Q_η Δt`` (eq. 7.95) is a rate increment of its columns at the start of the step
   (the text applies it "in the dynamics"; its covariance ``Q_η Δt`` is that of a rate change
   — the reading chosen once here);
-* no innovation gate (ch. 7 has none); epochs whose object is below the horizon are still
-  skipped (:mod:`lightcurve.filters.gating` screening), as in every variant.
+* no innovation gate (ch. 7 has none: ``invert`` sets the gate "off" for the thesis variant);
+  epochs whose object is below the horizon are still skipped (:mod:`lightcurve.filters.gating`
+  screening), as in every variant. A gate given explicitly (an ablation) acts as in the robust
+  UKF: a rejected magnitude leaves the time update, an inflated one adds ``R' − R`` to ``P_yy``.
 
 Reading chosen for eq. 7.91 (the text converts the perturbed points "back into error GRPs"):
 the cross-covariance uses the error GRPs of the propagated, *unperturbed* points, i.e. ζ
@@ -76,7 +78,7 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
     m = p.model
     dyn = p.dynamics
     rec = Recorder(p, "ukf")
-    p.meta["gate"] = {"mode": "off"}
+    p.meta.setdefault("gate", {"mode": "off"})
     gate = InnovationGate(p)
     _, q, w, b, z, P = initial_state_ext(p, bias, facets)
     na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
@@ -171,7 +173,14 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
         Pyy = float(wts.wc @ (dY * dY))                              # eq. 7.77
         Pxy = (D * wts.wc[:, None]).T @ dY                           # eq. 7.78
         nu = float(y - ym)
-        gate.check(k, nu, Pyy, R, rec)                               # mode off: records NIS
+        Rg = gate.check(k, nu, Pyy, R, rec)        # mode off (thesis): records the NIS only
+        if Rg is None:                             # rejected by an explicitly given gate
+            q = apply_grp(xm[None, :3], q0)[0] if na else q
+            w = xm[3:6].copy() if na else w
+            b, z, P = xm[L.ib].copy(), xm[L.iz].copy(), 0.5 * (Pm + Pm.T)
+            _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
+            continue
+        Pyy += Rg - R                              # inflated noise (R' ≥ R), else no change
         if not (Pyy > 0.0 and np.isfinite(Pyy)):
             rec.flags[k] |= FLAG_REFUSED
             q = apply_grp(xm[None, :3], q0)[0] if na else q
