@@ -98,24 +98,49 @@ def _table_rows(sums):
     return rows
 
 
+_KEYS = ("filter", "dynamics", "sites", "sigma_theta_deg", "sigma_omega_deg_s", "r_percent")
+
+
+def _ablations(sums, name):
+    """``{ablation label: summary}`` of the ablation studies of table ``name``
+    (study names ``<name>-ablation-<label>``)."""
+    pre = name + "-ablation-"
+    return {n[len(pre):]: s for n, s in sorted(sums.items()) if n.startswith(pre)}
+
+
 def _disagreements(sums):
     out = []
     for name, fig, _ in _TABLES:
         s = sums.get(name)
         if s is None or "agreement" not in s or not s["agreement"]["disagree"]:
             continue
+        abl = _ablations(sums, name)
         out.append(f"\n**Fig. {fig}: cells that disagree** (ours / thesis; runs outside 3σ "
-                   "θx θy θz ωx ωy ωz)\n")
+                   "θx θy θz ωx ωy ωz; *flipped by*: the ablations — one switch each, same "
+                   "seeds — whose colour for the cell is the thesis's)\n")
         out.append("| filter | dynamics | sites | σθ (°) | σω (°/s) | r (%) | ours | thesis | "
-                   "outside 3σ |")
-        out.append("|---|---|---|---|---|---|---|---|---|")
+                   "outside 3σ | flipped by |")
+        out.append("|---|---|---|---|---|---|---|---|---|---|")
         for d in s["agreement"]["disagree"]:
-            c = _cell(s, **{k: d[k] for k in ("filter", "dynamics", "sites", "sigma_theta_deg",
-                                               "sigma_omega_deg_s", "r_percent")})
+            key = {k: d[k] for k in _KEYS}
+            c = _cell(s, **key)
             o = " ".join(map(str, c["outside_3sigma"])) if c else "–"
+            flips = []
+            for lab, a in abl.items():
+                ac = _cell(a, **key)
+                if ac is not None and ac.get("runs") and ac["color"] == d["thesis_color"]:
+                    flips.append(f"{lab} ({ac['color']}, {max(ac['outside_3sigma'])} max)")
+            why = ", ".join(flips) if flips else ("none of the tested ablations" if abl
+                                                  else "no ablation run")
             out.append(f"| {d['filter'].upper()} | {d['dynamics']} | {d['sites']} | "
                        f"{d['sigma_theta_deg']:g} | {d['sigma_omega_deg_s']:g} | "
-                       f"{d['r_percent']:g} | {d['color']} | {d['thesis_color']} | {o} |")
+                       f"{d['r_percent']:g} | {d['color']} | {d['thesis_color']} | {o} | "
+                       f"{why} |")
+        if abl:
+            out.append("")
+            out.append("Ablation tables (agreement of the whole table with one switch): " + "; ".join(
+                f"{lab} {a['agreement']['agree']}/{a['agreement']['compared']}"
+                for lab, a in abl.items() if "agreement" in a) + ".")
     return out
 
 
