@@ -145,57 +145,13 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
         else:
             Pm += Qd
         q0 = Qs[0]
-        if not use:
-            q = apply_grp(xm[None, :3], q0)[0] if na else q          # eq. 7.74
-            w = xm[3:6].copy() if na else w
-            b, z, P = xm[L.ib].copy(), xm[L.iz].copy(), 0.5 * (Pm + Pm.T)
-            _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
-            continue
-        # ---- measurement (eq. 7.75–7.82; controlled: ζ columns perturb the attitude) ------
-        Qm = Qs
-        if na and nq and controlled:
-            Qm = K.perturb_rotvec_nb(np.ascontiguousarray(Qs),
-                                     np.ascontiguousarray(chi[:, nx:nx + 3]))   # eq. 7.87
-        Y = facets.magnitudes(m, Qm, z + chi[:, L.iz], k) if nz else m.predict_q(Qm, k)
-        if not np.all(np.isfinite(Y)):
-            rec.flags[k] |= FLAG_INVISIBLE
-            q = apply_grp(xm[None, :3], q0)[0] if na else q
-            w = xm[3:6].copy() if na else w
-            b, z, P = xm[L.ib].copy(), xm[L.iz].copy(), 0.5 * (Pm + Pm.T)
-            _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
-            continue
-        if nb:
-            s = int(bias.site[k])
-            Y = Y + b[s] + chi[:, na + s]
-        Y = Y + chi[:, -1]                                           # ν columns (eq. 7.75)
-        ym = float(wts.wm @ Y)                                       # eq. 7.76
-        dY = Y - ym
-        Pyy = float(wts.wc @ (dY * dY))                              # eq. 7.77
-        Pxy = (D * wts.wc[:, None]).T @ dY                           # eq. 7.78
-        nu = float(y - ym)
-        Rg = gate.check(k, nu, Pyy, R, rec)        # mode off (thesis): records the NIS only
-        if Rg is None:                             # rejected by an explicitly given gate
-            q = apply_grp(xm[None, :3], q0)[0] if na else q
-            w = xm[3:6].copy() if na else w
-            b, z, P = xm[L.ib].copy(), xm[L.iz].copy(), 0.5 * (Pm + Pm.T)
-            _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
-            continue
-        Pyy += Rg - R                              # inflated noise (R' ≥ R), else no change
-        if not (Pyy > 0.0 and np.isfinite(Pyy)):
-            rec.flags[k] |= FLAG_REFUSED
-            q = apply_grp(xm[None, :3], q0)[0] if na else q
-            w = xm[3:6].copy() if na else w
-            b, z, P = xm[L.ib].copy(), xm[L.iz].copy(), 0.5 * (Pm + Pm.T)
-            _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
-            continue
-        Kg = Pxy / Pyy                                               # eq. 7.79
-        xp = xm + Kg * nu                                            # eq. 7.80
-        Pp = Pm - Pyy * np.outer(Kg, Kg)                             # eq. 7.81
-        rec.innovation(k, nu, Pyy)
+        post = (_measurement(k, y, R, Qs, chi, D, xm, Pm, wts, L, nq, controlled, bias,
+                             facets, b, z, m, gate, rec) if use else None)
+        x, Pk = (xm, Pm) if post is None else post   # no update: the time update stands
         if na:
-            q = apply_grp(xp[None, :3], q0)[0]                       # eq. 7.82
-            w = xp[3:6].copy()
-        b, z, P = xp[L.ib].copy(), xp[L.iz].copy(), 0.5 * (Pp + Pp.T)
+            q = apply_grp(x[None, :3], q0)[0]        # eq. 7.74 / eq. 7.82
+            w = x[3:6].copy()
+        b, z, P = x[L.ib].copy(), x[L.iz].copy(), 0.5 * (Pk + Pk.T)
         _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
     est = gate.finish(rec.finish(time.perf_counter() - t0))
     est.meta["variant"] = "thesis"
@@ -206,6 +162,41 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
     if not na:
         est.meta["attitude"] = "truth"
     return est
+
+
+def _measurement(k, y, R, Qs, chi, D, xm, Pm, wts, L, nq, controlled, bias, facets, b, z, m,
+                 gate, rec):
+    """Measurement update of epoch k from the propagated points (eq. 7.75–7.81; controlled: ζ
+    columns perturb the attitude first, eq. 7.87) → ``(x⁺, P⁺)``, or None when the epoch gives
+    no update (a point predicts no light, a gate rejects it, P_yy not positive; flagged)."""
+    nx = L.nx
+    Qm = Qs
+    if L.na and nq and controlled:
+        Qm = K.perturb_rotvec_nb(np.ascontiguousarray(Qs),
+                                 np.ascontiguousarray(chi[:, nx:nx + 3]))        # eq. 7.87
+    Y = facets.magnitudes(m, Qm, z + chi[:, L.iz], k) if L.nz else m.predict_q(Qm, k)
+    if not np.all(np.isfinite(Y)):
+        rec.flags[k] |= FLAG_INVISIBLE
+        return None
+    if L.nb:
+        s = int(bias.site[k])
+        Y = Y + b[s] + chi[:, L.na + s]
+    Y = Y + chi[:, -1]                                           # ν columns (eq. 7.75)
+    ym = float(wts.wm @ Y)                                       # eq. 7.76
+    dY = Y - ym
+    Pyy = float(wts.wc @ (dY * dY))                              # eq. 7.77
+    Pxy = (D * wts.wc[:, None]).T @ dY                           # eq. 7.78
+    nu = float(y - ym)
+    Rg = gate.check(k, nu, Pyy, R, rec)      # mode off (thesis): records the NIS only
+    if Rg is None:                           # rejected by an explicitly given gate
+        return None
+    Pyy += Rg - R                            # inflated noise (R' ≥ R), else no change
+    if not (Pyy > 0.0 and np.isfinite(Pyy)):
+        rec.flags[k] |= FLAG_REFUSED
+        return None
+    Kg = Pxy / Pyy                                               # eq. 7.79
+    rec.innovation(k, nu, Pyy)
+    return xm + Kg * nu, Pm - Pyy * np.outer(Kg, Kg)             # eq. 7.80–7.81
 
 
 def _linear_step(p, L, bias, facets, q, w, b, P, dt):
