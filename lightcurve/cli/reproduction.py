@@ -8,10 +8,12 @@ __all__ = ["register"]
 
 
 def _cmd_reproduction(args) -> int:
-    from ..studies.reproduction import bernard_section, load_summaries, write_reproduction
+    from ..studies.reproduction import (bernard_section, css_section, load_summaries,
+                                        write_reproduction)
 
     dirs = list(args.study or [])
-    sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf)]
+    sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
+                css_section(list(args.css or []))]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
     print(f"wrote {args.output} ({n} study output(s) read)")
@@ -30,6 +32,9 @@ def register(sub) -> None:
         "reflection models of ch. 10).")
     p.add_argument("--study", action="append", metavar="DIR",
                    help="a study output folder (repeatable; identified by its study name)")
+    p.add_argument("--css", action="append", metavar="DIR",
+                   help="an output folder of 'lightcurve css study' (repeatable; O'Keefe, "
+                   "DiGregorio)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",
                    help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.7/10.8)")
     add_output(p, what="file", default="docs/reproduction.md",

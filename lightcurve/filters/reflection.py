@@ -36,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..photometry.partials import magnitude_partials
 
 __all__ = ["BIAS_MODELS", "REFLECTION_CHOICES", "SiteBias", "reflection_prior_variance"]
 
@@ -54,8 +55,6 @@ def reflection_prior_variance(shape, q, model, frac=0.1, epochs=None):
     only). ``q`` (N,4) inertial→body attitudes at ``model.t[epochs]``; ``model`` a
     :class:`~lightcurve.filters.models.MagnitudeModel`. Returns (N,) (NaN where m = +inf).
     """
-    from ..photometry.partials import magnitude_partials
-
     idx = np.arange(len(model)) if epochs is None else np.asarray(epochs, int)
     with np.errstate(divide="ignore", invalid="ignore"):
         mp = magnitude_partials(shape, np.asarray(q, float), model.s_eci[idx], model.o_eci[idx],

@@ -53,14 +53,21 @@ from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 __all__ = ["run_ukf_thesis"]
 
 
-def run_ukf_thesis(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0, bias=None,
-                   facets=None) -> Estimate:
-    """Run Bernard's §7.2 UKF over every epoch (module docstring) → :class:`Estimate`."""
+def run_ukf_thesis(problem: FilterProblem, config=None, *, alpha=None, beta=None, kappa=None,
+                   bias=None, facets=None) -> Estimate:
+    """Run Bernard's §7.2 UKF over every epoch (module docstring) → :class:`Estimate`.
+
+    ``config``: a :class:`~lightcurve.filters.config.UKFConfig` (its α, β, κ; default 1, 2, 0);
+    the keywords ``alpha``, ``beta``, ``kappa`` override it."""
+    from .config import UKFConfig
+
+    cfg = UKFConfig.resolve(config, alpha=alpha, beta=beta, kappa=kappa)
+    problem.meta.setdefault("variant", "thesis")
     L = StateLayout(not problem.attitude_known, bias, facets)
     if L.nx == 0:
         raise ValueError("attitude known and no extra state: nothing to estimate")
     with single_thread():
-        return _run(problem, L, float(alpha), float(beta), float(kappa), bias, facets)
+        return _run(problem, L, cfg.alpha, cfg.beta, cfg.kappa, bias, facets)
 
 
 def _noise_dims(p, L):
