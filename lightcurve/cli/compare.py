@@ -20,8 +20,17 @@ def _cmd_compare(args) -> int:
     cells = summary["cells"]
     cnt = {c: sum(1 for x in cells if x["color"] == c) for c in ("green", "yellow", "red")}
     fails = sum(x["failures"] for x in cells)
+    ind = " (INDICATIVE: fewer than 100 runs per cell, thresholds scaled)" \
+        if summary.get("indicative") else ""
     print(f"{len(cells)} cells x {summary['runs_per_cell']} runs: {cnt['green']} green, "
-          f"{cnt['yellow']} yellow, {cnt['red']} red; {fails} failed runs")
+          f"{cnt['yellow']} yellow, {cnt['red']} red; {fails} failed runs{ind}")
+    agr = summary.get("agreement")
+    if agr is not None:
+        byf = ", ".join(f"{f} {v['agree']}/{v['compared']}" for f, v in agr["by_filter"].items())
+        pct = 100.0 * agr["agree"] / agr["compared"] if agr["compared"] else float("nan")
+        print(f"Bernard (2021) Fig. {summary['thesis_figure']}, {summary.get('variant')} "
+              f"variant: {agr['agree']} of {agr['compared']} run cells agree ({pct:.0f} %; "
+              f"{byf}){ind}")
     print(f"wrote {Path(args.output) / 'summary.json'} and {Path(args.output) / 'report.html'}")
     return 0
 

@@ -398,7 +398,7 @@ def _flux_numpy(shape, sb, ob, areas=None, prm=None):
         B = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
         F = 0.5 * A * A * (1.0 + B * B)
         spec = (1.0 - xi) * 0.25 * F * D * G
-    spec = np.where((xi < 1.0) & (nh > 0.0) & (c > 0.0) & ~lam, spec, 0.0)
+    spec = np.where((nh > 0.0) & (c > 0.0) & ~lam, spec, 0.0)
     return np.sum(np.where(vis, areas * (diff + spec), 0.0), axis=1)
 
 

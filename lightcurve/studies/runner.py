@@ -101,11 +101,17 @@ def _scenario(text: str, file: str, library_dirs: tuple = (), site_dirs: tuple =
 
 @functools.lru_cache(maxsize=32)
 def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
-                library_dirs: tuple = (), site_dirs: tuple = ()):
+                library_dirs: tuple = (), site_dirs: tuple = (), cook_torrance: str = "",
+                truth_acs_mode: str = ""):
+    from .scenario import with_cook_torrance_form
     from .simulate import simulate
 
     sc = _scenario(text, file, library_dirs, site_dirs)
     sc = replace(sc, measurement=replace(sc.measurement, r_percent=float(r_percent)))
+    if cook_torrance:   # study [options] cook_torrance: the diffuse form of truth and filters
+        sc = replace(sc, shape=with_cook_torrance_form(sc.shape, cook_torrance))
+    if truth_acs_mode:  # study [options] truth_acs_mode: the controlled truth's ζ model
+        sc = replace(sc, attitude=replace(sc.attitude, acs_mode=truth_acs_mode))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the thesis cases ignore the eclipse on purpose
         return simulate(sc, seed=sim_seed)
@@ -141,15 +147,25 @@ def execute_task(task: RunTask) -> dict:
            "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
            "status": "ok", "error": ""}
     try:
-        dirs = (tuple(getattr(task, "library_dirs", ())), tuple(getattr(task, "site_dirs", ())))
-        lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
-                         int(task.sim_seed), *(dirs if any(dirs) else ()))
         opts = dict(task.options)
+        lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
+                         int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
+                         tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
+                         opts.get("truth_acs_mode", ""))
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])
         if "acs_mode" in opts:
             kw["acs_mode"] = opts["acs_mode"]
+        if "variant" in opts:
+            kw["variant"] = opts["variant"]
+        if "gate" in opts:
+            kw["gate"] = opts["gate"]
+        for k in ("alpha", "beta", "kappa"):
+            if k in opts and c.filter == "ukf":
+                kw[k] = float(opts[k])
+        if task.init_seed is not None:
+            kw["init_seed"] = int(task.init_seed)
         if c.reflection != "none":
             kw["reflection"] = c.reflection
         kw.update(dict(dict(opts.get("filters", ())).get(c.filter, ())))
@@ -530,7 +546,8 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     Only the runs 0…runs−1 of each cell are used (a study extended and then summarised with
     fewer runs ignores the extra files). Cells keep the study's grid order.
     """
-    from .metrics import rss_envelope
+    from .agreement import agreement, thesis_color
+    from .metrics import FULL_RUNS, rss_envelope
 
     out = Path(out_dir)
     n = study.runs if runs is None else int(runs)
@@ -552,6 +569,7 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
             rss.append(np.linalg.norm(r["att_error_deg"], axis=1))
         entry = cell_summary(c.as_dict(), mets, fails)
         entry["missing"] = int(n - len(mets) - fails)
+        entry["thesis_color"] = thesis_color(study.thesis_table, c.as_dict())
         if errors:
             entry["first_error"] = errors[0]
         cells.append(entry)
@@ -566,7 +584,16 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     summary = {"format": _SUMMARY_FORMAT, "format_version": 1, "study": study.name,
                "study_hash": study.hash, **_code_fields(), "seed": study.seed,
                "runs_per_cell": n,
+               # the traffic-light rule is defined for 100 runs; fewer runs scale it
+               # (lightcurve.studies.metrics.traffic_light) and the table is indicative
+               "indicative": bool(n < FULL_RUNS),
+               "variant": study.options.get("variant", "robust"),
                "grid_keys": list(GRID_KEYS), "cells": cells}
+    if study.thesis_table is not None:
+        summary["thesis_figure"] = study.thesis_table.figure
+        summary["thesis_title"] = study.thesis_table.title
+        summary["agreement"] = agreement(cells)
+        summary["not_run_grey"] = [c.as_dict() for c in study.skipped_cells]
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
     if write_report:
         from ..report.html import write_study_report

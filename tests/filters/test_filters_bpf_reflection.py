@@ -67,7 +67,7 @@ def test_model3_kernel_equals_attitude_only_kernel_at_nominal_parameters():
     reproduces the attitude-only kernel (same flux loop) to 1e-12 mag, for (N,4) attitudes and
     (1,D) shared states, with and without the ACS jitter ζ."""
     c = make_curve(n=5)
-    shape = load_shape("cube_1u")
+    shape = load_shape("cube_1u_mixed")
     m = MagnitudeModel(shape, c)
     fs = FacetParameterStates(shape)
     assert fs.dim == 24
@@ -103,7 +103,7 @@ def test_model3_kernel_vs_photometry_magnitude_random_parameters():
     from lightcurve.filters.bpf import _flux_numpy
 
     c = make_curve(n=3)
-    shape = load_shape("cube_1u")
+    shape = load_shape("cube_1u_mixed")
     m = MagnitudeModel(shape, c)
     fs = FacetParameterStates(shape)
     rng = np.random.default_rng(11)
@@ -181,7 +181,7 @@ def test_model3_attitude_known_observable_parameter_on_leo_fast_spin(tmp_path):
     truth perturbation (10 %), Model 3 in the BPF, one seed, 2,000 particles with resample-move:
     the Beckmann slope of the glinting +X facet (m[0], the parameter every run of
     benchmarks/reflection_bpf.py constrains most) shrinks ≥ 2× from its prior σ and ends
-    within 3σ of its truth. Our cube_1u values are ASSUMED (thesis table 9.2 unavailable)."""
+    within 3σ of its truth (cube_1u: Table 9.2 materials)."""
     import json
     import warnings
 

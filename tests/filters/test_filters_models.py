@@ -23,7 +23,7 @@ def _rand_q(rng, n):
 
 def test_magnitude_model_matches_photometry(curve):
     # oracle: lightcurve.photometry.apparent_magnitude (numpy object layer + its own kernel)
-    shape = load_shape("cube_1u")
+    shape = load_shape("cube_1u_mixed")
     m = MagnitudeModel(shape, curve)
     rng = np.random.default_rng(3)
     Q = _rand_q(rng, 64)
@@ -43,7 +43,7 @@ def test_magnitude_model_matches_photometry(curve):
 def test_measurement_jacobian_analytic_vs_central_difference(curve):
     # analytic photometry partial (Bernard eq. 8.x, consistent form) vs central differences of
     # m(exp(δθ) ⊗ q̂) with step 1e-6 rad
-    m = MagnitudeModel(load_shape("cube_1u"), curve)
+    m = MagnitudeModel(load_shape("cube_1u_mixed"), curve)
     for k in (3, 30):
         q = curve.truth_q[k]
         Ha = m.jacobian_theta(q, k, method="analytic")
@@ -149,7 +149,7 @@ def test_rk4_kernel_against_solve_ivp():
 
 def test_bpf_fused_kernel_equals_separate_steps(curve):
     # bpf_predict_nb (propagate + noise + ζ + magnitude) vs the same steps done separately
-    m = MagnitudeModel(load_shape("cube_1u"), curve)
+    m = MagnitudeModel(load_shape("cube_1u_mixed"), curve)
     rng = np.random.default_rng(8)
     N = 200
     Q = _rand_q(rng, N)
@@ -178,7 +178,7 @@ def test_numpy_reference_photometry_matches_kernel(curve):
     # the plain-NumPy magnitude of the benchmark reference (bpf._predict_np) vs the numba path
     from lightcurve.filters.bpf import _predict_np
 
-    m = MagnitudeModel(load_shape("cube_1u"), curve)
+    m = MagnitudeModel(load_shape("cube_1u_mixed"), curve)
     Q = _rand_q(np.random.default_rng(12), 500)
     for k in (0, 25):
         a = _predict_np(m, Q, k)
