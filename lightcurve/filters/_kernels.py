@@ -7,8 +7,8 @@ is ``δq = q ⊗ q_ref⁻¹`` (so ``q = δq ⊗ q_ref``), expressed as a GRP ``p
 or as a rotation vector (small-angle error, ``δq = [cos(|θ|/2), θ̂ sin(|θ|/2)]``).
 
 Every ``prange`` loop is over independent particles / sigma points, so the results do not
-depend on the number of threads (only the heavy kernels — magnitudes, RK4, the fused BPF
-prediction — are compiled parallel; the cheap chart maps run serially, because waking a
+depend on the number of threads (only the heavy kernels — magnitudes, RK4 — are compiled
+parallel; the cheap chart maps run serially, because waking a
 thread pool costs more than they do); random numbers are drawn by the caller from a
 ``numpy.random.Generator`` and passed in, which keeps runs reproducible bit for bit.
 """
@@ -24,7 +24,7 @@ from ..photometry.kernels import brdf_product_nb
 
 __all__ = [
     "const_rate_nb", "rk4_torque_free_nb", "apply_noise_nb", "perturb_rotvec_nb",
-    "grp_rel_nb", "from_grp_rel_nb", "mag_kernel_nb", "bpf_predict_nb",
+    "grp_rel_nb", "from_grp_rel_nb", "mag_kernel_nb",
     "facet_mag_particles_nb", "weighted_param_stats_nb",
 ]
 
@@ -291,208 +291,6 @@ def mag_kernel_nb(Q, s, o, normals, areas, ids, params, offset):
     return out
 
 
-@nb.njit(cache=True, parallel=True)
-def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
-                   params, offset, m_out):
-    """One fused bootstrap-PF prediction for every particle (in place on Q, W; fills m_out).
-
-    mode 0: constant rate (controlled), 1: torque-free RK4 with ``nsub`` sub-steps
-    (uncontrolled). ``noise`` (N,r) standard normals and ``Lnoise`` (6,r) a square root of the
-    process-noise covariance: the sample ``Lnoise · noise[i]`` = [δθ (rad), δω (rad/s)] is
-    applied after the deterministic step (``noise`` (0,r): none). ``zeta`` (N,3) or (0,3): ACS attitude noise (rad)
-    applied to the attitude *only for the predicted measurement* (controlled model, Bernard
-    eq. 7.8–7.11). ``m_out`` (N,) receives the predicted magnitudes (+inf: invisible). With
-    ``s[0]`` NaN no magnitude is computed (propagation only). Parallel over chunks of
-    particles; no allocation per particle.
-    """
-    N = Q.shape[0]
-    h = dt / max(nsub, 1)
-    use_noise = noise.shape[0] == N
-    r = noise.shape[1]
-    use_zeta = zeta.shape[0] == N
-    predict = not np.isnan(s[0])
-    nch = _nchunks(N)
-    for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
-        nv = np.empty(6)
-        q = np.empty(4)
-        w = np.empty(3)
-        dq = np.empty(4)
-        qm = np.empty(4)
-        sb = np.empty(3)
-        ob = np.empty(3)
-        k1q = np.empty(4)
-        k2q = np.empty(4)
-        k3q = np.empty(4)
-        k4q = np.empty(4)
-        k1w = np.empty(3)
-        k2w = np.empty(3)
-        k3w = np.empty(3)
-        k4w = np.empty(3)
-        qt = np.empty(4)
-        wt = np.empty(3)
-        for i in range(lo, hi):
-            for j in range(4):
-                q[j] = Q[i, j]
-            for j in range(3):
-                w[j] = W[i, j]
-            if dt != 0.0:
-                if mode == 0:
-                    _rotvec_q(w[0] * dt, w[1] * dt, w[2] * dt, dq)
-                    _qmul_into(dq, Q[i], q)
-                else:
-                    _rk4_one(q, w, J, Ji, h, nsub, k1q, k2q, k3q, k4q, k1w, k2w, k3w, k4w,
-                             qt, wt)
-            if use_noise:
-                for j in range(6):
-                    acc = 0.0
-                    for cc in range(r):
-                        acc += Lnoise[j, cc] * noise[i, cc]
-                    nv[j] = acc
-                _rotvec_q(nv[0], nv[1], nv[2], dq)
-                for j in range(4):
-                    qt[j] = q[j]
-                _qmul_into(dq, qt, q)
-                for j in range(3):
-                    w[j] += nv[3 + j]
-            _normalize(q)
-            for j in range(4):
-                Q[i, j] = q[j]
-            for j in range(3):
-                W[i, j] = w[j]
-            if predict:
-                if use_zeta:
-                    _rotvec_q(zeta[i, 0], zeta[i, 1], zeta[i, 2], dq)
-                    _qmul_into(dq, q, qm)
-                else:
-                    for j in range(4):
-                        qm[j] = q[j]
-                fl = _flux(qm, s, o, normals, areas, ids, params, sb, ob)
-                m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
-
-
-@nb.njit(cache=True)
-def ess_tempered_nb(logw, ll, phi):
-    """Effective sample size of the weights ``exp(logw + φ ll)`` (unnormalised logs).
-
-    Two passes, no temporary arrays: ``N_eff = (Σ e^{a−m})² / Σ e^{2(a−m)}`` with
-    ``a = logw + φ ll`` (φ = 0 ignores ``ll``; −inf entries count as zero weight), m = max a.
-    Returns 0 when every weight is zero.
-    """
-    N = logw.shape[0]
-    m = -np.inf
-    for i in range(N):
-        a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
-        if a > m:
-            m = a
-    if m == -np.inf or np.isnan(m):
-        return 0.0
-    s1 = 0.0
-    s2 = 0.0
-    for i in range(N):
-        a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
-        if a > -np.inf:
-            e = math.exp(a - m)
-            s1 += e
-            s2 += e * e
-    return s1 * s1 / s2
-
-
-@nb.njit(cache=True)
-def innovation_loglik_nb(logw, mpred, y, sig, ll):
-    """Prior-weighted innovation statistics and per-particle log-likelihoods (one epoch).
-
-    Fills ``ll[i] = −½ ((y − m_i)/σ)²`` (−inf where ``m_i`` is not finite: the particle
-    reflects no light). Returns ``(ŷ, var_m, ok)``: the mean and variance of the finite
-    predictions under the prior weights ``exp(logw)`` (renormalised over them); ``ok`` False
-    when no prediction is finite. Magnitudes, mag².
-    """
-    N = logw.shape[0]
-    mx = -np.inf
-    for i in range(N):
-        if logw[i] > mx:
-            mx = logw[i]
-    s0 = 0.0
-    s1 = 0.0
-    for i in range(N):
-        m = mpred[i]
-        if np.isfinite(m):
-            e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
-            s0 += e
-            s1 += e * m
-            r = (y - m) / sig
-            ll[i] = -0.5 * r * r
-        else:
-            ll[i] = -np.inf
-    if not s0 > 0.0:
-        return np.nan, np.nan, False
-    mean = s1 / s0
-    s2 = 0.0
-    for i in range(N):
-        m = mpred[i]
-        if np.isfinite(m):
-            e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
-            s2 += e * (m - mean) * (m - mean)
-    return mean, s2 / s0, True
-
-
-@nb.njit(cache=True)
-def add_normalize_nb(logw, ll, phi, w):
-    """In place ``logw ← logw + φ ll`` then normalise (log-sum-exp); fills ``w = exp(logw)``.
-
-    Returns ``(N_eff, ok)`` with ``N_eff = 1/Σ w²``; ``ok`` False (and logw, w untouched
-    beyond the addition) when every weight is zero. φ = 0 adds nothing.
-    """
-    N = logw.shape[0]
-    mx = -np.inf
-    for i in range(N):
-        if phi != 0.0:
-            logw[i] += phi * ll[i]
-        if logw[i] > mx:
-            mx = logw[i]
-    if not mx > -np.inf:
-        return 0.0, False
-    s = 0.0
-    for i in range(N):
-        e = math.exp(logw[i] - mx)
-        w[i] = e
-        s += e
-    lse = mx + math.log(s)
-    s2 = 0.0
-    for i in range(N):
-        logw[i] -= lse
-        w[i] /= s
-        s2 += w[i] * w[i]
-    return 1.0 / s2, True
-
-
-@nb.njit(cache=True)
-def weighted_stats_nb(dp, W, w):
-    """Weighted mean (6,) and covariance (6,6) of the rows [dp (N,3), W (N,3)] (Σ w = 1)."""
-    N = dp.shape[0]
-    mean = np.zeros(6)
-    for i in range(N):
-        for j in range(3):
-            mean[j] += w[i] * dp[i, j]
-            mean[3 + j] += w[i] * W[i, j]
-    C = np.zeros((6, 6))
-    x = np.empty(6)
-    for i in range(N):
-        for j in range(3):
-            x[j] = dp[i, j] - mean[j]
-            x[3 + j] = W[i, j] - mean[3 + j]
-        wi = w[i]
-        for a in range(6):
-            xa = wi * x[a]
-            for b in range(a + 1):
-                C[a, b] += xa * x[b]
-    for a in range(6):
-        for b in range(a):
-            C[b, a] = C[a, b]
-    return mean, C
-
-
 @nb.njit(cache=True, inline="always")
 def _fill_facet_arrays(z, facet, kind_col, logit, areas0, params0, ar, pr):
     """Facet areas ``ar`` (F,) m² and BRDF parameters ``pr`` (F,P) of one Model 3 state z (D,).
@@ -636,49 +434,3 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
                 r = (y[j] - (offs[j] - 2.5 * math.log10(fl))) / sig[j]
                 acc += -0.5 * wj * r * r
             out[i] = acc
-
-
-@nb.njit(cache=True)
-def mean_cov_nb(E):
-    """Equal-weight mean (D,) and covariance (D,D) (divisor N) of the rows of E (N,D).
-
-    Serial loops instead of BLAS: the clouds are thin (D ≤ a few tens) and multithreaded BLAS
-    on a busy machine costs far more than the arithmetic.
-    """
-    N, D = E.shape
-    mean = np.zeros(D)
-    for i in range(N):
-        for d in range(D):
-            mean[d] += E[i, d]
-    for d in range(D):
-        mean[d] /= N
-    C = np.zeros((D, D))
-    x = np.empty(D)
-    for i in range(N):
-        for d in range(D):
-            x[d] = E[i, d] - mean[d]
-        for a in range(D):
-            xa = x[a]
-            for b in range(a + 1):
-                C[a, b] += xa * x[b]
-    for a in range(D):
-        for b in range(a + 1):
-            C[a, b] /= N
-            C[b, a] = C[a, b]
-    return mean, C
-
-
-@nb.njit(cache=True)
-def affine_rows_nb(X, M, a, c, base, out):
-    """``out[i] = a · base[i] + c + X[i] @ Mᵀ`` for X (N,r), M (D,r), base (N,D), c (D,).
-
-    (Serial; the Liu–West jitter and the Metropolis proposal of the BPF's extra states.)
-    """
-    N, r = X.shape
-    D = M.shape[0]
-    for i in range(N):
-        for d in range(D):
-            acc = a * base[i, d] + c[d]
-            for j in range(r):
-                acc += M[d, j] * X[i, j]
-            out[i, d] = acc

@@ -255,7 +255,9 @@ def test_joint_kernel_keeps_mean_and_covariance_and_separates_duplicates():
     the extra Monte Carlo spread of the jitter) of the input cloud's, and no duplicate rows
     remain. h for d = 30, N = 10⁴ is A N^(−1/(d+4)), A = (4/(d+2))^(1/(d+4)):
     0.9407 × 0.7627 = 0.7174."""
-    from lightcurve.filters.bpf import _joint_bandwidth, _joint_kernel, _NumbaOps
+    from lightcurve.core.particles import mean_cov_rows
+    from lightcurve.filters._bpf_kernels import liu_west_attitude
+    from lightcurve.filters.bpf import _joint_bandwidth, _kernel_factor
 
     a, h = _joint_bandwidth(None, 10_000, 30)
     assert h == pytest.approx((4 / 32) ** (1 / 34) * 1e4 ** (-1 / 34), rel=1e-12)
@@ -269,18 +271,16 @@ def test_joint_kernel_keeps_mean_and_covariance_and_separates_duplicates():
     X[:, 3:6] += np.array([0.03, 0.02, 0.06])
     X = X[rng.integers(0, N // 4, N)]                  # a resampled cloud: many duplicates
     qref = rot.euler321_to_quat(np.radians([10.0, -20.0, 30.0]))
-    Q = _NumbaOps.from_grp(np.ascontiguousarray(X[:, :3]), qref)
-
-    class _Ext:
-        E = np.ascontiguousarray(X[:, 6:])
-        ne = 2
-
-    ext = _Ext()
-    dp = _NumbaOps.grp_rel(Q, qref)
+    Q = K.from_grp_rel_nb(np.ascontiguousarray(X[:, :3]), qref, 1.0, 4.0)
+    dp = K.grp_rel_nb(Q, qref, 1.0, 4.0)
     np.testing.assert_allclose(dp, X[:, :3], atol=1e-12)        # the chart round trip
-    Qn, Wn = _joint_kernel(_NumbaOps, Q, np.ascontiguousarray(X[:, 3:6]), ext, qref, dp,
-                           np.random.default_rng(5), (a, h))
-    Y = np.hstack([_NumbaOps.grp_rel(Qn, qref), Wn, ext.E])
+    Xc = np.ascontiguousarray(np.hstack([dp, X[:, 3:]]))
+    mean, Cx = mean_cov_rows(Xc)
+    L = _kernel_factor(Cx)
+    eps = np.random.default_rng(5).standard_normal((N, L.shape[1]))
+    Qn, Wn, En = np.empty((N, 4)), np.empty((N, 3)), np.empty((N, 2))
+    liu_west_attitude(Xc, eps, h * L, a, (1.0 - a) * mean, qref, 1.0, 4.0, Qn, Wn, En)
+    Y = np.hstack([K.grp_rel_nb(Qn, qref, 1.0, 4.0), Wn, En])
     m0, C0 = X.mean(axis=0), np.cov(X.T, bias=True)
     m1, C1 = Y.mean(axis=0), np.cov(Y.T, bias=True)
     se = np.sqrt(np.diag(C0) / N)
