@@ -18,8 +18,8 @@ call these kernels.
 * Liu & West (2001) shrinkage kernel: ``x_i ← a x_i + (1 − a) x̄ + h L ε_i`` with
   ``L Lᵀ`` the cloud covariance.
 * Counter-based random numbers (Philox4x32-10, Salmon et al. 2011, "Parallel random numbers:
-  as easy as 1, 2, 3", SC'11): normal draw j of row i of call c is a pure function of
-  ``(key, i, c)``, so the draws do not depend on the number of threads, the chunking, or the
+  as easy as 1, 2, 3", SC'11) with ziggurat normals (Marsaglia & Tsang 2000, Doornik 2005):
+  normal draw j of row i of call c is a pure function of ``(key, i, j, c)``, so the draws do not depend on the number of threads, the chunking, or the
   device (the same function runs in the CUDA kernels of :mod:`lightcurve.filters.bpf_gpu`).
 
 Parallel reductions use a fixed number of chunks that depends on N only (:func:`n_chunks`), and
@@ -38,8 +38,7 @@ __all__ = [
     "ess_tempered", "temper_exponent", "innovation_loglik", "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
-    "philox4x32", "philox_normals", "philox_uniforms", "uniform_from_words",
-    "normal_pair_from_words",
+    "philox4x32", "philox_normals", "philox_uniforms", "ziggurat_normal",
 ]
 
 _CHUNK = 2048      # particles per reduction chunk (fixed: results independent of threads)
@@ -163,12 +162,26 @@ def ess_tempered(logw, ll, phi):
 def temper_exponent(logw, ll, rest, target, steps):
     """Largest φ ∈ (0, rest] with ``N_eff(logw + φ ll) ≥ target`` by bisection (``steps``
     halvings of [0, rest]; the progressive correction of Oudjane & Musso 2000). Returns the
-    lower end of the final bracket (0 when even tiny φ falls below the target)."""
+    lower end of the final bracket (0 when even tiny φ falls below the target).
+
+    Each N_eff evaluation is one pass: the exponentials are shifted by the bound
+    ``max logw + φ max ll ≥ max (logw + φ ll)`` (exact once the weights are uniform), with
+    the exact two-pass :func:`ess_tempered` when that shift would underflow every weight.
+    """
+    mw = _max_tempered(logw, ll, 0.0)
+    ml = _max_tempered(ll, ll, 0.0)
     lo = 0.0
     hi = rest
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
-        if ess_tempered(logw, ll, mid) >= target:
+        e = 0.0
+        if mw > -np.inf and ml > -np.inf:
+            s1, s2 = _sum_exp(logw, ll, mid, mw + mid * ml)
+            if s1 > 1e-150 and s2 > 0.0:
+                e = s1 * s1 / s2
+            else:
+                e = ess_tempered(logw, ll, mid)
+        if e >= target:
             lo = mid
         else:
             hi = mid
@@ -588,51 +601,90 @@ def philox4x32(c0, c1, c2, c3, k0, k1):
     return c0, c1, c2, c3
 
 
+def _ziggurat_tables(n=128, r=3.442619855899, v=9.91256303526217e-3):
+    """Layer edges ``x`` (n+1,) and ratios ``x[i+1]/x[i]`` (n,) of the 128-layer ziggurat of the
+    standard normal density (Marsaglia & Tsang 2000; layer constants r, v and the layout with
+    x[0] = v/f(r) for the base strip from Doornik 2005, "An improved ziggurat method to generate
+    normal random samples")."""
+    x = np.zeros(n + 1)
+    f = math.exp(-0.5 * r * r)
+    x[0] = v / f
+    x[1] = r
+    for i in range(2, n):
+        x[i] = math.sqrt(-2.0 * math.log(v / x[i - 1] + f))
+        f = math.exp(-0.5 * x[i] * x[i])
+    return x, x[1:] / x[:-1]
+
+
+_ZIG_X, _ZIG_R = _ziggurat_tables()
+_ZIG_TAIL = 3.442619855899
+
+
 @nb.njit(cache=True, inline="always")
-def uniform_from_words(a, b):
-    """A double in (0, 1] from two 32-bit words: ``((a >> 5)·2²⁶ + (b >> 6) + 1) / 2⁵³``."""
+def _u01_open(a, b):
+    """A double in (0, 1) from two 32-bit words (never 0 or 1)."""
     hi = np.float64(a >> np.uint64(5))
     lo = np.float64(b >> np.uint64(6))
-    return (hi * 67108864.0 + lo + 1.0) * (1.0 / 9007199254740992.0)
+    return (hi * 67108864.0 + lo + 0.5) * (1.0 / 9007199254740992.0)
 
 
 @nb.njit(cache=True, inline="always")
-def normal_pair_from_words(a, b, c, d):
-    """Two independent standard normals from four 32-bit words (Box & Muller 1958)."""
-    u1 = uniform_from_words(a, b)
-    u2 = uniform_from_words(c, d)
-    r = math.sqrt(-2.0 * math.log(u1))
-    t = 2.0 * math.pi * u2
-    return r * math.cos(t), r * math.sin(t)
+def ziggurat_normal(c0, c1, c2, c3, k0, k1, zx, zr):
+    """One standard normal by the ziggurat method (Doornik 2005 variant, 128 layers) from the
+    Philox4x32-10 stream of the counter (c0, c1 + 2¹⁶·attempt, c2, c3) under (k0, k1).
+
+    Each attempt uses one Philox block: a uniform u ∈ (−1, 1) from two words, the layer from the
+    third; ≈ 99 % of draws end in the first attempt with one multiply and one comparison. The
+    base strip samples the tail beyond r by Marsaglia's (1964) method, the wedges by rejection
+    against the density. ``zx``, ``zr``: :data:`_ZIG_X`, :data:`_ZIG_R`.
+    """
+    att = np.uint64(0)
+    while True:
+        a, b, c, d = philox4x32(c0, (c1 + (att << np.uint64(16))) & _MASK, c2, c3, k0, k1)
+        att += np.uint64(1)
+        u = 2.0 * _u01_open(a, b) - 1.0
+        i = np.int64(c & np.uint64(127))
+        if abs(u) < zr[i]:
+            return u * zx[i]
+        if i == 0:                      # the tail beyond r (Marsaglia 1964)
+            while True:
+                a, b, c, d = philox4x32(c0, (c1 + (att << np.uint64(16))) & _MASK, c2, c3,
+                                        k0, k1)
+                att += np.uint64(1)
+                x = math.log(_u01_open(a, b)) / _ZIG_TAIL
+                y = math.log(_u01_open(c, d))
+                if -2.0 * y >= x * x:
+                    return x - _ZIG_TAIL if u < 0.0 else _ZIG_TAIL - x
+        x = u * zx[i]
+        f0 = math.exp(-0.5 * (zx[i] * zx[i] - x * x))
+        f1 = math.exp(-0.5 * (zx[i + 1] * zx[i + 1] - x * x))
+        v = np.float64(d >> np.uint64(11)) * (1.0 / 2097152.0)   # 21-bit uniform in [0, 1)
+        if f1 + v * (f0 - f1) < 1.0:
+            return x
 
 
 @nb.njit(cache=True, parallel=True)
 def philox_normals(k0, k1, call, out):
-    """Fill ``out`` (N, r) with standard normals: row i, columns 2m and 2m+1 come from
-    Philox4x32-10 of the counter ``(i, m, call mod 2³², call div 2³²)`` under the key
-    (k0, k1), by Box–Muller. A pure function of (key, i, call): independent of threads."""
+    """Fill ``out`` (N, r) with standard normals: entry (i, j) is the ziggurat normal
+    (:func:`ziggurat_normal`) of the Philox4x32-10 counter ``(i, j, call mod 2³², call div
+    2³²)`` under the key (k0, k1) — a pure function of (key, i, j, call), independent of the
+    number of threads."""
     N, r = out.shape
     kk0 = np.uint64(k0)
     kk1 = np.uint64(k1)
     cl = np.uint64(call) & _MASK
     ch = np.uint64(call) >> _S32
+    zx = _ZIG_X
+    zr = _ZIG_R
     for i in nb.prange(N):
         ci = np.uint64(i) & _MASK
-        m = 0
-        j = 0
-        while j < r:
-            a, b, c, d = philox4x32(ci, np.uint64(m), cl, ch, kk0, kk1)
-            z0, z1 = normal_pair_from_words(a, b, c, d)
-            out[i, j] = z0
-            if j + 1 < r:
-                out[i, j + 1] = z1
-            j += 2
-            m += 1
+        for j in range(r):
+            out[i, j] = ziggurat_normal(ci, np.uint64(j), cl, ch, kk0, kk1, zx, zr)
 
 
 @nb.njit(cache=True, parallel=True)
 def philox_uniforms(k0, k1, call, out):
-    """Fill ``out`` (N,) with uniforms in (0, 1]: entry i from Philox4x32-10 of the counter
+    """Fill ``out`` (N,) with uniforms in (0, 1): entry i from Philox4x32-10 of the counter
     ``(i, 2³² − 1, call mod 2³², call div 2³²)`` under (k0, k1) (the first two words)."""
     N = out.shape[0]
     kk0 = np.uint64(k0)
@@ -641,4 +693,4 @@ def philox_uniforms(k0, k1, call, out):
     ch = np.uint64(call) >> _S32
     for i in nb.prange(N):
         a, b, c, d = philox4x32(np.uint64(i) & _MASK, _MASK, cl, ch, kk0, kk1)
-        out[i] = uniform_from_words(a, b)
+        out[i] = _u01_open(a, b)

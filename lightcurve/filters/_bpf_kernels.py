@@ -18,9 +18,9 @@ import numba as nb
 import numpy as np
 
 from ..core.particles import n_chunks
-from ._kernels import _flux, _normalize, _qmul_into, _rk4_one, _rotvec_q
+from ._kernels import _flux_pre, _normalize, _qmul_into, _rk4_one, _rotvec_q, flux_invariants
 
-__all__ = ["bpf_predict_nb", "argmax_weights", "grp_weighted_mean", "chart_rows",
+__all__ = ["bpf_predict_nb", "argmax_weights", "grp_weighted_mean", "chart_rows", "chart_stats",
            "roughen_chart", "roughen_compose", "liu_west_attitude", "min_abs_residual"]
 
 
@@ -67,7 +67,9 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     ``zeta`` (N,3) or (0,3): ACS attitude noise (rad) applied to the attitude *only for the
     predicted measurement* (controlled jitter model, Bernard eq. 7.8–7.11). ``m_out`` (N,)
     receives the predicted magnitudes (+inf: invisible; DESIGN.md magnitude equation). With
-    ``s[0]`` NaN no magnitude is computed (propagation only). The quaternions are renormalised.
+    ``s[0]`` NaN no magnitude is computed (propagation only). The facet sum uses the
+    attitude-independent half vector and Fresnel factors of the epoch
+    (:func:`~lightcurve.filters._kernels.flux_invariants`). The quaternions are renormalised.
     """
     N = Q.shape[0]
     h = dt / max(nsub, 1)
@@ -75,6 +77,11 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     r = noise.shape[1]
     use_zeta = zeta.shape[0] == N
     predict = not np.isnan(s[0])
+    Fr = np.zeros(normals.shape[0])
+    hI = np.zeros(3)
+    cI = -1.0
+    if predict:
+        hI, cI = flux_invariants(s, o, ids, params, Fr)
     nch = n_chunks(N)
     for c in nb.prange(nch):
         lo = c * N // nch
@@ -86,6 +93,7 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
         qm = np.empty(4)
         sb = np.empty(3)
         ob = np.empty(3)
+        hb = np.empty(3)
         k1q = np.empty(4)
         k2q = np.empty(4)
         k3q = np.empty(4)
@@ -132,7 +140,7 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
                 else:
                     for j in range(4):
                         qm[j] = q[j]
-                fl = _flux(qm, s, o, normals, areas, ids, params, sb, ob)
+                fl = _flux_pre(qm, s, o, hI, cI, Fr, normals, areas, ids, params, sb, ob, hb)
                 m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
 
 
@@ -193,6 +201,49 @@ def chart_rows(Q, W, qref, a, f, X):
         _grp_of(Q[i], qref, a, f, X[i, :3])
         for j in range(3):
             X[i, 3 + j] = W[i, j]
+
+
+@nb.njit(cache=True, parallel=True)
+def chart_stats(Q, W, w, qref, a, f, w0, X):
+    """:func:`chart_rows` fused with the weighted moments of the rows ``x_i = [δp_i, ω_i]``:
+    returns ``(mean (6,), cov (6,6))`` with ``mean = Σ w x``, ``cov = Σ w (x − mean)(x −
+    mean)ᵀ`` (Bernard eq. 7.102–7.104; normalised weights). One pass, accumulated about the
+    shift ``[0, 0, 0, w0]`` (w0 a rate near the mean, e.g. the heaviest particle's) so that
+    the one-pass covariance keeps full precision."""
+    N = Q.shape[0]
+    nch = n_chunks(N)
+    S1 = np.zeros((nch, 6))
+    S2 = np.zeros((nch, 6, 6))
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        x = np.empty(6)
+        for i in range(lo, hi):
+            _grp_of(Q[i], qref, a, f, X[i, :3])
+            for j in range(3):
+                X[i, 3 + j] = W[i, j]
+                x[j] = X[i, j]
+                x[3 + j] = W[i, j] - w0[j]
+            wi = w[i]
+            for d in range(6):
+                xd = wi * x[d]
+                S1[c, d] += xd
+                for e in range(d + 1):
+                    S2[c, d, e] += xd * x[e]
+    m = np.zeros(6)
+    C = np.zeros((6, 6))
+    for c in range(nch):
+        for d in range(6):
+            m[d] += S1[c, d]
+            for e in range(d + 1):
+                C[d, e] += S2[c, d, e]
+    for d in range(6):
+        for e in range(d + 1):
+            C[d, e] -= m[d] * m[e]
+            C[e, d] = C[d, e]
+    for j in range(3):
+        m[3 + j] += w0[j]
+    return m, C
 
 
 @nb.njit(cache=True, parallel=True)

@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..photometry.kernels import brdf_product_nb
+from ..photometry.kernels import COOK_TORRANCE, brdf_product_nb, ct_product_fresnel, fresnel_ct
 
 __all__ = [
     "const_rate_nb", "rk4_torque_free_nb", "apply_noise_nb", "perturb_rotvec_nb",
@@ -265,6 +265,60 @@ def _flux(q, s, o, normals, areas, ids, params, sb, ob):
             continue
         acc += areas[fct] * brdf_product_nb(mid, params[fct], nx, ny, nz,
                                             sb[0], sb[1], sb[2], ob[0], ob[1], ob[2])
+    return acc
+
+
+@nb.njit(cache=True)
+def flux_invariants(s, o, ids, params, Fr):
+    """Attitude-independent parts of the facet sum at one geometry: returns ``(ĥ (3,), c)``
+    with ĥ = (ŝ+ô)/|ŝ+ô| (ECI) and c = ô·ĥ, and fills ``Fr[f]`` with the Cook–Torrance
+    Fresnel factor F(c, F0_f) of every Cook–Torrance facet (0 for the others). c = −1 when
+    ŝ = −ô (no half vector; no facet sees both)."""
+    hx = s[0] + o[0]
+    hy = s[1] + o[1]
+    hz = s[2] + o[2]
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    h = np.zeros(3)
+    c = -1.0
+    if hn > 0.0:
+        h[0] = hx / hn
+        h[1] = hy / hn
+        h[2] = hz / hn
+        c = o[0] * h[0] + o[1] * h[1] + o[2] * h[2]
+    for f in range(ids.shape[0]):
+        Fr[f] = fresnel_ct(c, params[f, 1]) if (ids[f] == COOK_TORRANCE and c > 0.0) else 0.0
+    return h, c
+
+
+@nb.njit(cache=True, inline="always")
+def _flux_pre(q, s, o, h, c, Fr, normals, areas, ids, params, sb, ob, hb):
+    """:func:`_flux` with the invariants of :func:`flux_invariants` precomputed (the same
+    sum; Cook–Torrance through :func:`~lightcurve.photometry.kernels.ct_product_fresnel`,
+    other models through ``brdf_product_nb``)."""
+    _qrot_into(q, s, sb)
+    _qrot_into(q, o, ob)
+    _qrot_into(q, h, hb)
+    acc = 0.0
+    for fct in range(normals.shape[0]):
+        mid = ids[fct]
+        if mid < 0:
+            continue
+        nx = normals[fct, 0]
+        ny = normals[fct, 1]
+        nz = normals[fct, 2]
+        ns = nx * sb[0] + ny * sb[1] + nz * sb[2]
+        if ns <= 0.0:
+            continue
+        no = nx * ob[0] + ny * ob[1] + nz * ob[2]
+        if no <= 0.0:
+            continue
+        if mid == COOK_TORRANCE:
+            nh = nx * hb[0] + ny * hb[1] + nz * hb[2]
+            p = params[fct]
+            acc += areas[fct] * ct_product_fresnel(ns, no, nh, c, Fr[fct], p[0], p[1], p[2])
+        else:
+            acc += areas[fct] * brdf_product_nb(mid, params[fct], nx, ny, nz,
+                                                sb[0], sb[1], sb[2], ob[0], ob[1], ob[2])
     return acc
 
 

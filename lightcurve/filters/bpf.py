@@ -225,7 +225,7 @@ class _Draws:
             return float(self.rng.random())
         CP.philox_uniforms(self.k0, self.k1, self.call, self._one)
         self.call += 1
-        return float(self._one[0]) % 1.0
+        return float(self._one[0])
 
     def random(self, n):
         if self.kind == "numpy":
@@ -233,7 +233,7 @@ class _Draws:
         out = np.empty(n)
         CP.philox_uniforms(self.k0, self.k1, self.call, out)
         self.call += 1
-        return out % 1.0
+        return out
 
     def sorted_uniforms_into(self, u):
         if self.kind == "numpy":
@@ -241,7 +241,6 @@ class _Draws:
         else:
             CP.philox_uniforms(self.k0, self.k1, self.call, u)
             self.call += 1
-            np.remainder(u, 1.0, out=u)
         u.sort()
         return u
 
@@ -389,6 +388,10 @@ class _NumbaOps:
         BK.chart_rows(Q, W, qref, GRP_A, GRP_F, X)
 
     @staticmethod
+    def chart_stats(Q, W, w, qref, w0, X):
+        return BK.chart_stats(Q, W, w, qref, GRP_A, GRP_F, w0, X)
+
+    @staticmethod
     def roughen_chart(X, z, sig, ncols, qref, Q, W):
         BK.roughen_chart(X, z, sig, ncols, qref, GRP_A, GRP_F, Q, W)
 
@@ -427,6 +430,11 @@ class _NumpyOps:
     def chart(Q, W, qref, X):
         X[:, :3] = _grp_rel_np(Q, qref)
         X[:, 3:6] = W
+
+    @staticmethod
+    def chart_stats(Q, W, w, qref, w0, X):
+        _NumpyOps.chart(Q, W, qref, X)
+        return _wstats_np(X[:, :6], w)
 
     @staticmethod
     def roughen_chart(X, z, sig, ncols, qref, Q, W):
@@ -1120,15 +1128,15 @@ class _Run:
         """Posterior mean and covariance (step 4) → ``(q̂, ω̂, C, q_ref)``; leaves the chart
         ``[δp about q_ref, ω]`` of the cloud in ``self.X[:, :6]``."""
         ops, Q = self.ops, self.Q
-        qmax = Q[int(ops.argmax(w))].copy()
+        imax = int(ops.argmax(w))
+        qmax = Q[imax].copy()
         if self.cfg.reference == "refined":
             qref = rot.quat_mult(rot.grp_to_quat(ops.grp_mean(Q, qmax, w), GRP_A, GRP_F), qmax)
             qref = qref / np.linalg.norm(qref)
         else:
             qref = qmax
         qref = np.ascontiguousarray(qref)
-        ops.chart(Q, self.W, qref, self.X)
-        mean, C = ops.wstats(self.X[:, :6], w)
+        mean, C = ops.chart_stats(Q, self.W, w, qref, self.W[imax].copy(), self.X)
         qhat = rot.quat_mult(rot.grp_to_quat(mean[:3], GRP_A, GRP_F), qref)
         return qhat / np.linalg.norm(qhat), mean[3:6].copy(), 0.5 * (C + C.T), qref
 

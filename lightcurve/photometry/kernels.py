@@ -31,6 +31,7 @@ import numpy as np
 __all__ = [
     "LAMBERT", "COOK_TORRANCE", "PHONG", "ASHIKHMIN_SHIRLEY",
     "brdf_product_nb", "brdf_value_kernel", "brightness_kernel", "facet_products_kernel",
+    "ct_product_fresnel", "fresnel_ct",
 ]
 
 LAMBERT = 0
@@ -42,7 +43,7 @@ _INV_PI = 1.0 / math.pi
 
 
 @nb.njit(cache=True, inline="always")
-def _fresnel_ct(c, f0):
+def fresnel_ct(c, f0):
     """Cook–Torrance Fresnel factor (standard form), c = ô·ĥ, f0 = normal-incidence reflectance.
 
     F = ½ (g−c)²/(g+c)² [1 + (c(g+c)−1)²/(c(g−c)+1)²], g² = n² + c² − 1,
@@ -57,15 +58,17 @@ def _fresnel_ct(c, f0):
 
 
 @nb.njit(cache=True, inline="always")
-def _ct_product(ns, no, nh, c, xi, a, m):
-    """(n·s)(n·o) f_r for Cook–Torrance.
+def ct_product_fresnel(ns, no, nh, c, F, xi, a, m):
+    """(n·s)(n·o) f_r for Cook–Torrance with its Fresnel factor ``F`` given.
 
     f_r = ξ a/π + (1−ξ) F D G / (4 (n·s)(n·o)); the diffuse term is ξ a/π, *without* the
     extra (n̂·ŝ) factor of the thesis's eq. 5.8 (a slip: the cosine is already in the
     magnitude equation). D is the normalised Beckmann distribution
     D = exp(−tan²α/m²)/(π m² cos⁴α), cos α = n̂·ĥ. G = min(1, 2(n̂·ĥ)(n̂·ô)/(ô·ĥ),
     2(n̂·ĥ)(n̂·ŝ)/(ô·ĥ)) — the thesis's eq. 5.10 writes a different second denominator; we
-    use ô·ĥ in both (= ŝ·ĥ by construction of ĥ).
+    use ô·ĥ in both (= ŝ·ĥ by construction of ĥ). ``c = ô·ĥ`` and ``F = F(c, F0)``
+    (:func:`fresnel_ct`) do not change with the attitude (both vectors rotate together), so
+    a caller evaluating many attitudes at one geometry computes F once.
     """
     diff = xi * a * _INV_PI * ns * no
     if xi >= 1.0 or nh <= 0.0 or c <= 0.0:
@@ -79,8 +82,15 @@ def _ct_product(ns, no, nh, c, xi, a, m):
         G = g1
     if g2 < G:
         G = g2
-    F = _fresnel_ct(c, a)
     return diff + (1.0 - xi) * 0.25 * F * D * G
+
+
+@nb.njit(cache=True, inline="always")
+def _ct_product(ns, no, nh, c, xi, a, m):
+    """(n·s)(n·o) f_r for Cook–Torrance (:func:`ct_product_fresnel` with F = F(c, a))."""
+    if xi >= 1.0 or nh <= 0.0 or c <= 0.0:
+        return xi * a * _INV_PI * ns * no
+    return ct_product_fresnel(ns, no, nh, c, fresnel_ct(c, a), xi, a, m)
 
 
 @nb.njit(cache=True)
