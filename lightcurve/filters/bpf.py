@@ -64,6 +64,7 @@ import numpy as np
 from .. import rotations as rot
 from ..core import particles as CP
 from ..errors import InputError
+from ..threads import limited_threads
 from . import _bpf_kernels as BK
 from . import _kernels as K
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
@@ -278,8 +279,12 @@ def run_bpf(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0, 
     """
     cfg = _config(config, overrides)
     backend = "numba" if problem.model.kernel_ok else "numpy"
-    return _Run(problem, cfg, seed, backend, bias, facets, attitude, keep_clouds, cloud_size,
-                initial_cloud).run()
+    run = _Run(problem, cfg, seed, backend, bias, facets, attitude, keep_clouds, cloud_size,
+               initial_cloud)
+    # one chunk of particles per thread at most: a small cloud runs on fewer threads (waking
+    # idle threads costs more than its work, most of all on a busy machine)
+    with limited_threads(CP.n_chunks(cfg.particles)):
+        return run.run()
 
 
 def run_bpf_numpy(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0,

@@ -40,7 +40,7 @@ from ..io.atomic import atomic_path, atomic_write_text
 from .metrics import cell_summary, run_metrics
 from .study import GRID_KEYS, RunTask, Study
 
-__all__ = ["limit_blas_threads", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
+__all__ = ["limit_blas_threads", "init_worker", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
            "prepare_output", "iter_results", "progress_bar", "RUN_FORMAT"]
 
 RUN_FORMAT = "lightcurve-study-run"
@@ -284,11 +284,52 @@ def _iter_inline(tasks, fn=None):
         yield fn(t)
 
 
+def init_worker(numba_threads: int) -> None:
+    """Start-up of a worker process: single-threaded BLAS (:func:`limit_blas_threads`) and at
+    most ``numba_threads`` numba threads (:mod:`lightcurve.threads`: workers × threads ≤
+    cores)."""
+    from ..threads import limit_numba_threads
+
+    limit_blas_threads()
+    limit_numba_threads(numba_threads)
+
+
+class _ThreadLimited:
+    """``fn(task)`` run with at most n numba threads in the calling thread (Dask tasks run in
+    the worker's executor threads, where a limit set at worker start does not apply). ``n``
+    comes from the cores of the worker's host and the Dask threads on it (``host_threads``:
+    host → threads of all workers there; a worker not listed divides by its own threads)."""
+
+    def __init__(self, fn, host_threads):
+        self.fn = fn
+        self.host_threads = dict(host_threads)
+
+    def __call__(self, task):
+        from ..threads import available_cores, limited_threads, user_thread_limit
+
+        try:
+            import distributed
+
+            w = distributed.get_worker()
+            host = str(w.address).split("://")[-1].rsplit(":", 1)[0]
+            busy = self.host_threads.get(host) or int(w.state.nthreads)
+        except (ImportError, ValueError, AttributeError):
+            busy = 1
+        n = max(1, available_cores() // max(1, int(busy)))
+        u = user_thread_limit()
+        with limited_threads(min(n, u) if u is not None else n):
+            return self.fn(task)
+
+
 def _iter_pool(tasks, workers, fn=None):
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
+    from ..threads import threads_per_worker
+
     fn = execute_task if fn is None else fn
+    nt = threads_per_worker(workers)
+    os.environ["NUMBA_NUM_THREADS"] = str(nt)   # inherited by a forkserver started now
     # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
     # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
     if "forkserver" in mp.get_all_start_methods():
@@ -297,7 +338,7 @@ def _iter_pool(tasks, workers, fn=None):
     else:
         ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                             initializer=limit_blas_threads) as ex:
+                             initializer=init_worker, initargs=(nt,)) as ex:
         pending = set()
         it = iter(tasks)
         # bounded in-flight queue: the results come back as they complete
@@ -328,10 +369,14 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
     distributed = _import_distributed()
     fn = execute_task if fn is None else fn
     key = (lambda t: f"lightcurve-run-{t.run_id}-{t.filter_seed}") if key is None else key
+    from ..threads import threads_per_worker
+
     cluster = None
     if address is None:
+        nt = threads_per_worker(int(n_workers))
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
-                                           processes=True, dashboard_address=None)
+                                           processes=True, dashboard_address=None,
+                                           env={"NUMBA_NUM_THREADS": str(nt)})
         client = distributed.Client(cluster)
     else:
         try:
@@ -340,6 +385,11 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
             raise InputError(f"cannot connect to the Dask scheduler: {exc}", field="--scheduler",
                              value=address) from None
     try:
+        hosts = {}
+        for addr, info in client.scheduler_info().get("workers", {}).items():
+            h = str(addr).split("://")[-1].rsplit(":", 1)[0]
+            hosts[h] = hosts.get(h, 0) + int(info.get("nthreads", 1))
+        fn = _ThreadLimited(fn, hosts)
         futs = [client.submit(fn, t, key=key(t), pure=False) for t in tasks]
         for fut in distributed.as_completed(futs):
             res = fut.result()
