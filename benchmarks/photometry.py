@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from lightcurve.photometry import Material, Shape, apparent_magnitude, load_shape  # noqa: E402
-from lightcurve.photometry.kernels import brightness_kernel  # noqa: E402
+from lightcurve.core.photometry import brightness_kernel  # noqa: E402
 from lightcurve.rotations import quat_normalize  # noqa: E402
 
 

@@ -5,7 +5,10 @@ One module per subcommand group (``sites``, ``shapes``, ``simulate``/``plot``/``
 ``register(subparsers)`` function and thin handlers that parse arguments, call the library and
 print. Shared option types live in :mod:`lightcurve.cli._args`. Exit codes: 0 success,
 1 run-time failure, 2 bad usage or bad input (one clear line; the traceback only with
-``--debug``).
+``--debug``), 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP (stored results kept;
+one line saying how to resume, :mod:`lightcurve.process`). Every command runs with its
+inputs tracked (:func:`lightcurve.io.safe_open.track_inputs`): an output that would replace
+one of its inputs is refused (exit 2).
 """
 
 from __future__ import annotations
@@ -56,16 +59,25 @@ def main(argv=None) -> int:
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
+    from ..io.safe_open import track_inputs
+    from ..process import Terminated, exit_code, handle_termination
+
     try:
-        return int(args.func(args) or 0)
+        with handle_termination(), track_inputs():
+            return int(args.func(args) or 0)
     except InputError as exc:  # bad input: exit 2
         if args.debug:
             traceback.print_exc()
         print(f"lightcurve: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("lightcurve: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP (lightcurve.process)
+        if args.debug:
+            traceback.print_exc()
+        how = f"terminated by {exc.name}" if isinstance(exc, Terminated) else "interrupted"
+        hint = getattr(args, "resume_hint", None)
+        hint = "" if not hint else "; " + hint.format(**vars(args))
+        print(f"lightcurve: {how}{hint}", file=sys.stderr)
+        return exit_code(exc)
     except BrokenPipeError:  # `lightcurve ... | head`: the reader went away, not our failure
         try:
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115  silence the flush at exit

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["number", "SEED", "csv_list", "csv_ints"]
+__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input"]
 
 
 def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
@@ -64,3 +64,25 @@ def csv_ints(text, option):
         out.append(v)
     return tuple(out)
 
+
+
+def output_not_input(output, *inputs, option: str = "-o/--output") -> None:
+    """Refuse (InputError, exit 2) an output file that names one of the command's inputs —
+    the same file by device and inode (links count) or the same absolute path — before any
+    work is done. (Writes are checked again when they happen:
+    :func:`lightcurve.io.safe_open.check_not_input`.)"""
+    import os
+
+    if output is None:
+        return
+    for inp in inputs:
+        if inp is None:
+            continue
+        try:
+            same = os.path.samefile(output, inp)
+        except (OSError, ValueError):
+            same = os.path.abspath(output) == os.path.abspath(inp)
+        if same:
+            raise InputError("the output would overwrite an input file of this command",
+                             file=output, field=option, value=str(inp),
+                             allowed="an output path that is not one of the inputs")

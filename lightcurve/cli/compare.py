@@ -49,4 +49,5 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true",
                    help="discard stored runs of a different (changed) study instead of refusing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_compare)
+    p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
+                   "run the same command again to resume")

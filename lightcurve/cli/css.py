@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._args import SEED, number
+from ._args import SEED, number, output_not_input
 
 __all__ = ["register"]
 
@@ -34,6 +34,7 @@ def _cmd_css_simulate(args) -> int:
     from ..css.sunline_ekf import FilterParams
     from ..css.truth import Scenario, simulate
 
+    output_not_input(args.out, args.config, args.albedo, args.filter_albedo, option="--out")
     css = _css_sensors(args.config, args.fov_deg)
     gyro = None if args.gyro == "none" else args.gyro
     fp = FilterParams() if gyro else gyroless_params()
@@ -69,6 +70,7 @@ def _cmd_css_estimate(args) -> int:
     from ..css.study import gyroless_params
     from ..css.sunline_ekf import FilterParams, run_filter
 
+    output_not_input(args.out, args.recording, option="--out")
     rec = read_recording(args.recording)
     gyro = None if args.no_gyro else rec["gyro"]
     if args.estimator in ("ekf", "eckf"):

@@ -134,4 +134,5 @@ def register(sub) -> None:
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
     p.add_argument("--plot", action="store_true", help="also write a PNG per file")
-    p.set_defaults(func=_cmd_invert)
+    p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
+                   "listed in {output}/summary.json; run the command again on the others")

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import SEED, csv_ints, csv_list, number
+from ._args import SEED, csv_ints, csv_list, number, output_not_input
 
 __all__ = ["register"]
 
@@ -21,6 +21,7 @@ def _cmd_fit_reflection(args) -> int:
     if args.attitude == "estimate" and not args.estimate:
         raise InputError("--attitude estimate needs --estimate FILE.h5 (an 'invert' result)",
                          field="--estimate")
+    output_not_input(args.output, args.file, args.estimate)
     curve = read_lightcurve(args.file)
     kinds = csv_list(args.params, "--params")
     facets = list(csv_ints(args.facets, "--facets")) if args.facets else None

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._args import SEED
+from ._args import SEED, output_not_input
 
 __all__ = ["register"]
 
@@ -19,6 +19,9 @@ def _cmd_simulate(args) -> int:
     from ..studies.scenario import load_scenario
     from ..studies.simulate import simulate
 
+    output_not_input(args.output, args.scenario)
+    if args.plot:
+        output_not_input(Path(args.output).with_suffix(".png"), args.scenario, option="--plot")
     scen = load_scenario(args.scenario, library_dirs=args.library, site_dirs=args.sites)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -42,8 +45,9 @@ def _cmd_plot(args) -> int:
     from ..io.lightcurve_h5 import read_lightcurve
     from ..report.plots import plot_lightcurve
 
-    lc = read_lightcurve(args.file)
     out = Path(args.output) if args.output else Path(args.file).with_suffix(".png")
+    output_not_input(out, args.file)
+    lc = read_lightcurve(args.file)
     plot_lightcurve(lc, out, title=Path(args.file).name)
     print(f"wrote {out}")
     return 0

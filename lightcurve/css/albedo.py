@@ -37,6 +37,7 @@ import numba
 import numpy as np
 
 from ..errors import InputError
+from ..io.safe_open import ALBEDO_MAX_BYTES as _MAX_MAP_BYTES
 
 __all__ = [
     "WGS84_A_M", "WGS84_F", "ZONAL_LEGENDRE_COEFFS", "AlbedoMap", "AlbedoGrid",
@@ -195,7 +196,6 @@ def builtin_albedo_map(resolution_deg: float = 10.0) -> AlbedoMap:
 
 
 _CERES_SHAPES = ((18, 36), (36, 72), (180, 360))
-_MAX_MAP_BYTES = 16 * 1024 * 1024
 
 
 def load_albedo_map(path) -> AlbedoMap:
@@ -205,19 +205,20 @@ def load_albedo_map(path) -> AlbedoMap:
     Raises :class:`InputError` (naming the file and field) for a missing file, unparsable
     numbers, a wrong shape, NaN, or values outside [0, 1] (0–100 % for TOMS).
     """
+    import io
+
+    from ..io.safe_open import read_bytes
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError("albedo map file not found", file=path)
-    size = path.stat().st_size
-    if size > _MAX_MAP_BYTES:  # refused before reading (bounded time and memory)
-        raise InputError(f"file too large ({size} bytes) for an albedo map", file=path,
-                         allowed=f"<= {_MAX_MAP_BYTES} bytes (a 1-degree CERES map is ~0.5 MB)")
+    # a regular file of at most 16 MiB (a 1-degree CERES map is ~0.5 MB), size from the
+    # opened descriptor, refused before reading
+    data = io.BytesIO(read_bytes(path, max_bytes=_MAX_MAP_BYTES, what="albedo map file"))
     toms = path.suffix.lower() == ".dat"
     try:
         if toms:
-            raw = np.loadtxt(path, dtype=float)
+            raw = np.loadtxt(data, dtype=float)
         else:
-            raw = np.loadtxt(path, delimiter=",", dtype=float)
+            raw = np.loadtxt(data, delimiter=",", dtype=float)
     except ValueError as exc:
         raise InputError(f"cannot parse numbers: {exc}", file=path, field="values") from None
     raw = np.atleast_2d(raw)

@@ -80,15 +80,11 @@ def read_recording(path) -> dict:
     Returns a dict with ``t``, ``y``, ``normals``, ``fov_half_angle_rad``, ``gyro`` (or None)
     and ``truth`` (dict or None).
     """
+    from ..io.safe_open import open_hdf5
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError("recording not found", file=path)
     try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"not an HDF5 file ({exc})", file=path) from None
-    try:
-        with f:
+        with open_hdf5(path) as f:  # regular file; no external links/storage, no VDS
             out = _read_checked(f, path)
     except InputError:
         raise
@@ -116,7 +112,9 @@ def _read_checked(f, path) -> dict:
             raise InputError("dataset too large", file=path, field=name, value=d.shape)
         if d.dtype.kind not in "fiub":
             raise InputError("expected real numbers", file=path, field=name, value=str(d.dtype))
-        v = np.asarray(d[()], dtype=float)
+        from ..io.safe_open import read_dataset
+
+        v = np.asarray(read_dataset(f, name, max_elements=_MAX_ELEMENTS, file=path), dtype=float)
         if not np.all(np.isfinite(v)):
             raise InputError("contains NaN or infinite values", file=path, field=name)
         return v

@@ -324,14 +324,20 @@ def load_study(path) -> StudySpec:
         if not p.is_absolute():
             p = Path(path).parent / p
         alb = str(p)
-        load_albedo_map(alb)  # validate early
+        try:
+            load_albedo_map(alb)  # validate early
+        except InputError as exc:  # name the study file and key, then the map's problem
+            raise InputError(str(exc), file=path, field="scenario.albedo") from None
     falb = sc.str("filter_albedo", "builtin")
     if falb not in ("builtin", "none"):
         p = Path(falb)
         if not p.is_absolute():
             p = Path(path).parent / p
         falb = str(p)
-        load_albedo_map(falb)  # validate early
+        try:
+            load_albedo_map(falb)  # validate early
+        except InputError as exc:  # name the study file and key, then the map's problem
+            raise InputError(str(exc), file=path, field="scenario.filter_albedo") from None
     spec = replace(
         spec, configuration=conf,
         fov_half_angle_deg=sc.float("fov_half_angle_deg", DEFAULT_FOV_HALF_ANGLE_DEG, min=0.0,

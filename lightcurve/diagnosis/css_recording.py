@@ -36,15 +36,15 @@ AU_M = 149_597_870_700.0
 
 def is_css_recording(path) -> bool:
     """True when ``path`` is an HDF5 file with root attribute ``format = "lightcurve-css"``."""
-    import h5py
+    from ..io.safe_open import is_regular_file, open_hdf5
 
     p = Path(path)
-    if not p.is_file():
+    if not is_regular_file(p):
         return False
     try:
-        with h5py.File(p, "r") as f:
+        with open_hdf5(p) as f:
             fmt = f.attrs.get("format", "")
-    except OSError:
+    except (InputError, OSError):
         return False
     fmt = fmt.decode() if isinstance(fmt, bytes) else str(fmt)
     return fmt == "lightcurve-css"

@@ -213,10 +213,10 @@ def load_model_scenario(path):
     from ..studies.scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
+    doc, text = load_toml(path, with_text=True)
     diag = doc.pop("diagnosis", None)
     had_effects = bool(doc.pop("effects", None))
-    sc = parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"))
+    sc = parse_scenario(doc, file=path, text=text)
     opts = {}
     if diag is not None:
         sec = Section(diag, file=path, name="diagnosis")
@@ -284,7 +284,7 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
             doc = loads_toml(lc.scenario_toml, file=f"{recording}:scenario")
             doc.pop("effects", None)
             doc.pop("diagnosis", None)
-            sc = parse_scenario(doc, file=str(recording))
+            sc = parse_scenario(doc, file=str(recording), embedded=True)
         default_free = "none"
         q = lc.truth_q
         omega = lc.truth_omega_rad_s

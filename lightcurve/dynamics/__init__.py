@@ -10,7 +10,7 @@ Modules: :mod:`.kinematics`, :mod:`.rigid_body`, :mod:`.torques`, :mod:`.atmosph
 """
 
 from .atmosphere import EXPONENTIAL_TABLE, R_EARTH_M, altitude_m, density_kg_m3
-from .integrators import integrate_truth, rk4_propagate, rk4_propagate_nb, rk4_propagate_serial_nb
+from .integrators import integrate_truth, rk4_propagate, rk4_propagate_nb
 from .jacobians import (
     acs_noise_covariance,
     controlled_F,
@@ -23,7 +23,7 @@ from .jacobians import (
     uncontrolled_F,
     uncontrolled_F_models,
 )
-from .kinematics import const_rate_step_nb, propagate_constant_rate, qdot_nb, quat_derivative
+from .kinematics import propagate_constant_rate, quat_derivative
 from .rigid_body import (
     angular_momentum_inertial,
     check_inertia,
@@ -51,11 +51,11 @@ from .truth import ControlledTruth, UncontrolledTruth, srp_coefficients_from_mat
 
 __all__ = [
     "EXPONENTIAL_TABLE", "R_EARTH_M", "altitude_m", "density_kg_m3",
-    "integrate_truth", "rk4_propagate", "rk4_propagate_nb", "rk4_propagate_serial_nb",
+    "integrate_truth", "rk4_propagate", "rk4_propagate_nb",
     "acs_noise_covariance", "controlled_F", "drag_torque_jacobian", "eta_noise_covariance",
     "gravity_gradient_jacobian", "nonlinear_error_rate", "srp_torque_jacobian",
     "transition_matrix", "uncontrolled_F", "uncontrolled_F_models",
-    "const_rate_step_nb", "propagate_constant_rate", "qdot_nb", "quat_derivative",
+    "propagate_constant_rate", "quat_derivative",
     "angular_momentum_inertial", "check_inertia", "euler_omega_dot", "rotational_energy",
     "state_derivative",
     "AU_M", "MU_EARTH", "OMEGA_EARTH", "P_SUN_1AU", "ConstantTorque", "DragTorque",

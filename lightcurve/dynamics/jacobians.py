@@ -36,9 +36,10 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rotations as rot
+from ..core.dynamics import error_F_nb
 from . import _checks as ck
 from .atmosphere import altitude_m, density_kg_m3
-from .rigid_body import check_inertia
+from .rigid_body import check_inertia, euler_omega_dot
 from .torques import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU, _srp_inputs, drag_relative_velocity
 
 __all__ = [
@@ -135,9 +136,8 @@ def controlled_F(omega) -> np.ndarray:
     axes). The attitude-only model (rate known) is the upper-left block ``−[ω×]``.
     """
     w = _single_vec(omega, "omega")
-    F = np.zeros((6, 6))
-    F[:3, :3] = -rot.skew(w)
-    F[:3, 3:] = np.eye(3)
+    F = np.empty((6, 6))
+    error_F_nb(np.ascontiguousarray(w), np.eye(3), np.eye(3), False, F)
     return F
 
 
@@ -159,13 +159,10 @@ def uncontrolled_F(omega, J, dT_dtheta=None, dT_domega=None, J_inv=None) -> np.n
     w = _single_vec(omega, "omega")
     J = check_inertia(J)
     Ji = np.linalg.inv(J) if J_inv is None else np.asarray(J_inv, dtype=float)
-    F = np.zeros((6, 6))
-    F[:3, :3] = -rot.skew(w)
-    F[:3, 3:] = np.eye(3)
-    Fww = rot.skew(J @ w) - rot.skew(w) @ J
+    F = np.empty((6, 6))
+    error_F_nb(np.ascontiguousarray(w), np.ascontiguousarray(J), np.ascontiguousarray(Ji), True, F)
     if dT_domega is not None:
-        Fww = Fww + np.asarray(dT_domega, dtype=float).reshape(3, 3)
-    F[3:, 3:] = Ji @ Fww
+        F[3:, 3:] += Ji @ np.asarray(dT_domega, dtype=float).reshape(3, 3)
     if dT_dtheta is not None:
         F[3:, :3] = Ji @ np.asarray(dT_dtheta, dtype=float).reshape(3, 3)
     return F
@@ -201,9 +198,8 @@ def nonlinear_error_rate(dx, q_hat, omega_hat, J=None, torque_fn=None, t: float 
     def wdot(qq, ww):
         if J is None:
             return np.zeros(3)
-        Jm = check_inertia(J)
         T = np.zeros(3) if torque_fn is None else np.asarray(torque_fn(t, qq, ww), dtype=float)
-        return np.linalg.solve(Jm, -np.cross(ww, Jm @ ww) + T)
+        return euler_omega_dot(ww, J, T)
 
     qd, qhd = qdot(q, w), qdot(q_hat, w_hat)
     dqd = rot.quat_mult(qd, rot.quat_conj(q_hat)) + rot.quat_mult(q, rot.quat_conj(qhd))

@@ -7,17 +7,18 @@ angular velocity of the body relative to inertial space, expressed in body axes 
 
 with :func:`lightcurve.rotations.quat_mult`'s ``⊗`` (``A(q ⊗ p) = A(q) A(p)``). For a constant
 body rate the exact solution is ``q(t + Δt) = exp(ω Δt) ⊗ q(t)`` with ``exp(θ)`` the quaternion
-of the rotation vector ``θ`` (:func:`lightcurve.rotations.rotvec_to_quat`).
+of the rotation vector ``θ`` (:func:`lightcurve.rotations.rotvec_to_quat`). The kernels are
+:func:`lightcurve.core.dynamics.quat_rate_xyz` and :func:`lightcurve.core.dynamics.const_rate_xyz`.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .. import rotations as rot
+from ..core.dynamics import quat_rate_batch_nb
 
-__all__ = ["quat_derivative", "propagate_constant_rate", "qdot_nb", "const_rate_step_nb"]
+__all__ = ["quat_derivative", "propagate_constant_rate"]
 
 
 def _check_omega(omega, name="omega"):
@@ -46,12 +47,11 @@ def quat_derivative(q, omega):
     q = rot.check_unit_quat(q, "q")
     w = _check_omega(omega)
     shape = np.broadcast_shapes(q.shape[:-1], w.shape[:-1])
-    q = np.broadcast_to(q, shape + (4,))
-    w = np.broadcast_to(w, shape + (3,))
-    q0, qv = q[..., :1], q[..., 1:]
-    d0 = -0.5 * np.sum(qv * w, axis=-1, keepdims=True)
-    dv = 0.5 * (q0 * w - np.cross(w, qv))
-    return np.concatenate([d0, dv], axis=-1)
+    Q = np.ascontiguousarray(np.broadcast_to(q, shape + (4,))).reshape(-1, 4)
+    W = np.ascontiguousarray(np.broadcast_to(w, shape + (3,))).reshape(-1, 3)
+    out = np.empty((Q.shape[0], 4))
+    quat_rate_batch_nb(Q, W, out)
+    return out.reshape(shape + (4,))
 
 
 def propagate_constant_rate(q, omega, dt):
@@ -77,24 +77,3 @@ def propagate_constant_rate(q, omega, dt):
         raise ValueError("dt: contains NaN or infinite values")
     dq = rot.rotvec_to_quat(w * dt[..., None])
     return rot.quat_mult(dq, q)
-
-
-@njit(cache=True)
-def qdot_nb(q, w):
-    """``½ [0, ω] ⊗ q`` for 1-D float64 arrays (q: 4, ω: 3); no validation."""
-    out = np.empty(4)
-    out[0] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2])
-    # ½ (q1 ω − ω × q_v)
-    out[1] = 0.5 * (q[0] * w[0] - (w[1] * q[3] - w[2] * q[2]))
-    out[2] = 0.5 * (q[0] * w[1] - (w[2] * q[1] - w[0] * q[3]))
-    out[3] = 0.5 * (q[0] * w[2] - (w[0] * q[2] - w[1] * q[1]))
-    return out
-
-
-@njit(cache=True)
-def const_rate_step_nb(q, w, dt):
-    """Exact constant-rate step ``exp(ω dt) ⊗ q`` for 1-D float64 arrays; no validation."""
-    th = np.empty(3)
-    for i in range(3):
-        th[i] = w[i] * dt
-    return rot.qmul_nb(rot.rotvec2q_nb(th), q)

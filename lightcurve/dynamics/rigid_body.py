@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rotations as rot
+from ..core.dynamics import omega_dot_batch_nb, quat_rate_batch_nb
 from .kinematics import _check_omega
 
 __all__ = [
@@ -69,11 +70,13 @@ def euler_omega_dot(omega, J, torque=None, J_inv=None):
     J = check_inertia(J)
     w = _check_omega(omega)
     Ji = np.linalg.inv(J) if J_inv is None else np.asarray(J_inv, dtype=float)
-    Jw = w @ J.T
-    rhs = -np.cross(w, Jw)
-    if torque is not None:
-        rhs = rhs + _check_omega(torque, "torque")
-    return rhs @ Ji.T
+    T = np.zeros(3) if torque is None else _check_omega(torque, "torque")
+    w, T = np.broadcast_arrays(w, T)
+    lead = w.shape[:-1]
+    out = np.empty((int(np.prod(lead, dtype=int)), 3))
+    omega_dot_batch_nb(np.ascontiguousarray(w.reshape(-1, 3)), np.ascontiguousarray(J),
+                       np.ascontiguousarray(Ji), np.ascontiguousarray(T.reshape(-1, 3)), out)
+    return out.reshape(lead + (3,))
 
 
 def state_derivative(t, x, J, torque_fn=None, J_inv=None):
@@ -95,17 +98,16 @@ def state_derivative(t, x, J, torque_fn=None, J_inv=None):
     x = np.asarray(x, dtype=float)
     if x.shape != (7,):
         raise ValueError(f"x: expected shape (7,) = [q(4), omega(3)], got {x.shape}")
-    q, w = x[:4], x[4:]
+    q, w = x[None, :4], x[None, 4:]
     J = check_inertia(J)
-    Ji = np.linalg.inv(J) if J_inv is None else J_inv
-    qd = np.empty(4)
-    qd[0] = -0.5 * (q[1:] @ w)
-    qd[1:] = 0.5 * (q[0] * w - np.cross(w, q[1:]))
-    T = np.zeros(3)
+    Ji = np.linalg.inv(J) if J_inv is None else np.asarray(J_inv, dtype=float)
+    T = np.zeros((1, 3))
     if torque_fn is not None:
-        T = np.asarray(torque_fn(t, q / np.linalg.norm(q), w), dtype=float)
-    wd = Ji @ (-np.cross(w, J @ w) + T)
-    return np.concatenate([qd, wd])
+        T[0] = np.asarray(torque_fn(t, x[:4] / np.linalg.norm(x[:4]), x[4:]), dtype=float)
+    out = np.empty(7)
+    quat_rate_batch_nb(q, w, out[None, :4])
+    omega_dot_batch_nb(w, J, Ji, T, out[None, 4:])
+    return out
 
 
 def angular_momentum_inertial(q, omega, J):

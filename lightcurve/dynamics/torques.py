@@ -33,6 +33,8 @@ import numpy as np
 from numba import njit
 
 from .. import rotations as rot
+from ..core.constants import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU
+from ..core.dynamics import gravity_gradient_batch_nb
 from . import _checks as ck
 from .atmosphere import altitude_m, density_kg_m3
 from .rigid_body import check_inertia
@@ -56,14 +58,6 @@ __all__ = [
     "TorqueSum",
 ]
 
-MU_EARTH = 3.986004418e14
-"""Earth's gravitational parameter, m³/s² (WGS84/EGM96)."""
-P_SUN_1AU = 4.56e-6
-"""Solar radiation pressure at 1 au on a perfect absorber, N/m² (Markley & Crassidis 2014, environmental torques)."""
-AU_M = 1.495978707e11
-"""Astronomical unit, m (IAU 2012)."""
-OMEGA_EARTH = 7.292115e-5
-"""Earth's rotation rate, rad/s (about the GCRS z axis; precession/nutation neglected)."""
 
 
 # ----------------------------------------------------------------------------------------
@@ -89,8 +83,13 @@ def gravity_gradient_torque(r_eci_m, q, J, mu: float = MU_EARTH):
     rn = np.linalg.norm(r, axis=-1, keepdims=True)
     if np.any(rn == 0):
         raise ValueError("r_eci_m: zero position vector")
-    u = rot.quat_rotate(q, r / rn)
-    return 3.0 * mu / rn**3 * np.cross(u, u @ J.T)
+    q = rot.check_unit_quat(q, "q")
+    lead = np.broadcast_shapes(r.shape[:-1], q.shape[:-1])
+    R = np.ascontiguousarray(np.broadcast_to(r, lead + (3,))).reshape(-1, 3)
+    Q = np.ascontiguousarray(np.broadcast_to(q, lead + (4,))).reshape(-1, 4)
+    out = np.empty((R.shape[0], 3))
+    gravity_gradient_batch_nb(Q, R, np.ascontiguousarray(J), mu, out)
+    return out.reshape(lead + (3,))
 
 
 @njit(cache=True)
@@ -100,15 +99,9 @@ def gravity_gradient_torque_nb(q, r_eci_m, J, mu):
     ``q`` (4,) unit quaternion, ``r_eci_m`` (3,) m, ``J`` (3, 3) kg m², ``mu`` m³/s²; returns the
     body torque (3,) in N m. No validation.
     """
-    rn = np.sqrt(r_eci_m[0] ** 2 + r_eci_m[1] ** 2 + r_eci_m[2] ** 2)
-    u = rot.qrot_nb(q, r_eci_m / rn)
-    Ju = J @ u
-    k = 3.0 * mu / rn**3
-    out = np.empty(3)
-    out[0] = k * (u[1] * Ju[2] - u[2] * Ju[1])
-    out[1] = k * (u[2] * Ju[0] - u[0] * Ju[2])
-    out[2] = k * (u[0] * Ju[1] - u[1] * Ju[0])
-    return out
+    out = np.empty((1, 3))
+    gravity_gradient_batch_nb(q.reshape(1, 4), r_eci_m.reshape(1, 3), J, mu, out)
+    return out[0]
 
 
 # ----------------------------------------------------------------------------------------

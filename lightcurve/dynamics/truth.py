@@ -39,28 +39,24 @@ import numpy as np
 from numba import njit
 
 from .. import rotations as rot
+from ..core.dynamics import mat9, omega_dot_xyz, quat_rate_xyz
 
 
 @njit(cache=True)
 def _truth_rhs_nb(x, T, J, Ji, eta):
-    """State derivative of ``x = [q (4), ω (3)]``: ``q̇ = ½ [0, ω] ⊗ q`` (scalar first,
-    inertial→body), ``ω̇ = J⁻¹ (T − ω × Jω) + η`` (rad/s², body axes; T in N m, J kg m²)."""
+    """State derivative of ``x = [q (4), ω (3)]``: ``q̇ = ½ [0, ω] ⊗ q`` (Bernard eq. 4.12;
+    scalar first, inertial→body), ``ω̇ = J⁻¹ (T − ω × Jω) + η`` (eq. 4.13; rad/s², body axes;
+    T in N m, J kg m²) — the core's :func:`~lightcurve.core.dynamics.quat_rate_xyz` and
+    :func:`~lightcurve.core.dynamics.omega_dot_xyz`."""
     out = np.empty(7)
-    q0, q1, q2, q3 = x[0], x[1], x[2], x[3]
-    w0, w1, w2 = x[4], x[5], x[6]
-    out[0] = -0.5 * (q1 * w0 + q2 * w1 + q3 * w2)
-    out[1] = 0.5 * (q0 * w0 - (w1 * q3 - w2 * q2))
-    out[2] = 0.5 * (q0 * w1 - (w2 * q1 - w0 * q3))
-    out[3] = 0.5 * (q0 * w2 - (w0 * q2 - w1 * q1))
-    h0 = J[0, 0] * w0 + J[0, 1] * w1 + J[0, 2] * w2
-    h1 = J[1, 0] * w0 + J[1, 1] * w1 + J[1, 2] * w2
-    h2 = J[2, 0] * w0 + J[2, 1] * w1 + J[2, 2] * w2
-    c0 = T[0] - (w1 * h2 - w2 * h1)
-    c1 = T[1] - (w2 * h0 - w0 * h2)
-    c2 = T[2] - (w0 * h1 - w1 * h0)
-    for i in range(3):
-        out[4 + i] = Ji[i, 0] * c0 + Ji[i, 1] * c1 + Ji[i, 2] * c2 + eta[i]
+    out[0], out[1], out[2], out[3] = quat_rate_xyz(x[0], x[1], x[2], x[3], x[4], x[5], x[6])
+    e0, e1, e2 = omega_dot_xyz(x[4], x[5], x[6], mat9(J), mat9(Ji), (T[0], T[1], T[2]), None)
+    out[4] = e0 + eta[0]
+    out[5] = e1 + eta[1]
+    out[6] = e2 + eta[2]
     return out
+
+
 from . import _checks as ck
 from .integrators import integrate_truth
 from .kinematics import _check_omega

@@ -37,7 +37,6 @@ from .kalman import (
     joseph_update,
     kf_predict,
     safe_cholesky,
-    standard_update,
     symmetrize,
 )
 from .linear import (
@@ -88,7 +87,7 @@ from .sigma_points import (
 __all__ = [
     # kalman
     "UpdateInfo", "symmetrize", "safe_cholesky", "kf_predict", "joseph_update",
-    "standard_update", "consider_update",
+    "consider_update",
     # sigma points
     "UnscentedWeights", "unscented_weights", "sigma_offsets", "sigma_points",
     "unscented_mean", "unscented_covariance", "unscented_cross_covariance", "UTResult",

@@ -20,17 +20,18 @@ Failure path (DESIGN.md, "Numerics"): a factorisation of ``S`` that fails, or an
 intermediate, leaves ``x`` and ``P`` unchanged and reports ``ok = False`` in the returned
 :class:`UpdateInfo`; never a silent NaN.
 
-The ``*_nb`` functions are ``numba.njit(cache=True)`` kernels with the same algebra on plain
-float64 arrays, for filters whose whole trajectory loop is compiled.
+The algebra is done once, by the kernels of :mod:`lightcurve.core.kalman` (``cholesky_nb``,
+``joseph_update_nb`` are re-exported here for compiled filter loops); this module validates
+shapes and packages the diagnostics.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
-from scipy.linalg import solve_triangular
+
+from ..core.kalman import cholesky_nb, joseph_apply_nb, joseph_update_nb, kalman_gain_nb
 
 __all__ = [
     "UpdateInfo",
@@ -38,7 +39,6 @@ __all__ = [
     "safe_cholesky",
     "kf_predict",
     "joseph_update",
-    "standard_update",
     "consider_update",
     "cholesky_nb",
     "joseph_update_nb",
@@ -84,13 +84,8 @@ def safe_cholesky(P):
         raise ValueError(f"safe_cholesky needs a square 2-D matrix, got shape {P.shape}")
     if not np.all(np.isfinite(P)):
         return None, False
-    try:
-        L = np.linalg.cholesky(0.5 * (P + P.T))
-    except np.linalg.LinAlgError:
-        return None, False
-    if not np.all(np.isfinite(L)) or np.any(np.diag(L) <= 0.0):
-        return None, False
-    return L, True
+    L, ok = cholesky_nb(np.ascontiguousarray(0.5 * (P + P.T)))
+    return (L, True) if ok else (None, False)
 
 
 def _as_vector(a, name):
@@ -239,28 +234,6 @@ def _prepare_update(x, P, y, H, R, h):
     return x, P, y, H, R, h
 
 
-def _gain(P, H, R, nu):
-    """Shared part of every update: S, its Cholesky factor, K, NIS (or a refusal reason)."""
-    S = H @ P @ H.T + R
-    S = 0.5 * (S + S.T)
-    if not np.all(np.isfinite(nu)):
-        return S, None, np.nan, "non-finite innovation"
-    L, ok = safe_cholesky(S)
-    if not ok:
-        return S, None, np.nan, "innovation covariance S is not positive definite"
-    PHt = P @ H.T
-    if L.shape[0] == 1:
-        # scalar measurement (a magnitude, one CSS voltage): the triangular solves are two
-        # divisions. Same arithmetic as the general branch; it avoids SciPy's BLAS call, whose
-        # thread-pool wake-up costs milliseconds per 1×1 solve on a loaded machine.
-        ell = L[0, 0]
-        return S, (PHt / ell) / ell, float((nu[0] / ell) ** 2), ""
-    # K = P Hᵀ S⁻¹, from S Kᵀ = H P  (two triangular solves with L)
-    Kt = solve_triangular(L.T, solve_triangular(L, PHt.T, lower=True), lower=False)
-    w = solve_triangular(L, nu, lower=True)
-    return S, Kt.T, float(w @ w), ""
-
-
 def _refused(x, P, nu, S, reason):
     return x.copy(), P.copy(), UpdateInfo(innovation=nu, S=S, nis=np.nan, ok=False,
                                           gain=None, reason=reason)
@@ -295,23 +268,25 @@ def joseph_update(x, P, y, H, R, *, h=None, consider=None):
     info : UpdateInfo
         Innovation, S, NIS, gain and the ``ok`` flag. When ``ok`` is False the returned
         ``x_post``, ``P_post`` are copies of the prior.
+
+    The arithmetic is :func:`lightcurve.core.kalman.kalman_gain_nb` and
+    :func:`lightcurve.core.kalman.joseph_apply_nb`.
     """
     x, P, y, H, R, h = _prepare_update(x, P, y, H, R, h)
-    mask = _consider_mask(consider, x.shape[0])
+    n = x.shape[0]
+    mask = _consider_mask(consider, n)
+    mask = np.zeros(n, dtype=np.bool_) if mask is None else mask
     nu = y - h
-    S, K, nis, reason = _gain(P, H, R, nu)
-    if K is None:
+    x, P, H, R = (np.ascontiguousarray(a) for a in (x, P, H, R))
+    K, S, nis, ok = kalman_gain_nb(P, H, R, np.ascontiguousarray(nu), mask)
+    if not ok:
+        reason = ("non-finite innovation" if not np.all(np.isfinite(nu))
+                  else "innovation covariance S is not positive definite")
         return _refused(x, P, nu, S, reason)
-    if mask is not None:
-        K = K.copy()
-        K[mask, :] = 0.0
-    IKH = np.eye(x.shape[0]) - K @ H
-    P_new = IKH @ P @ IKH.T + K @ R @ K.T
-    P_new = 0.5 * (P_new + P_new.T)
-    x_new = x + K @ nu
-    if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))):
+    x_new, P_new, ok = joseph_apply_nb(x, P, np.ascontiguousarray(nu), H, R, K)
+    if not ok:
         return _refused(x, P, nu, S, "non-finite posterior")
-    return x_new, P_new, UpdateInfo(innovation=nu, S=S, nis=nis, ok=True, gain=K)
+    return x_new, P_new, UpdateInfo(innovation=nu, S=S, nis=float(nis), ok=True, gain=K)
 
 
 def consider_update(x, P, y, H, R, consider, *, h=None):
@@ -323,135 +298,3 @@ def consider_update(x, P, y, H, R, consider, *, h=None):
     consistently (the Joseph form is exact for this sub-optimal gain).
     """
     return joseph_update(x, P, y, H, R, h=h, consider=consider)
-
-
-def standard_update(x, P, y, H, R, *, h=None):
-    """Kalman update with the short covariance form ``P⁺ = (I − K H) P`` (symmetrised).
-
-    Equal to the Joseph form for the optimal gain (Bar-Shalom et al. 2001 §5.2.3); less robust
-    to round-off. Kept as a reference for tests and for speed comparisons. Same returns and
-    failure path as :func:`joseph_update`.
-    """
-    x, P, y, H, R, h = _prepare_update(x, P, y, H, R, h)
-    nu = y - h
-    S, K, nis, reason = _gain(P, H, R, nu)
-    if K is None:
-        return _refused(x, P, nu, S, reason)
-    P_new = (np.eye(x.shape[0]) - K @ H) @ P
-    P_new = 0.5 * (P_new + P_new.T)
-    x_new = x + K @ nu
-    if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))):
-        return _refused(x, P, nu, S, "non-finite posterior")
-    return x_new, P_new, UpdateInfo(innovation=nu, S=S, nis=nis, ok=True, gain=K)
-
-
-# --------------------------------------------------------------------------------------------
-# Numba kernels
-# --------------------------------------------------------------------------------------------
-
-@numba.njit(cache=True)
-def cholesky_nb(A):
-    """Lower Cholesky factor of symmetric ``A`` (n, n) → ``(L, ok)``; never raises.
-
-    Uses only the lower triangle of ``A``. ``ok`` is False (and ``L`` zero) when a pivot is
-    not strictly positive or not finite.
-    """
-    n = A.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not (s > 0.0) or not np.isfinite(s):
-            return np.zeros((n, n)), False
-        d = np.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            t = A[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / d
-    return L, True
-
-
-@numba.njit(cache=True)
-def _forward_nb(L, b):
-    n = L.shape[0]
-    z = np.empty(n)
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * z[k]
-        z[i] = s / L[i, i]
-    return z
-
-
-@numba.njit(cache=True)
-def _backward_nb(L, z):
-    # solves Lᵀ v = z
-    n = L.shape[0]
-    v = np.empty(n)
-    for i in range(n - 1, -1, -1):
-        s = z[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * v[k]
-        v[i] = s / L[i, i]
-    return v
-
-
-@numba.njit(cache=True)
-def joseph_update_nb(x, P, nu, H, R, consider):
-    """Compiled Joseph-form update on plain float64 arrays.
-
-    Parameters
-    ----------
-    x (n,), P (n, n), nu (m,) innovation ``y − h``, H (m, n), R (m, m),
-    consider (n,) boolean: states whose gain row is zeroed (all False for a plain update).
-
-    Returns
-    -------
-    x_post (n,), P_post (n, n), nis (float, NaN when refused), ok (bool).
-    On failure ``x_post`` and ``P_post`` are copies of the prior.
-    """
-    n = x.shape[0]
-    m = nu.shape[0]
-    PHt = P @ H.T
-    S = H @ PHt + R
-    for i in range(m):
-        for j in range(i):
-            a = 0.5 * (S[i, j] + S[j, i])
-            S[i, j] = a
-            S[j, i] = a
-    finite = True
-    for i in range(m):
-        if not np.isfinite(nu[i]):
-            finite = False
-    if not finite:
-        return x.copy(), P.copy(), np.nan, False
-    L, ok = cholesky_nb(S)
-    if not ok:
-        return x.copy(), P.copy(), np.nan, False
-    K = np.empty((n, m))
-    for r in range(n):
-        kr = _backward_nb(L, _forward_nb(L, PHt[r, :].copy()))
-        for c in range(m):
-            K[r, c] = 0.0 if consider[r] else kr[c]
-    w = _forward_nb(L, nu)
-    nis = 0.0
-    for i in range(m):
-        nis += w[i] * w[i]
-    IKH = np.eye(n) - K @ H
-    Pn = IKH @ P @ IKH.T + K @ R @ K.T
-    xn = x + K @ nu
-    for i in range(n):
-        if not np.isfinite(xn[i]):
-            return x.copy(), P.copy(), np.nan, False
-        for j in range(n):
-            if not np.isfinite(Pn[i, j]):
-                return x.copy(), P.copy(), np.nan, False
-    for i in range(n):
-        for j in range(i):
-            a = 0.5 * (Pn[i, j] + Pn[j, i])
-            Pn[i, j] = a
-            Pn[j, i] = a
-    return xn, Pn, nis, True

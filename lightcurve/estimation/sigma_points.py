@@ -24,8 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_solve, solve_triangular
 
+from ..core.kalman import backward_nb, forward_nb
+from ..core.sigma_points import sigma_offsets_nb, unscented_weights_nb
 from .kalman import UpdateInfo, safe_cholesky, symmetrize
 
 __all__ = [
@@ -108,15 +109,11 @@ def unscented_weights(n, alpha=1.0, beta=2.0, kappa=0.0) -> UnscentedWeights:
         raise ValueError(f"alpha must be finite and > 0, got {alpha}")
     if not (np.isfinite(beta) and np.isfinite(kappa)):
         raise ValueError(f"beta and kappa must be finite, got beta={beta}, kappa={kappa}")
-    lam = alpha * alpha * (n + kappa) - n
-    c = n + lam
+    c = alpha * alpha * (n + kappa)
     if not c > 0.0:
         raise ValueError(f"n + lambda = alpha^2 (n + kappa) must be > 0; got {c} "
                          f"(n={n}, alpha={alpha}, kappa={kappa})")
-    wm = np.full(2 * n + 1, 0.5 / c)
-    wm[0] = lam / c
-    wc = wm.copy()
-    wc[0] = wm[0] + 1.0 - alpha * alpha + beta
+    lam, wm, wc = unscented_weights_nb(n, alpha, beta, kappa)
     return UnscentedWeights(n=n, alpha=alpha, beta=beta, kappa=kappa, lam=lam, wm=wm, wc=wc)
 
 
@@ -147,11 +144,10 @@ def sigma_offsets(P, weights):
         raise ValueError(f"P must be square (n, n), got {P.shape}")
     n = P.shape[0]
     _check_weights(weights, n)
-    L, ok = safe_cholesky((n + weights.lam) * P)
-    if not ok:
+    if not np.all(np.isfinite(P)):
         return None, False
-    S = L.T  # row i = column i of L
-    return np.concatenate([S, -S], axis=0), True
+    off, ok = sigma_offsets_nb(np.ascontiguousarray(P), n + weights.lam)
+    return (off, True) if ok else (None, False)
 
 
 def sigma_points(x, P, weights):
@@ -303,8 +299,8 @@ def unscented_update(x, P, X, Y, y, weights, R=None):
         K = (Pxy / ell) / ell
         w = nu / ell
     else:
-        K = cho_solve((L, True), Pxy.T).T
-        w = solve_triangular(L, nu, lower=True)
+        K = np.array([backward_nb(L, forward_nb(L, np.ascontiguousarray(r))) for r in Pxy])
+        w = forward_nb(L, np.ascontiguousarray(nu))
     x_new = x + K @ nu
     P_new = symmetrize(P - K @ Pyy @ K.T)
     if not (np.all(np.isfinite(x_new)) and np.all(np.isfinite(P_new))):

@@ -3,11 +3,14 @@
 Particles are rows of ``Q`` (N,4) inertial→body quaternions (scalar first) and ``W`` (N,3) body
 rates (rad/s). The attitude chart of a cloud about a reference ``q_ref`` is the GRP
 (Bernard eq. 7.1, a = 1, f = 4) of ``δq_i = q_i ⊗ q_ref⁻¹`` with the sign ``δq1 ≥ 0``; a chart
-buffer ``X`` (N, 6 + e) holds ``[δp_i, ω_i, extra states]`` per row.
+buffer ``X`` (N, 6 + e) holds ``[δp_i, ω_i, extra states]`` per row. Model 3 particles carry
+facet parameters ``Z`` (N, D) (Bernard ch. 8).
 
-Every kernel is parallel over particles (``prange``), allocation-free per particle, and its
-result does not depend on the number of threads (reductions sum fixed chunks in order,
-:func:`lightcurve.core.particles.n_chunks`).
+The rotation algebra, the rigid-body step and the BRDFs are the core's
+(:mod:`lightcurve.core.rotations`, :mod:`lightcurve.core.dynamics`,
+:mod:`lightcurve.core.photometry`). Every kernel is parallel over particles (``prange``),
+allocation-free per particle, and its result does not depend on the number of threads
+(reductions sum fixed chunks in order, :func:`lightcurve.core.particles.n_chunks`).
 """
 
 from __future__ import annotations
@@ -17,26 +20,81 @@ import math
 import numba as nb
 import numpy as np
 
+from ..core.dynamics import const_rate_xyz, mat9, rk4_step_xyz
 from ..core.particles import n_chunks
-from ._kernels import _flux_pre, _normalize, _qmul_into, _rk4_one, _rotvec_q, flux_invariants
+from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, brdf_product_nb,
+                               cook_torrance_fresnel_xyz, facet_flux_nb, fresnel_xyz)
+from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 
-__all__ = ["bpf_predict_nb", "argmax_weights", "grp_weighted_mean", "chart_rows", "chart_stats",
-           "roughen_chart", "roughen_compose", "liu_west_attitude", "min_abs_residual"]
+__all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
+           "chart_rows", "chart_stats", "roughen_chart", "roughen_compose", "liu_west_attitude",
+           "min_abs_residual", "facet_mag_particles_nb", "weighted_param_stats_nb",
+           "facet_loglik_history_nb"]
+
+
+@nb.njit(cache=True)
+def flux_invariants(s, o, ids, params, Fr):
+    """Attitude-independent parts of the facet sum at one geometry: returns ``(ĥ, c)`` with
+    ĥ = (ŝ+ô)/|ŝ+ô| (3-tuple, ECI) and c = ô·ĥ, and fills ``Fr[f]`` with the Cook–Torrance
+    Fresnel factor F(c, F0_f) (:func:`~lightcurve.core.photometry.fresnel_xyz`) of every
+    Cook–Torrance facet (0 for the others). c = −1 when ŝ = −ô (no facet sees both)."""
+    hx = s[0] + o[0]
+    hy = s[1] + o[1]
+    hz = s[2] + o[2]
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    h = (0.0, 0.0, 0.0)
+    c = -1.0
+    if hn > 0.0:
+        h = (hx / hn, hy / hn, hz / hn)
+        c = o[0] * h[0] + o[1] * h[1] + o[2] * h[2]
+    for f in range(ids.shape[0]):
+        ct = ids[f] == COOK_TORRANCE or ids[f] == COOK_TORRANCE_THESIS
+        Fr[f] = fresnel_xyz(c, params[f, 1])[0] if (ct and c > 0.0) else 0.0
+    return h, c
+
+
+@nb.njit(cache=True, inline="always")
+def _flux_pre(q0, q1, q2, q3, s, o, h, c, Fr, normals, areas, ids, params):
+    """Facet sum ``Σ_i A_i (n̂·ŝ)⁺(n̂·ô)⁺ f_r,i`` of one attitude with the invariants of
+    :func:`flux_invariants` (the sum of :func:`~lightcurve.core.photometry.facet_flux_nb`;
+    Cook–Torrance through ``cook_torrance_fresnel_xyz`` with the epoch's F, the other models
+    through ``brdf_product_nb``)."""
+    sx, sy, sz = qrot_xyz_nb(q0, q1, q2, q3, s[0], s[1], s[2])
+    ox, oy, oz = qrot_xyz_nb(q0, q1, q2, q3, o[0], o[1], o[2])
+    hx, hy, hz = qrot_xyz_nb(q0, q1, q2, q3, h[0], h[1], h[2])
+    acc = 0.0
+    for fct in range(normals.shape[0]):
+        mid = ids[fct]
+        if mid < 0:
+            continue
+        nx = normals[fct, 0]
+        ny = normals[fct, 1]
+        nz = normals[fct, 2]
+        ns = nx * sx + ny * sy + nz * sz
+        if ns <= 0.0:
+            continue
+        no = nx * ox + ny * oy + nz * oz
+        if no <= 0.0:
+            continue
+        if mid == COOK_TORRANCE or mid == COOK_TORRANCE_THESIS:
+            nh = nx * hx + ny * hy + nz * hz
+            p = params[fct]
+            acc += areas[fct] * cook_torrance_fresnel_xyz(
+                ns, no, nh, c, Fr[fct], 0.0, 0.0, p[0], p[1], p[2],
+                mid == COOK_TORRANCE_THESIS)[0]
+        else:
+            acc += areas[fct] * brdf_product_nb(mid, params[fct], nx, ny, nz, sx, sy, sz,
+                                                ox, oy, oz)
+    return acc
 
 
 @nb.njit(cache=True, inline="always")
 def _grp_of(q, r, a, f, out):
-    """GRP (3,) of ``q ⊗ r⁻¹`` with the sign of the scalar part made ≥ 0 (``r`` given as its
-    conjugate's components: r = [r0, r1, r2, r3] of the reference, conjugated here)."""
-    d0 = q[0] * r[0] + q[1] * r[1] + q[2] * r[2] + q[3] * r[3]
-    d1 = -q[0] * r[1] + r[0] * q[1] - (-q[2] * r[3] + q[3] * r[2])
-    d2 = -q[0] * r[2] + r[0] * q[2] - (-q[3] * r[1] + q[1] * r[3])
-    d3 = -q[0] * r[3] + r[0] * q[3] - (-q[1] * r[2] + q[2] * r[1])
+    """GRP (3,) of ``q ⊗ r⁻¹`` (Bernard eq. 7.100 and 7.1) with the sign of the scalar part
+    made ≥ 0, into ``out``."""
+    d0, d1, d2, d3 = qmul_xyz(q[0], q[1], q[2], q[3], r[0], -r[1], -r[2], -r[3])
     if d0 < 0.0:
-        d0 = -d0
-        d1 = -d1
-        d2 = -d2
-        d3 = -d3
+        d0, d1, d2, d3 = -d0, -d1, -d2, -d3
     den = a + d0
     out[0] = f * d1 / den
     out[1] = f * d2 / den
@@ -44,15 +102,15 @@ def _grp_of(q, r, a, f, out):
 
 
 @nb.njit(cache=True, inline="always")
-def _grp_quat(p0, p1, p2, a, f, d):
-    """Quaternion ``d`` (4,) of the GRP (p0, p1, p2) (Bernard eq. 7.2–7.4)."""
-    n2 = p0 * p0 + p1 * p1 + p2 * p2
-    q0 = (-a * n2 + f * math.sqrt(f * f + (1.0 - a * a) * n2)) / (f * f + n2)
-    cc = (a + q0) / f
-    d[0] = q0
-    d[1] = cc * p0
-    d[2] = cc * p1
-    d[3] = cc * p2
+def _grp_times(p0, p1, p2, a, f, r, out):
+    """``out = grp2q(p) ⊗ r`` (Bernard eq. 7.105 / 7.108), renormalised."""
+    d0, d1, d2, d3 = grp2q_xyz(p0, p1, p2, a, f)
+    e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, r[0], r[1], r[2], r[3])
+    n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+    out[0] = e0 / n
+    out[1] = e1 / n
+    out[2] = e2 / n
+    out[3] = e3 / n
 
 
 @nb.njit(cache=True, parallel=True)
@@ -60,16 +118,18 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
                    params, offset, m_out):
     """One fused bootstrap-PF prediction for every particle (in place on Q, W; fills m_out).
 
-    mode 0: constant rate (controlled, exact ``q ← exp(ω dt) ⊗ q``), 1: torque-free RK4 with
-    ``nsub`` sub-steps (uncontrolled). ``noise`` (N,r) standard normals and ``Lnoise`` (6,r) a
-    square root of the process-noise covariance: the sample ``Lnoise · noise[i]`` =
-    [δθ (rad), δω (rad/s)] is applied after the deterministic step (``noise`` (0,r): none).
-    ``zeta`` (N,3) or (0,3): ACS attitude noise (rad) applied to the attitude *only for the
-    predicted measurement* (controlled jitter model, Bernard eq. 7.8–7.11). ``m_out`` (N,)
-    receives the predicted magnitudes (+inf: invisible; DESIGN.md magnitude equation). With
-    ``s[0]`` NaN no magnitude is computed (propagation only). The facet sum uses the
-    attitude-independent half vector and Fresnel factors of the epoch
-    (:func:`~lightcurve.filters._kernels.flux_invariants`). The quaternions are renormalised.
+    mode 0: constant rate (controlled; the exact step ``exp(ω dt) ⊗ q``,
+    :func:`~lightcurve.core.dynamics.const_rate_xyz`), 1: torque-free rigid body, ``nsub`` steps
+    of the core's RK4 (:func:`~lightcurve.core.dynamics.rk4_step_xyz`; J, Ji (3,3) inertia
+    kg m² and its inverse). ``noise`` (N,r) standard normals and ``Lnoise`` (6,r) a square root
+    of the process-noise covariance: the sample ``Lnoise · noise[i]`` = [δθ (rad), δω (rad/s)]
+    is applied after the deterministic step as ``q ← exp(δθ) ⊗ q``, ``ω ← ω + δω`` (``noise``
+    (0,r): none). ``zeta`` (N,3) or (0,3): ACS attitude noise (rad) applied to the attitude
+    *only for the predicted measurement* (controlled jitter model, Bernard eq. 7.8–7.11).
+    ``m_out`` (N,) receives ``offset − 2.5 log10 Φ(q)`` (DESIGN.md magnitude equation; +inf
+    where no light reaches the observer). With ``s[0]`` NaN no magnitude is computed
+    (propagation only). The quaternions are renormalised; the facet sum uses the epoch's
+    attitude-independent half vector and Fresnel factors (:func:`flux_invariants`).
     """
     N = Q.shape[0]
     h = dt / max(nsub, 1)
@@ -77,8 +137,10 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     r = noise.shape[1]
     use_zeta = zeta.shape[0] == N
     predict = not np.isnan(s[0])
+    Jt = mat9(J)
+    Kt = mat9(Ji)
     Fr = np.zeros(normals.shape[0])
-    hI = np.zeros(3)
+    hI = (0.0, 0.0, 0.0)
     cI = -1.0
     if predict:
         hI, cI = flux_invariants(s, o, ids, params, Fr)
@@ -86,61 +148,48 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     for c in nb.prange(nch):
         lo = c * N // nch
         hi = (c + 1) * N // nch
-        nv = np.empty(6)
-        q = np.empty(4)
-        w = np.empty(3)
-        dq = np.empty(4)
-        qm = np.empty(4)
-        sb = np.empty(3)
-        ob = np.empty(3)
-        hb = np.empty(3)
-        k1q = np.empty(4)
-        k2q = np.empty(4)
-        k3q = np.empty(4)
-        k4q = np.empty(4)
-        k1w = np.empty(3)
-        k2w = np.empty(3)
-        k3w = np.empty(3)
-        k4w = np.empty(3)
-        qt = np.empty(4)
-        wt = np.empty(3)
         for i in range(lo, hi):
-            for j in range(4):
-                q[j] = Q[i, j]
-            for j in range(3):
-                w[j] = W[i, j]
+            q0, q1, q2, q3 = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
+            w0, w1, w2 = W[i, 0], W[i, 1], W[i, 2]
             if dt != 0.0:
                 if mode == 0:
-                    _rotvec_q(w[0] * dt, w[1] * dt, w[2] * dt, dq)
-                    _qmul_into(dq, Q[i], q)
+                    q0, q1, q2, q3 = const_rate_xyz(q0, q1, q2, q3, w0, w1, w2, dt)
                 else:
-                    _rk4_one(q, w, J, Ji, h, nsub, k1q, k2q, k3q, k4q, k1w, k2w, k3w, k4w,
-                             qt, wt)
+                    for _ in range(nsub):
+                        q0, q1, q2, q3, w0, w1, w2 = rk4_step_xyz(q0, q1, q2, q3, w0, w1, w2, h,
+                                                                  Jt, Kt, None, None, None)
             if use_noise:
-                for j in range(6):
-                    acc = 0.0
-                    for cc in range(r):
-                        acc += Lnoise[j, cc] * noise[i, cc]
-                    nv[j] = acc
-                _rotvec_q(nv[0], nv[1], nv[2], dq)
-                for j in range(4):
-                    qt[j] = q[j]
-                _qmul_into(dq, qt, q)
-                for j in range(3):
-                    w[j] += nv[3 + j]
-            _normalize(q)
-            for j in range(4):
-                Q[i, j] = q[j]
-            for j in range(3):
-                W[i, j] = w[j]
+                v0 = 0.0
+                v1 = 0.0
+                v2 = 0.0
+                v3 = 0.0
+                v4 = 0.0
+                v5 = 0.0
+                for cc in range(r):
+                    z = noise[i, cc]
+                    v0 += Lnoise[0, cc] * z
+                    v1 += Lnoise[1, cc] * z
+                    v2 += Lnoise[2, cc] * z
+                    v3 += Lnoise[3, cc] * z
+                    v4 += Lnoise[4, cc] * z
+                    v5 += Lnoise[5, cc] * z
+                d0, d1, d2, d3 = rotvec2q_xyz(v0, v1, v2)
+                q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
+                w0 += v3
+                w1 += v4
+                w2 += v5
+            n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+            q0 /= n
+            q1 /= n
+            q2 /= n
+            q3 /= n
+            Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = q0, q1, q2, q3
+            W[i, 0], W[i, 1], W[i, 2] = w0, w1, w2
             if predict:
                 if use_zeta:
-                    _rotvec_q(zeta[i, 0], zeta[i, 1], zeta[i, 2], dq)
-                    _qmul_into(dq, q, qm)
-                else:
-                    for j in range(4):
-                        qm[j] = q[j]
-                fl = _flux_pre(qm, s, o, hI, cI, Fr, normals, areas, ids, params, sb, ob, hb)
+                    d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
+                    q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
+                fl = _flux_pre(q0, q1, q2, q3, s, o, hI, cI, Fr, normals, areas, ids, params)
                 m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
 
 
@@ -253,13 +302,8 @@ def roughen_chart(X, z, sig, ncols, qref, a, f, Q, W):
     (ncols = 3: the attitude only, W left as it is). z (N, ncols) standard normals."""
     N = Q.shape[0]
     for i in nb.prange(N):
-        p0 = X[i, 0] + sig[0] * z[i, 0]
-        p1 = X[i, 1] + sig[1] * z[i, 1]
-        p2 = X[i, 2] + sig[2] * z[i, 2]
-        d = np.empty(4)
-        _grp_quat(p0, p1, p2, a, f, d)
-        _qmul_into(d, qref, Q[i])
-        _normalize(Q[i])
+        _grp_times(X[i, 0] + sig[0] * z[i, 0], X[i, 1] + sig[1] * z[i, 1],
+                   X[i, 2] + sig[2] * z[i, 2], a, f, qref, Q[i])
         if ncols == 6:
             for j in range(3):
                 W[i, j] = X[i, 3 + j] + sig[3 + j] * z[i, 3 + j]
@@ -271,13 +315,10 @@ def roughen_compose(Q, W, z, sig, a, f):
     eq. 7.108) and ``ω_i ← ω_i + c_ω,i`` (eq. 7.109); z (N,6) standard normals."""
     N = Q.shape[0]
     for i in nb.prange(N):
-        d = np.empty(4)
-        qi = np.empty(4)
-        _grp_quat(sig[0] * z[i, 0], sig[1] * z[i, 1], sig[2] * z[i, 2], a, f, d)
-        for j in range(4):
-            qi[j] = Q[i, j]
-        _qmul_into(d, qi, Q[i])
-        _normalize(Q[i])
+        d0, d1, d2, d3 = grp2q_xyz(sig[0] * z[i, 0], sig[1] * z[i, 1], sig[2] * z[i, 2], a, f)
+        e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
+        n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+        Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = e0 / n, e1 / n, e2 / n, e3 / n
         for j in range(3):
             W[i, j] += sig[3 + j] * z[i, 3 + j]
 
@@ -297,10 +338,7 @@ def liu_west_attitude(X, eps, M, sa, c, qref, a, f, Q, W, E):
             for j in range(r):
                 acc += M[d, j] * eps[i, j]
             x[d] = acc
-        dq = np.empty(4)
-        _grp_quat(x[0], x[1], x[2], a, f, dq)
-        _qmul_into(dq, qref, Q[i])
-        _normalize(Q[i])
+        _grp_times(x[0], x[1], x[2], a, f, qref, Q[i])
         for j in range(3):
             W[i, j] = x[3 + j]
         for d in range(6, D):
@@ -329,3 +367,144 @@ def min_abs_residual(mpred, y):
         if part[c] < b:
             b = part[c]
     return b
+
+
+@nb.njit(cache=True, inline="always")
+def _fill_facet_arrays(z, facet, kind_col, logit, areas0, params0, ar, pr):
+    """Facet areas ``ar`` (F,) m² and BRDF parameters ``pr`` (F,P) of one Model 3 state z (D,).
+
+    Starts from the nominal ``areas0``/``params0`` and overwrites the estimated entries with
+    ``p = 1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``; ``kind_col[d] == 3`` is an area, otherwise
+    the BRDF parameter column of facet ``facet[d]``.
+    """
+    F, P = params0.shape
+    for f in range(F):
+        ar[f] = areas0[f]
+        for j in range(P):
+            pr[f, j] = params0[f, j]
+    for d in range(z.shape[0]):
+        zz = z[d]
+        v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+        if kind_col[d] == 3:
+            ar[facet[d]] = v
+        else:
+            pr[facet[d], kind_col[d]] = v
+
+
+@nb.njit(cache=True, parallel=True)
+def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, areas0, ids,
+                           params0, offset, m_out):
+    """Apparent magnitudes with per-particle facet parameters (Model 3, Bernard ch. 8).
+
+    ``m_out[i] = offset − 2.5 log10 Σ_f A_if (n̂_f·ŝ)⁺(n̂_f·ô)⁺ f_r,f`` (DESIGN.md magnitude
+    equation) where particle i's facet arrays are the shape's ``areas0`` (F,) m² and packed
+    BRDF rows ``params0`` (F,P) with the estimated entries replaced by ``p(Z[i])``: state d
+    sets parameter ``kind_col[d]`` (0 ξ, 1 a = F0, 2 m (Beckmann slope) → ``params[f,kc]``;
+    3 → area A_f, m²) of facet ``facet[d]`` to ``1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``.
+
+    Q (N,4) inertial→body quaternions, or (1,4) shared by every particle (attitude known);
+    ``zeta`` (N,3) ACS jitter rotation vectors (rad) applied as ``exp(ζ_i) ⊗ q_i`` for the
+    prediction only, or (0,3); Z (N,D) unbounded states, or (1,D) shared; s, o (3,) unit
+    object→Sun / object→observer directions in ECI; normals (F,3) body axes; ids (F,) BRDF
+    model ids. The facet sum is the core's (:func:`~lightcurve.core.photometry.facet_flux_nb`), so with
+    ``p(Z[i])`` equal to the shape's values the two agree to round-off. +inf where no light
+    reaches the observer. Parallel over chunks of particles; work buffers per chunk.
+    """
+    N = m_out.shape[0]
+    F = normals.shape[0]
+    P = params0.shape[1]
+    D = facet.shape[0]
+    qall = Q.shape[0] == N
+    zall = Z.shape[0] == N
+    use_zeta = zeta.shape[0] == N
+    nch = n_chunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        ar = np.empty(F)
+        pr = np.empty((F, P))
+        qm = np.empty(4)
+        for i in range(lo, hi):
+            iq = i if qall else 0
+            iz = i if zall else 0
+            _fill_facet_arrays(Z[iz], facet, kind_col, logit, areas0, params0, ar, pr)
+            if use_zeta:
+                d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
+                qm[0], qm[1], qm[2], qm[3] = qmul_xyz(d0, d1, d2, d3, Q[iq, 0], Q[iq, 1],
+                                                      Q[iq, 2], Q[iq, 3])
+            else:
+                for j in range(4):
+                    qm[j] = Q[iq, j]
+            fl = facet_flux_nb(qm, s, o, normals, ar, ids, pr)
+            m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+
+
+@nb.njit(cache=True)
+def weighted_param_stats_nb(Z, w, logit):
+    """Weighted mean and variance of unbounded states Z (N,D) and of their physical values.
+
+    ``p = 1/(1+e^{−z})`` where ``logit[d]`` else ``e^{z}``; weights w (N,) sum to 1.
+    Returns ``(z_mean, z_var, p_mean, p_var)``, each (D,).
+    """
+    N, D = Z.shape
+    zm = np.zeros(D)
+    pm = np.zeros(D)
+    z2 = np.zeros(D)
+    p2 = np.zeros(D)
+    for i in range(N):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(D):
+            zz = Z[i, d]
+            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            zm[d] += wi * zz
+            pm[d] += wi * pp
+    for i in range(N):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(D):
+            zz = Z[i, d]
+            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            z2[d] += wi * (zz - zm[d]) ** 2
+            p2[d] += wi * (pp - pm[d]) ** 2
+    return zm, z2, pm, p2
+
+
+@nb.njit(cache=True, parallel=True)
+def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, kind_col, logit,
+                            normals, areas0, ids, params0, out):
+    """Log-likelihood of each particle's facet states over the measurement history.
+
+    ``out[i] = Σ_{j<kmax} ℓ_j(Z[i]) + φ_last ℓ_kmax(Z[i])`` with
+    ``ℓ_j = −½ ((y_j − m_j)/σ_j)²`` (m_j the magnitude of :func:`facet_mag_particles_nb` at the
+    known attitude ``Qs[j]``; ``ℓ_j = −inf`` when m_j = +inf; epochs with a non-finite
+    ``y_j`` are skipped). Qs (n,4) known inertial→body attitudes, S, O (n,3) unit ECI
+    object→Sun / object→observer, offs (n,) magnitude offsets, y, sig (n,) mag. Used by the
+    resample-move step of the BPF's attitude-known mode. Parallel over chunks of particles.
+    """
+    N = Z.shape[0]
+    F = normals.shape[0]
+    P = params0.shape[1]
+    D = facet.shape[0]
+    nch = n_chunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        ar = np.empty(F)
+        pr = np.empty((F, P))
+        for i in range(lo, hi):
+            _fill_facet_arrays(Z[i], facet, kind_col, logit, areas0, params0, ar, pr)
+            acc = 0.0
+            for j in range(kmax + 1):
+                wj = 1.0 if j < kmax else phi_last
+                if wj == 0.0 or not np.isfinite(y[j]):
+                    continue
+                fl = facet_flux_nb(Qs[j], S[j], O[j], normals, ar, ids, pr)
+                if not fl > 0.0:
+                    acc = -np.inf
+                    break
+                r = (y[j] - (offs[j] - 2.5 * math.log10(fl))) / sig[j]
+                acc += -0.5 * wj * r * r
+            out[i] = acc

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
+from ..core.rotations import from_grp_rel_nb, grp_rel_nb
 from ..estimation.consistency import NISDivergenceDetector
-from . import _kernels as K
 from .result import FLAG_COLLAPSE, FLAG_NIS, FLAG_REFUSED, Estimate
 
 GRP_A = 1.0
@@ -156,18 +157,18 @@ def grp_to_dq(p):
     """Quaternions (S,4) of GRP error vectors p (S,3) (a = 1, f = 4)."""
     P = np.ascontiguousarray(np.asarray(p, float).reshape(-1, 3))
     ident = np.array([1.0, 0.0, 0.0, 0.0])
-    return K.from_grp_rel_nb(P, ident, GRP_A, GRP_F)
+    return from_grp_rel_nb(P, ident, GRP_A, GRP_F)
 
 
 def apply_grp(p, qref):
     """``grp2q(p_i) ⊗ qref`` for p (S,3) → (S,4)."""
     P = np.ascontiguousarray(np.asarray(p, float).reshape(-1, 3))
-    return K.from_grp_rel_nb(P, np.ascontiguousarray(qref, dtype=float), GRP_A, GRP_F)
+    return from_grp_rel_nb(P, np.ascontiguousarray(qref, dtype=float), GRP_A, GRP_F)
 
 
 def grp_rel(Q, qref):
     """GRP (S,3) of ``Q_i ⊗ qref⁻¹`` (sign with δq1 ≥ 0)."""
-    return K.grp_rel_nb(np.ascontiguousarray(Q, dtype=float),
+    return grp_rel_nb(np.ascontiguousarray(Q, dtype=float),
                         np.ascontiguousarray(qref, dtype=float), GRP_A, GRP_F)
 
 
@@ -195,15 +196,11 @@ class single_thread:
     """
 
     def __enter__(self):
-        import numba
-
         self._n = numba.get_num_threads()
         numba.set_num_threads(1)
         return self
 
     def __exit__(self, *exc):
-        import numba
-
         numba.set_num_threads(self._n)
         return False
 

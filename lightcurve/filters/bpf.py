@@ -63,10 +63,10 @@ import numpy as np
 
 from .. import rotations as rot
 from ..core import particles as CP
+from ..core.rotations import from_grp_rel_nb
 from ..errors import InputError
 from ..threads import limited_threads
 from . import _bpf_kernels as BK
-from . import _kernels as K
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
 from .gating import GateConfig, InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
@@ -495,11 +495,11 @@ def _flux_numpy(shape, sb, ob, areas=None, prm=None):
 
     sb, ob (N,3) body-frame unit vectors; ``areas`` (N,F) m² and ``prm`` (N,F,P) per-particle
     kernel arrays (Model 3) replace the shape's when given. The same formulas as
-    :mod:`lightcurve.photometry.kernels` (Cook–Torrance in the DESIGN.md form: Beckmann D,
+    `lightcurve.core.photometry` (Cook–Torrance in the DESIGN.md form: Beckmann D,
     G = min(1, 2(n̂·ĥ)(n̂·ô)/(ô·ĥ), 2(n̂·ĥ)(n̂·ŝ)/(ô·ĥ)), standard Fresnel with n from F0);
     returns None when a facet uses another BRDF.
     """
-    from ..photometry.kernels import COOK_TORRANCE, LAMBERT
+    from ..core.photometry import COOK_TORRANCE, LAMBERT
 
     n, areas0, ids, prm0 = shape.kernel_arrays()
     areas = areas0 if areas is None else areas
@@ -659,7 +659,7 @@ class _Extra:
     def _log_post(self, Z, k, phi):
         Qs, S, O, offs, y, sig, n_arr, ids = self._hist
         ll = np.empty(Z.shape[0])
-        K.facet_loglik_history_nb(Z, k, phi, Qs, S, O, offs, y, sig, self.fc, self.kc,
+        BK.facet_loglik_history_nb(Z, k, phi, Qs, S, O, offs, y, sig, self.fc, self.kc,
                                   self.lg, n_arr, self.areas0, ids, self.params0, ll)
         r = np.empty_like(Z)
         CP.liu_west_rows(Z, self._Linv, 0.0, -(self._Linv @ self.facets.z0), Z, r)
@@ -699,7 +699,7 @@ class _Extra:
         if not self.ne:
             return
         if self.kind == "facets":
-            zm, zv, pm, pv = K.weighted_param_stats_nb(self.E, np.ascontiguousarray(w), self.lg)
+            zm, zv, pm, pv = BK.weighted_param_stats_nb(self.E, np.ascontiguousarray(w), self.lg)
             self.mean[k], self.sd[k] = zm, np.sqrt(zv)
             self.pmean[k], self.psd[k] = pm, np.sqrt(pv)
         else:
@@ -735,7 +735,7 @@ def _predict_facets(backend, p, ext, k, Q, zeta, out):
     m = p.model
     if backend == "numba":
         n_arr, _, ids, _ = m._karrs
-        K.facet_mag_particles_nb(Q, zeta, ext.E, ext.fc, ext.kc, ext.lg, m.s_eci[k], m.o_eci[k],
+        BK.facet_mag_particles_nb(Q, zeta, ext.E, ext.fc, ext.kc, ext.lg, m.s_eci[k], m.o_eci[k],
                                  n_arr, ext.areas0, ids, ext.params0, float(m.offset[k]), out)
         return out
     N = ext.E.shape[0]
@@ -842,7 +842,7 @@ class _Run:
             X0 = self.draws.normal((N, 6)) @ psd_sqrt(p.P0).T
             P0 = np.ascontiguousarray(X0[:, :3])
             if self.backend == "numba":
-                self.Q = K.from_grp_rel_nb(P0, np.ascontiguousarray(p.q0), GRP_A, GRP_F)
+                self.Q = from_grp_rel_nb(P0, np.ascontiguousarray(p.q0), GRP_A, GRP_F)
             else:
                 self.Q = np.ascontiguousarray(_from_grp_np(P0, p.q0))
             self.W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])

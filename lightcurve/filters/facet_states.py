@@ -48,10 +48,11 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
-from ..photometry.kernels import COOK_TORRANCE, brdf_product_nb
-from ..photometry.partials import kernel_capable, magnitude_partials_q_nb
+from ..core.photometry import (COOK_TORRANCE, brdf_product_nb, facet_flux_nb,
+                               magnitude_partials_q_nb)
+from ..photometry.partials import kernel_capable
 from ..rotations import qrot_xyz_nb
-from ._kernels import _fill_facet_arrays, _flux
+from ._bpf_kernels import _fill_facet_arrays
 
 __all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
            "dp_dz", "mag_states_nb", "mag_z_states_nb", "partials_z_nb"]
@@ -141,12 +142,10 @@ def mag_z_states_nb(Q, s, o, normals, areas0, ids, params0, offset, Z, kind_col,
     out = np.empty(S)
     areas = np.empty(F)
     params = np.empty(params0.shape)
-    sb = np.empty(3)
-    ob = np.empty(3)
     for i in range(S):
-        # the BPF's per-particle fill and the attitude-only flux loop (filters._kernels)
+        # the BPF's per-particle fill and the core's facet sum
         _fill_facet_arrays(Z[i], facet, kind_col, logit, areas0, params0, areas, params)
-        acc = _flux(Q[i], s, o, normals, areas, ids, params, sb, ob)
+        acc = facet_flux_nb(Q[i], s, o, normals, areas, ids, params)
         out[i] = offset - 2.5 * math.log10(acc) if acc > 0.0 else np.inf
     return out
 
@@ -434,8 +433,7 @@ class FacetParameterStates:
         with np.errstate(divide="ignore", invalid="ignore"):
             mp = magnitude_partials(self.shape_at(z), q[None, :], model.s_eci[k:k + 1],
                                     model.o_eci[k:k + 1], model.range_obs[k:k + 1],
-                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag,
-                                    backend="numpy")
+                                    model.range_sun[k:k + 1], sun_mag=model.sun_mag)
         cols = (mp.dm_dxi[0], mp.dm_da[0], mp.dm_dm[0], mp.dm_dA[0])
         dm_dp = np.array([cols[c][f] for c, f in zip(self.kind_col, self.facet)])
         m = float(mp.m[0]) + float(model.lit_offset[k])

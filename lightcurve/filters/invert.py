@@ -43,7 +43,7 @@ def _scenario_attitude(curve):
 
     try:
         doc = tomllib.loads(txt)
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, RecursionError):  # RecursionError: hostile nesting
         return {}
     at = doc.get("attitude", {})
     return at if isinstance(at, dict) else {}
@@ -102,7 +102,7 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
                              field="attrs.shape")
         from ..photometry import load_shape
 
-        shape = load_shape(str(name))
+        shape = load_shape(str(name), library_only=True)  # a name from a data file
     elif isinstance(shape, str):
         from ..photometry import load_shape
 

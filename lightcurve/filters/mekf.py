@@ -32,15 +32,12 @@ Per epoch k (times sorted as in the lightcurve; two sites may share a time, Δt 
    horizon are skipped, and a magnitude whose ``ν²/S`` (``S = H P⁻ Hᵀ + R``) exceeds the χ²
    gate is rejected (or used with inflated R), flagged and counted.
 
-Implementation (issue 6, speed): the scalar Joseph update is a numba kernel
-(:func:`joseph_scalar_nb`, O(n²), the same algebra as
-:func:`lightcurve.estimation.joseph_update`, which calls LAPACK triangular solves whose
-thread pool costs milliseconds per call on a loaded machine), and with the analytic Jacobian
-the magnitude and all its partials come from one numba pass over the facets
-(:func:`lightcurve.photometry.partials.magnitude_partials_q_nb`,
-:func:`lightcurve.filters.facet_states.partials_z_nb`) when every facet is Lambert,
-Cook–Torrance or Phong — no shape copy per epoch. Results equal the NumPy path to rounding
-(tests/filters/test_filters_model3_speed_equivalence.py).
+Implementation: the scalar Joseph update is the core's O(n²) kernel
+(:func:`lightcurve.core.kalman.joseph_scalar_nb`), and with the analytic Jacobian the magnitude
+and all its partials come from one numba pass over the facets
+(:func:`lightcurve.core.photometry.magnitude_partials_q_nb`,
+:func:`lightcurve.filters.facet_states.partials_z_nb`) when every facet has analytic partials —
+no shape copy per epoch.
 """
 
 from __future__ import annotations
@@ -48,12 +45,13 @@ from __future__ import annotations
 import math
 import time
 
-import numba as nb
 import numpy as np
 
-from ..photometry.partials import kernel_capable, magnitude_partials_q_nb
-from . import _kernels as K
-from ._common import (FilterProblem, Recorder, attach_bias, attach_facets, grp_to_dq,
+from ..core.kalman import UPDATE_OK, joseph_scalar_nb
+from ..core.photometry import magnitude_partials_q_nb
+from ..core.rotations import from_grp_rel_nb, normalize_into_nb, perturb_rotvec_nb, qmul_nb
+from ..photometry.partials import kernel_capable
+from ._common import (GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, attach_facets,
                       initial_state_ext, layout_transition, reflection_histories,
                       single_thread, truth_state)
 from .gating import InnovationGate
@@ -63,20 +61,17 @@ __all__ = ["run_mekf"]
 
 
 def _reset(q, dth, error):
-    """``normalise(δq(δθ⁺) ⊗ q)`` (Bernard eq. 3.20 product, written out on scalars: the
-    same operations as :func:`lightcurve.rotations.quat_mult` without its array overhead)."""
+    """``normalise(δq(δθ⁺) ⊗ q)`` (Bernard eq. 3.20): δq the GRP quaternion of δθ⁺
+    (eq. 3.29–3.30, a = 1, f = 4) or, for ``small_angle``, ``normalise([1, δθ⁺/2])``."""
+    q = np.ascontiguousarray(q, dtype=float)
     if error == "grp":
-        dq = grp_to_dq(dth)[0]
-    else:
-        dq = np.concatenate([[1.0], 0.5 * np.asarray(dth, float)])
-        dq /= np.linalg.norm(dq)
-    a0, a1, a2, a3 = (float(v) for v in dq)
-    b0, b1, b2, b3 = (float(v) for v in q)
-    qn = np.array([a0 * b0 - (a1 * b1 + a2 * b2 + a3 * b3),
-                   (a0 * b1 + b0 * a1) - (a2 * b3 - a3 * b2),
-                   (a0 * b2 + b0 * a2) - (a3 * b1 - a1 * b3),
-                   (a0 * b3 + b0 * a3) - (a1 * b2 - a2 * b1)])
-    return qn / np.linalg.norm(qn)
+        return from_grp_rel_nb(np.ascontiguousarray(dth, dtype=float).reshape(1, 3), q,
+                               GRP_A, GRP_F)[0]
+    dq = np.concatenate([[1.0], 0.5 * np.asarray(dth, float)])
+    normalize_into_nb(dq, False)
+    qn = qmul_nb(dq, q)
+    normalize_into_nb(qn, False)
+    return qn
 
 
 def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=None,
@@ -202,65 +197,16 @@ def _run(problem, error, jacobian, bias=None, facets=None):
     return est
 
 
-@nb.njit(cache=True)
-def joseph_scalar_nb(P, H, R, nu, dx, Pn):
-    """Joseph-form Kalman update of a scalar measurement, in place into ``dx`` (n,), ``Pn`` (n,n).
-
-    P (n,n) prior covariance of the error state (prior error state zero), H (n,) the
-    measurement row, R > 0 its noise variance (mag²), nu = y − ŷ the innovation (mag).
-    ``S = H P Hᵀ + R``, ``K = P Hᵀ / S``, ``δx⁺ = K ν``,
-    ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` evaluated as ``B − (B Hᵀ) Kᵀ + R K Kᵀ`` with
-    ``B = P − K (H P)`` (the same product, O(n²)), symmetrised. Returns ``(S, status)``:
-    0 ok; 1 non-finite innovation; 2 S not positive (or not finite); 3 non-finite posterior —
-    the failure reasons of :func:`lightcurve.estimation.joseph_update` (then dx/Pn are
-    undefined and the caller keeps the prior).
-    """
-    n = P.shape[0]
-    PHt = np.zeros(n)
-    HP = np.zeros(n)
-    for j in range(n):
-        hj = H[j]
-        if hj != 0.0:
-            for i in range(n):
-                PHt[i] += P[i, j] * hj
-                HP[i] += hj * P[j, i]
-    hph = 0.0
-    for i in range(n):
-        hph += H[i] * PHt[i]
-    S = hph + R
-    if not math.isfinite(nu):
-        return S, 1
-    if not (S > 0.0 and math.isfinite(S)):
-        return S, 2
-    Kg = PHt / S
-    # B Hᵀ = P Hᵀ − K (H P Hᵀ)
-    BH = PHt - Kg * hph
-    bad = False
-    for i in range(n):
-        for j in range(n):
-            Pn[i, j] = P[i, j] - Kg[i] * HP[j] - BH[i] * Kg[j] + R * Kg[i] * Kg[j]
-    for i in range(n):
-        dx[i] = Kg[i] * nu
-        if not math.isfinite(dx[i]):
-            bad = True
-        for j in range(i + 1):
-            v = 0.5 * (Pn[i, j] + Pn[j, i])
-            Pn[i, j] = v
-            Pn[j, i] = v
-            if not math.isfinite(v):
-                bad = True
-    return S, 3 if bad else 0
-
-
 def _update(P, h, R, y, yhat):
-    """Scalar Joseph update (:func:`joseph_scalar_nb`) → ``(δx⁺, P⁺, ν, S, ok)``."""
+    """Scalar Joseph update (:func:`lightcurve.core.kalman.joseph_scalar_nb`) →
+    ``(δx⁺, P⁺, ν, S, ok)``."""
     n = P.shape[0]
     dx = np.empty(n)
     Pn = np.empty((n, n))
     nu = float(y - yhat)
     S, status = joseph_scalar_nb(np.ascontiguousarray(P), np.ascontiguousarray(h, dtype=float),
                                  float(R), nu, dx, Pn)
-    return dx, Pn, nu, float(S), status == 0
+    return dx, Pn, nu, float(S), status == UPDATE_OK
 
 
 def _predict(m, facets, q, z, k, jacobian, ph=None, h=1e-6):
@@ -283,7 +229,7 @@ def _predict(m, facets, q, z, k, jacobian, ph=None, h=1e-6):
         return facets.partials(m, q, z, k)
     yhat = float(facets.magnitudes(m, q[None, :], z, k)[0])
     d = np.concatenate([h * np.eye(3), -h * np.eye(3)])
-    Qp = K.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
+    Qp = perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
     mq = facets.magnitudes(m, Qp, z, k)
     E = h * np.eye(facets.dim)
     Zp = np.concatenate([z + E, z - E])

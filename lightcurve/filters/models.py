@@ -45,15 +45,17 @@ partials ``∂m/∂z`` by :class:`lightcurve.filters.facet_states.FacetParameter
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import expm
 
-from .. import rotations as rot
+from ..core import dynamics as CD
+from ..core.constants import AU_M, SUN_MAG_V
+from ..core.photometry import mag_kernel_nb
+from ..core.rotations import perturb_rotvec_nb
+from ..dynamics.rigid_body import check_inertia
 from ..errors import InputError
-from ..photometry.magnitude import AU_M, SUN_MAG_V, apparent_magnitude
-from . import _kernels as K
-from . import _transition_kernels as TK
+from ..photometry.magnitude import apparent_magnitude
+from ..photometry.partials import magnitude_partials
 
-_EYE3 = np.eye(3)  # inertia argument of the shared error_F kernel; the controlled model ignores it
+_EYE3 = np.eye(3)  # inertia argument of the error-F kernel; the controlled model ignores it
 
 
 def _finite_rate(omega):
@@ -63,46 +65,7 @@ def _finite_rate(omega):
         raise ValueError("omega: contains NaN or infinite values")
     return w
 
-__all__ = ["MagnitudeModel", "ControlledDynamics", "UncontrolledDynamics", "error_F",
-           "discretize"]
-
-
-# --------------------------------------------------------------------------------------------
-# Linear error dynamics
-# --------------------------------------------------------------------------------------------
-
-def error_F(omega, J=None):
-    """6×6 continuous error-dynamics matrix ``F`` at the rate ``omega`` (rad/s, body axes).
-
-    ``[[−[ω×], I], [0, Fωω]]`` with ``Fωω = 0`` (controlled, Bernard eq. 7.24) or
-    ``J⁻¹([(Jω)×] − [ω×] J)`` (torque-free uncontrolled, eq. 7.37) when ``J`` (kg m²) is given.
-    """
-    w = np.asarray(omega, float).reshape(3)
-    F = np.zeros((6, 6))
-    F[:3, :3] = -rot.skew(w)
-    F[:3, 3:] = np.eye(3)
-    if J is not None:
-        J = np.asarray(J, float)
-        F[3:, 3:] = np.linalg.solve(J, rot.skew(J @ w) - rot.skew(w) @ J)
-    return F
-
-
-def discretize(F, Qc, dt):
-    """Van Loan discretisation: ``Φ = exp(F Δt)`` and ``Q_d = ∫₀^Δt Φ(s) Qc Φ(s)ᵀ ds``.
-
-    F (n,n) continuous dynamics, Qc (n,n) continuous process-noise PSD, dt ≥ 0 s.
-    """
-    n = F.shape[0]
-    if dt == 0.0:
-        return np.eye(n), np.zeros((n, n))
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n] = -F
-    M[:n, n:] = Qc
-    M[n:, n:] = F.T
-    E = expm(M * dt)
-    Phi = E[n:, n:].T
-    Qd = Phi @ E[:n, n:]
-    return Phi, 0.5 * (Qd + Qd.T)
+__all__ = ["MagnitudeModel", "ControlledDynamics", "UncontrolledDynamics"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -142,7 +105,7 @@ class ControlledDynamics:
         Q = np.ascontiguousarray(q, dtype=float).copy()
         W = np.ascontiguousarray(w, dtype=float).copy()
         if dt != 0.0:
-            K.const_rate_nb(Q, W, float(dt))
+            CD.const_rate_batch_nb(Q, W, float(dt))
         return Q, W
 
     def transition(self, omega, dt):
@@ -151,42 +114,20 @@ class ControlledDynamics:
         Without pseudo-noise Φ is the closed form of ``exp(F Δt)`` for eq. 7.24:
         ``Φθθ = exp(−[ω×]Δt)``, ``Φθω = I Δt − (1 − cos φ)/|ω|² [ω×]
         + (Δt − sin φ/|ω|)/|ω|² [ω×]²`` (φ = |ω| Δt), ``Φωω = I``; otherwise Van Loan.
-        Numba kernels (:mod:`lightcurve.filters._transition_kernels`); :meth:`transition_numpy`
-        is the NumPy reference of the same computation (equal to rounding, tested to 1e-12).
+        Kernels :func:`lightcurve.core.dynamics.controlled_transition_nb`,
+        :func:`~lightcurve.core.dynamics.error_F_nb`, :func:`~lightcurve.core.dynamics.van_loan_nb`.
         """
         dt = float(dt)
         w = _finite_rate(omega)
         if self.pseudo_noise == 0.0:
-            return TK.controlled_transition_nb(w, dt), np.zeros((6, 6))
+            return CD.controlled_transition_nb(w, dt), np.zeros((6, 6))
         Qc = np.zeros((6, 6))
         Qc[3:, 3:] = self.pseudo_noise * np.eye(3)
         F = np.empty((6, 6))
-        TK.error_F_nb(w, _EYE3, _EYE3, False, F)
+        CD.error_F_nb(w, _EYE3, _EYE3, False, F)
         Phi, Qd = np.empty((6, 6)), np.empty((6, 6))
-        TK.van_loan_nb(F, Qc, dt, Phi, Qd)
+        CD.van_loan_nb(F, Qc, dt, Phi, Qd)
         return Phi, Qd
-
-    def transition_numpy(self, omega, dt):
-        """NumPy reference of :meth:`transition` (the test oracle; slower, same numbers)."""
-        dt = float(dt)
-        w = np.asarray(omega, float).reshape(3)
-        if self.pseudo_noise == 0.0:
-            Phi = np.eye(6)
-            nw = float(np.linalg.norm(w))
-            S = rot.skew(w)
-            S2 = S @ S
-            if nw * abs(dt) < 1e-8:
-                Phi[:3, :3] = np.eye(3) - S * dt
-                Phi[:3, 3:] = np.eye(3) * dt - 0.5 * S * dt * dt
-            else:
-                phi = nw * dt
-                Phi[:3, :3] = rot.rotvec_to_dcm(w * dt)
-                Phi[:3, 3:] = (np.eye(3) * dt - (1.0 - np.cos(phi)) / nw**2 * S
-                               + (dt - np.sin(phi) / nw) / nw**2 * S2)
-            return Phi, np.zeros((6, 6))
-        Qc = np.zeros((6, 6))
-        Qc[3:, 3:] = self.pseudo_noise * np.eye(3)
-        return discretize(error_F(w), Qc, dt)
 
     @property
     def zeta_cov(self):
@@ -211,8 +152,6 @@ class UncontrolledDynamics:
     kind = "uncontrolled"
 
     def __init__(self, J, eta_psd=0.0, substep_s=0.5, pseudo_noise=0.0):
-        from ..dynamics.rigid_body import check_inertia
-
         self.J = check_inertia(J)
         self.J_inv = np.linalg.inv(self.J)
         self.eta_psd = float(eta_psd) + float(pseudo_noise)
@@ -233,7 +172,8 @@ class UncontrolledDynamics:
         Q = np.ascontiguousarray(q, dtype=float).copy()
         W = np.ascontiguousarray(w, dtype=float).copy()
         if dt != 0.0:
-            K.rk4_torque_free_nb(Q, W, self.J, self.J_inv, float(dt), self.nsub(dt))
+            n = self.nsub(dt)
+            CD.rk4_propagate_nb(Q, W, self.J, self.J_inv, float(dt) / n, n, None)
         return Q, W
 
     def transition(self, omega, dt):
@@ -242,43 +182,13 @@ class UncontrolledDynamics:
         Φ is the product of ``exp(F(ω_j) h)`` over the RK4 sub-steps with ``ω_j`` the rate at
         each sub-step's midpoint (Euler's equations, torque free), so it follows the rate's
         evolution; ``Q_d`` accumulates the Van Loan discretisation of the white η (PSD on the
-        rate block) over the same sub-steps. Numba kernel
-        (:func:`lightcurve.filters._transition_kernels.uncontrolled_transition_nb`);
-        :meth:`transition_numpy` is the NumPy reference (equal to rounding, tested to 1e-12).
+        rate block) over the same sub-steps (kernel
+        :func:`lightcurve.core.dynamics.uncontrolled_transition_nb`).
         """
         dt = float(dt)
         w = _finite_rate(omega)
-        return TK.uncontrolled_transition_nb(w, self.J, self.J_inv, self.eta_psd, dt,
+        return CD.uncontrolled_transition_nb(w, self.J, self.J_inv, self.eta_psd, dt,
                                              self.nsub(dt))
-
-    def transition_numpy(self, omega, dt):
-        """NumPy reference of :meth:`transition` (the test oracle; slower, same numbers)."""
-        dt = float(dt)
-        if dt == 0.0:
-            return np.eye(6), np.zeros((6, 6))
-        n = self.nsub(dt)
-        h = dt / n
-        Qc = np.zeros((6, 6))
-        Qc[3:, 3:] = self.eta_psd * np.eye(3)
-        Phi = np.eye(6)
-        Qd = np.zeros((6, 6))
-        w = np.asarray(omega, float).reshape(3).copy()
-        J, Ji = self.J, self.J_inv
-
-        def wdot(x):
-            return Ji @ (-np.cross(x, J @ x))
-
-        for _ in range(n):
-            k1 = wdot(w)
-            k2 = wdot(w + 0.5 * h * k1)
-            wmid = w + 0.5 * h * k2
-            Ph, Qh = discretize(error_F(wmid, J), Qc, h)
-            Phi = Ph @ Phi
-            Qd = Ph @ Qd @ Ph.T + Qh
-            k3 = wdot(w + 0.5 * h * k2)
-            k4 = wdot(w + h * k3)
-            w = w + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return Phi, 0.5 * (Qd + Qd.T)
 
     @property
     def zeta_cov(self):
@@ -361,7 +271,7 @@ class MagnitudeModel:
         Q = np.ascontiguousarray(np.asarray(q, float).reshape(-1, 4))
         if self._kernel:
             n, a, ids, p = self._karrs
-            return K.mag_kernel_nb(Q, self.s_eci[k], self.o_eci[k], n, a, ids, p,
+            return mag_kernel_nb(Q, self.s_eci[k], self.o_eci[k], n, a, ids, p,
                                    float(self.offset[k]))
         with np.errstate(divide="ignore"):
             m = apparent_magnitude(self.shape, Q[None, :, :], self.s_eci[k:k + 1],
@@ -386,8 +296,6 @@ class MagnitudeModel:
         """
         q = np.asarray(q, float).reshape(4)
         if method == "analytic":
-            from ..photometry.partials import magnitude_partials
-
             with np.errstate(divide="ignore", invalid="ignore"):
                 mp = magnitude_partials(self.shape, q[None, :], self.s_eci[k:k + 1],
                                         self.o_eci[k:k + 1], self.range_obs[k:k + 1],
@@ -396,7 +304,7 @@ class MagnitudeModel:
         if method != "numeric":
             raise ValueError(f"jacobian method must be 'analytic' or 'numeric', got {method!r}")
         d = np.concatenate([h * np.eye(3), -h * np.eye(3)])
-        Qp = K.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
+        Qp = perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
         m = self.predict_q(Qp, k)
         return (m[:3] - m[3:]) / (2.0 * h)
 

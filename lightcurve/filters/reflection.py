@@ -58,7 +58,7 @@ def reflection_prior_variance(shape, q, model, frac=0.1, epochs=None):
     with np.errstate(divide="ignore", invalid="ignore"):
         mp = magnitude_partials(shape, np.asarray(q, float), model.s_eci[idx], model.o_eci[idx],
                                 model.range_obs[idx], model.range_sun[idx], sun_mag=model.sun_mag)
-    from ..photometry.kernels import COOK_TORRANCE
+    from ..core.photometry import COOK_TORRANCE
 
     ct = shape.model_ids == COOK_TORRANCE
     var = (mp.dm_dA * frac * shape.areas_m2[None, :]) ** 2

@@ -242,31 +242,33 @@ class Estimate:
 
 
 def read_estimate(path) -> Estimate:
-    """Read an HDF5 estimate written by :meth:`Estimate.write`."""
+    """Read an HDF5 estimate written by :meth:`Estimate.write` (opened through
+    :func:`lightcurve.io.safe_open.open_hdf5`: regular file, no external data, declared sizes
+    checked before reading)."""
     import json
 
-    import h5py
-
     from ..errors import InputError
+    from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)
-    try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"cannot open estimate file: {exc}", file=path) from None
-    with h:
+    cap = 4 * 10**8  # elements per dataset (the particle clouds are the largest)
+    with open_hdf5(path) as h:
         if h.attrs.get("format") != "lightcurve-estimate":
             raise InputError("not a lightcurve estimate file", file=path, field="format",
                              value=h.attrs.get("format"), allowed="lightcurve-estimate")
-        kw = {n: (np.asarray(h[n]) if n in h else None) for n in (
-            "t", "q", "omega_rad_s", "cov", "att_sigma_deg", "omega_sigma_rad_s", "innovations",
-            "innovation_var", "n_eff", "flags", "att_error_deg", "omega_error_rad_s", "nees",
-            "bias", "bias_sigma", "refl_z", "refl_z_sigma", "refl_p", "refl_p_sigma")}
+        kw = {n: (None if n not in h else np.asarray(read_dataset(h, n, max_elements=cap,
+                                                                    file=path)))
+              for n in ("t", "q", "omega_rad_s", "cov", "att_sigma_deg", "omega_sigma_rad_s",
+                        "innovations", "innovation_var", "n_eff", "flags", "att_error_deg",
+                        "omega_error_rad_s", "nees", "bias", "bias_sigma", "refl_z",
+                        "refl_z_sigma", "refl_p", "refl_p_sigma")}
         if "refl_names_json" in h.attrs:
             kw["refl_names"] = json.loads(str(h.attrs["refl_names_json"]))
         clouds = None
         if "clouds" in h:
-            clouds = {int(n.split("_")[1]): np.asarray(h["clouds"][n]) for n in h["clouds"]}
+            clouds = {int(n.split("_")[1]): np.asarray(read_dataset(h, f"clouds/{n}",
+                                                                    max_elements=cap, file=path))
+                      for n in h["clouds"]}
         return Estimate(method=str(h.attrs["method"]), skipped_nan=int(h.attrs["skipped_nan"]),
                         clouds=clouds,
                         diverged=bool(h.attrs["diverged"]),

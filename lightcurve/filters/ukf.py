@@ -52,8 +52,8 @@ import time
 
 import numpy as np
 
+from ..core.rotations import perturb_rotvec_nb
 from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
-from . import _kernels as K
 from ._common import (FilterProblem, Recorder, StateLayout, apply_grp, attach_bias,
                       attach_facets, grp_rel, initial_state_ext, layout_transition,
                       reflection_histories, single_thread, truth_state)
@@ -186,7 +186,7 @@ def _epoch(p, k, q, w, b, z, P, L, w6, w9, zc, rec, bias, facets):
         return prior
     chi, Qs, Ws = _sigma_states(q, w, off, na)
     if w9 is not None:
-        Qs = K.perturb_rotvec_nb(np.ascontiguousarray(Qs), np.ascontiguousarray(chi[:, nx:nx + 3]))
+        Qs = perturb_rotvec_nb(np.ascontiguousarray(Qs), np.ascontiguousarray(chi[:, nx:nx + 3]))
     if nz:
         Y = facets.magnitudes(m, Qs, z + chi[:, L.iz], k)
     else:

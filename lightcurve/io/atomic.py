@@ -9,16 +9,99 @@ allows it — POSIX folders can be opened read-only and synced; on Windows (no `
 folders cannot be opened) and on file systems that refuse ``fsync`` on a folder (``EINVAL``,
 ``ENOTSUP``, ``EBADF``, ``EACCES``) that last step is skipped: the rename is still atomic, only
 its durability across a crash is up to the OS.
+
+File modes: the new file gets ``0o666 & ~umask`` (what ``open()`` would give), not the
+``0o600`` of a temporary file, so a shared report is readable by whoever the umask allows.
+
+Temporary files are named ``.<name>.<host>-<pid>-<random><suffix>`` (``host`` a 6-hex-digit
+hash of the host name, ``suffix`` e.g. ``.png`` or ``.tmp``). A killed writer leaves its temporary file behind; the next write into
+the same folder (:func:`clean_stale_temp`) removes those of the same final name whose writer
+is provably gone — same host and the pid no longer alive — and, for other hosts (a shared
+network folder), those untouched for a day. A live writer's temporary file is never removed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
+import re
+import socket
 import tempfile
+import time
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "fsync_dir"]
+__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "fsync_dir",
+           "clean_stale_temp", "current_umask", "temp_prefix"]
+
+#: temporary files of other hosts are removed only after this long without a change
+FOREIGN_TEMP_AGE_S = 86400.0
+_TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[0-9a-f]{6})-(?P<pid>[0-9]+)-[a-z0-9_]{8}"
+                     r"(?:\.[A-Za-z0-9_.\-]*)?$")
+
+
+def _host_tag() -> str:
+    return hashlib.sha256(socket.gethostname().encode("utf-8", "replace")).hexdigest()[:6]
+
+
+def temp_prefix(name: str) -> str:
+    """Prefix of this process's temporary files for final name ``name``."""
+    return f".{name}.{_host_tag()}-{os.getpid()}-"
+
+
+def current_umask() -> int:
+    """The process umask (read from ``/proc/self/status`` where possible; elsewhere set and
+    restored at once)."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def clean_stale_temp(folder, name: str | None = None) -> int:
+    """Remove temporary files left in ``folder`` by killed writers (module docstring); only
+    those for final name ``name`` when given. Returns how many were removed."""
+    folder = Path(folder)
+    host = _host_tag()
+    now = time.time()
+    n = 0
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return 0
+    for e in entries:
+        m = _TMP_RE.match(e.name)
+        if m is None or (name is not None and m.group("name") != name):
+            continue
+        try:
+            st = e.stat(follow_symlinks=False)
+        except OSError:
+            continue
+        if m.group("host") == host:
+            stale = not _pid_alive(int(m.group("pid")))
+        else:
+            stale = now - st.st_mtime > FOREIGN_TEMP_AGE_S
+        if stale:
+            with contextlib.suppress(OSError):
+                os.unlink(e.path)
+                n += 1
+    return n
 
 
 def fsync_dir(folder) -> bool:
@@ -45,11 +128,24 @@ def atomic_path(path, suffix: str | None = None):
     """Yield a temporary path beside ``path``; on success fsync it, rename it onto ``path`` and
     fsync the folder (:func:`fsync_dir`).
 
-    On an exception the temporary file is removed and ``path`` is left as it was.
+    On an exception the temporary file is removed and ``path`` is left as it was. The file
+    gets the umask's mode; stale temporary files of ``path`` left by killed writers are
+    removed first (:func:`clean_stale_temp`). While the command line tracks its inputs
+    (:func:`lightcurve.io.safe_open.track_inputs`), a ``path`` that is one of them is refused.
     """
+    from .safe_open import check_not_input
+
     path = Path(path)
+    check_not_input(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or ".tmp", dir=path.parent)
+    clean_stale_temp(path.parent, path.name)
+    # the suffix stays last: writers such as matplotlib pick the format from it
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix(path.name), suffix=suffix or ".tmp",
+                               dir=path.parent)
+    try:
+        os.fchmod(fd, 0o666 & ~current_umask())
+    except (OSError, AttributeError):  # e.g. Windows: modes do not apply
+        pass
     os.close(fd)
     tmp = Path(tmp)
     try:

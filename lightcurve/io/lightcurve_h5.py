@@ -259,52 +259,44 @@ _MAX_ROWS = 50_000_000
 def read_lightcurve(path) -> Lightcurve:
     """Read and validate a lightcurve HDF5 file written by :meth:`Lightcurve.write`.
 
+    The file is opened through :func:`lightcurve.io.safe_open.open_hdf5` (regular file only;
+    external links, external storage, virtual datasets and never-written datasets refused).
+    Every dataset's declared shape is checked against the row count of ``t`` and the total
+    against the memory limit (:func:`lightcurve.memory.check_allocation`) before any of them
+    is read.
+
     Raises :class:`InputError` (naming the file and dataset) for a missing, truncated or
     corrupted file, a wrong format version, missing datasets or inconsistent shapes.
     """
-    import h5py
+    from .safe_open import open_hdf5, read_attr, read_dataset
 
     path = Path(path)
-    if not path.exists():
-        raise InputError("file not found", file=path)
     try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"not a readable HDF5 file (truncated or corrupted?): {exc}", file=path) from None
-    try:
-        with h:
+        with open_hdf5(path) as h:
             ver = h.attrs.get("format_version")
             if ver is None:
                 raise InputError("missing root attribute", file=path, field="format_version")
             if int(ver) != FORMAT_VERSION:
                 raise InputError("unsupported format version", file=path, field="format_version",
                                  value=int(ver), allowed=str(FORMAT_VERSION))
+            _check_declared_shapes(h, path)
 
             def ds(name, required=True):
-                if name not in h:
-                    if required:
-                        raise InputError("missing dataset", file=path, field=name)
-                    return None
-                d = h[name]
-                if not isinstance(d, h5py.Dataset):
-                    raise InputError("expected a dataset", file=path, field=name)
-                if d.size > _MAX_ROWS * 4:
-                    raise InputError("dataset too large", file=path, field=name, value=d.shape)
-                try:
-                    return d[()]
-                except (OSError, RuntimeError) as exc:
-                    raise InputError(f"cannot read dataset (corrupted?): {exc}", file=path, field=name) from None
+                return read_dataset(h, name, max_elements=_MAX_ROWS * 4, file=path,
+                                    required=required)
 
             names = ds("sites/name")
             names = [n.decode() if isinstance(n, bytes) else str(n) for n in np.atleast_1d(names)]
-            meta = {k[5:]: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()
-                    if k.startswith("meta_")}
-            epoch = h.attrs.get("epoch_utc")
+            meta = {}
+            for k in h.attrs:
+                if k.startswith("meta_"):
+                    meta[k[5:]] = read_attr(h, k, file=path)
+            epoch = read_attr(h, "epoch_utc", file=path)
             if epoch is None:
                 raise InputError("missing root attribute", file=path, field="epoch_utc")
-            scen = h.attrs.get("scenario", "")
+            scen = read_attr(h, "scenario", "", file=path)
             kw = dict(
-                epoch_utc=epoch.decode() if isinstance(epoch, bytes) else str(epoch),
+                epoch_utc=str(epoch),
                 t=ds("t"), mag=ds("mag"), mag_sigma=ds("mag_sigma"), site=ds("site"),
                 site_names=names, site_lla_deg_m=ds("sites/lla_deg_m"),
                 r_obj_eci_m=ds("geometry/r_obj_eci_m"), r_site_eci_m=ds("geometry/r_site_eci_m"),
@@ -313,7 +305,7 @@ def read_lightcurve(path) -> Lightcurve:
                 elevation_rad=ds("geometry/elevation_rad", False),
                 truth_q=ds("truth/q", False), truth_omega_rad_s=ds("truth/omega_rad_s", False),
                 truth_mag=ds("truth/mag", False),
-                scenario_toml=scen.decode() if isinstance(scen, bytes) else str(scen),
+                scenario_toml=str(scen),
                 attrs=meta,
             )
     except InputError:
@@ -333,3 +325,41 @@ def read_lightcurve(path) -> Lightcurve:
     except (ValueError, TypeError) as exc:
         raise InputError(f"inconsistent datasets: {exc}", file=path) from None
     return lc
+
+
+#: per-row datasets and their trailing shapes (checked against ``t`` before any is read)
+_ROW_DATASETS = (("t", ()), ("mag", ()), ("mag_sigma", ()), ("site", ()),
+                 ("geometry/r_obj_eci_m", (3,)), ("geometry/r_site_eci_m", (3,)),
+                 ("geometry/r_sun_eci_m", (3,)), ("geometry/lit_fraction", ()),
+                 ("geometry/elevation_rad", ()), ("truth/q", (4,)), ("truth/omega_rad_s", (3,)),
+                 ("truth/mag", ()))
+
+
+def _check_declared_shapes(h, path) -> None:
+    """Every per-row dataset declares (N, ...) with N = rows of ``t`` <= the row cap, and all
+    of them together fit the memory limit — checked from the declared shapes, nothing read."""
+    import h5py
+
+    from ..memory import check_allocation
+
+    t = h.get("t")
+    if not isinstance(t, h5py.Dataset):
+        raise InputError("missing dataset" if t is None else "expected a dataset", file=path,
+                         field="t")
+    if len(t.shape) != 1:
+        raise InputError("expected a 1-D array of times", file=path, field="t",
+                         value=tuple(int(x) for x in t.shape))
+    n = int(t.shape[0])
+    if n > _MAX_ROWS:
+        raise InputError("too many rows", file=path, field="t", value=n,
+                         allowed=f"<= {_MAX_ROWS} rows")
+    total = 0
+    for name, tail in _ROW_DATASETS:
+        d = h.get(name)
+        if not isinstance(d, h5py.Dataset):
+            continue  # missing or wrong kind: reported when read
+        if tuple(int(x) for x in d.shape) != (n, *tail):
+            raise InputError(f"expected shape {(n, *tail)} (rows of t), got "
+                             f"{tuple(int(x) for x in d.shape)}", file=path, field=name)
+        total += n * int(np.prod(tail, dtype=np.int64)) * 8  # read as float64 / int64
+    check_allocation(2 * total, f"reading {n} rows", file=path, field="t", value=n)

@@ -203,14 +203,10 @@ def recording_spec_from_section(sec) -> RecordingSpec:
 # ----------------------------------------------------------------------------------------
 def _read_rows(path: Path, spec: RecordingSpec):
     """(header or None, list of (line_no, fields)) with comments and blank lines removed."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"not a UTF-8 text file: {exc}", file=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read the file: {exc}", file=path) from None
+    from .safe_open import CSV_MAX_BYTES, read_text
+
+    # a regular file of at most CSV_MAX_BYTES (no FIFO, device or endless file)
+    text = read_text(path, max_bytes=CSV_MAX_BYTES, what="CSV recording", encoding="utf-8-sig")
     header = None
     rows = []
     for no, line in enumerate(text.splitlines(), start=1):
@@ -218,7 +214,11 @@ def _read_rows(path: Path, spec: RecordingSpec):
             line = line[: line.index(spec.comment)]
         if not line.strip():
             continue
-        fields = [f.strip() for f in next(csv.reader([line], delimiter=spec.delimiter))]
+        try:
+            fields = [f.strip() for f in next(csv.reader([line], delimiter=spec.delimiter))]
+        except csv.Error as exc:  # e.g. a field over csv.field_size_limit() characters
+            raise InputError(f"unreadable CSV line: {exc}", file=path, field=f"line {no}",
+                             allowed=f"fields of at most {csv.field_size_limit()} characters") from None
         if spec.header and header is None:
             header = (no, fields)
             continue

@@ -18,40 +18,45 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .safe_open import TOML_MAX_BYTES as MAX_TOML_BYTES
 
-__all__ = ["load_toml", "loads_toml", "Section", "REQUIRED"]
+__all__ = ["load_toml", "loads_toml", "read_toml_text", "Section", "REQUIRED"]
 
 REQUIRED = object()
-MAX_TOML_BYTES = 20 * 1024 * 1024
 
 
 def loads_toml(text: str, file="<string>") -> dict:
-    """Parse TOML text; a syntax error becomes an :class:`InputError` naming the file and line."""
+    """Parse TOML text; a syntax error becomes an :class:`InputError` naming the file and line.
+
+    Nesting deeper than Python's recursion limit (``a = [[[[…]]]]`` 5,000 deep) is refused
+    the same way (tomllib parses arrays and inline tables recursively).
+    """
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML: {exc}", file=file) from None
+    except RecursionError:
+        raise InputError("not valid TOML: arrays or tables nested too deeply", file=file,
+                         allowed="nesting well below 1000 levels") from None
 
 
-def load_toml(path) -> dict:
-    """Read and parse a TOML file (UTF-8, at most 20 MiB)."""
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-    except FileNotFoundError:
-        raise InputError("file not found", file=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read file: {exc.strerror}", file=path) from None
-    if path.is_dir():
-        raise InputError("is a directory, expected a TOML file", file=path)
-    if size > MAX_TOML_BYTES:
-        raise InputError(f"file too large ({size} bytes)", file=path, allowed=f"<= {MAX_TOML_BYTES} bytes")
-    raw = path.read_bytes()
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text (byte {exc.start})", file=path) from None
-    return loads_toml(text, file=path)
+def read_toml_text(path) -> str:
+    """The text of a TOML file: a regular file (no FIFO or device) of at most 20 MiB, UTF-8
+    (:mod:`lightcurve.io.safe_open`)."""
+    from .safe_open import read_text
+
+    return read_text(path, max_bytes=MAX_TOML_BYTES, what="TOML file")
+
+
+def load_toml(path, *, with_text: bool = False):
+    """Read and parse a TOML file (regular file, UTF-8, at most 20 MiB).
+
+    With ``with_text`` returns ``(document, text)``: the text that was parsed (read once, so
+    the two always agree).
+    """
+    text = read_toml_text(path)
+    doc = loads_toml(text, file=Path(path))
+    return (doc, text) if with_text else doc
 
 
 class Section:

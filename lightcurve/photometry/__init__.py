@@ -16,9 +16,9 @@ Public API::
 """
 
 from .brdf import BRDF, available_brdfs, get_brdf, register_brdf, unregister_brdf
-from .brdf_models import AshikhminShirley, CookTorrance, Lambert, Phong
+from .brdf_models import AshikhminShirley, CookTorrance, CookTorranceBernard, Lambert, Phong
 from .facets import Shape
-from .kernels import brightness_kernel
+from ..core.photometry import brightness_kernel
 from .magnitude import AU_M, SUN_MAG_V, apparent_magnitude, body_directions, flux_factor, magnitude_from_flux
 from .materials import Material
 from .noise import add_noise, magnitude_sigma
@@ -28,7 +28,7 @@ from .tabulated import TabulatedBRDF
 
 __all__ = [
     "BRDF", "available_brdfs", "get_brdf", "register_brdf", "unregister_brdf",
-    "Lambert", "CookTorrance", "Phong", "AshikhminShirley", "TabulatedBRDF",
+    "Lambert", "CookTorrance", "CookTorranceBernard", "Phong", "AshikhminShirley", "TabulatedBRDF",
     "Shape", "Material", "brightness_kernel",
     "AU_M", "SUN_MAG_V", "apparent_magnitude", "body_directions", "flux_factor",
     "magnitude_from_flux", "add_noise", "magnitude_sigma", "MagnitudePartials",

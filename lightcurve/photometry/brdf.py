@@ -9,7 +9,7 @@ Two kinds of BRDF live in one registry:
 
 * built-in analytic models (Lambert, Cook–Torrance, Phong, Ashikhmin–Shirley) that also have a
   numba kernel id (:attr:`BRDF.kernel_id`), so the hot loop in
-  :func:`lightcurve.photometry.kernels.brightness_kernel` evaluates them without Python;
+  :func:`lightcurve.core.photometry.brightness_kernel` evaluates them without Python;
 * user models (a class or a plain function) evaluated vectorised in numpy by the object layer.
 
 Users add a model in one of two ways (see ``docs/extending.md``)::
@@ -37,6 +37,7 @@ import threading
 
 import numpy as np
 
+from ..core.photometry import PARAM_COLUMNS  # width of the packed per-facet parameter rows
 from ..errors import InputError
 
 __all__ = [
@@ -53,8 +54,6 @@ __all__ = [
 #: Entry-point group scanned for third-party BRDFs.
 ENTRY_POINT_GROUP = "lightcurve.brdfs"
 
-#: Width of the packed per-facet parameter array handed to the numba kernels.
-PARAM_COLUMNS = 7
 
 _REGISTRY: dict[str, "BRDF"] = {}
 _LOCK = threading.Lock()

@@ -1,6 +1,6 @@
 """Built-in analytic BRDFs (registered on import): Lambert, Cook–Torrance, Phong, Ashikhmin–Shirley.
 
-Each class's :meth:`evaluate` calls the numba kernel of :mod:`.kernels` on flattened arrays,
+Each class's :meth:`evaluate` calls the numba kernel of :mod:`lightcurve.core.photometry` on flattened arrays,
 so the object layer and the hot loop share a single implementation. Frames: ``n``, ``s``,
 ``o`` are unit vectors in one frame (body axes); ``s`` points object→Sun, ``o``
 object→observer. Values in sr⁻¹.
@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import kernels as K
+from ..core import photometry as K
 from .brdf import BRDF, PARAM_COLUMNS, register_brdf
 
-__all__ = ["Lambert", "CookTorrance", "Phong", "AshikhminShirley", "kernel_brdf_values"]
+__all__ = ["Lambert", "CookTorrance", "CookTorranceBernard", "Phong", "AshikhminShirley",
+           "kernel_brdf_values"]
 
 
 def kernel_brdf_values(model_id: int, n, s, o, params_rows) -> np.ndarray:
@@ -73,7 +74,7 @@ class CookTorrance(_KernelBRDF):
     with min(1, …), F the standard Cook–Torrance Fresnel with c = ô·ĥ,
     g² = n² + c² − 1, n = (1+√F0)/(1−√F0). Departures from thesis slips (eq. 5.8's extra
     (n̂·ŝ) in the diffuse term, eq. 5.10's second denominator) are documented in
-    :func:`lightcurve.photometry.kernels._ct_product`.
+    :mod:`lightcurve.core.photometry`.
     """
 
     param_names = ("xi", "a", "m")
@@ -81,6 +82,25 @@ class CookTorrance(_KernelBRDF):
                     "m": (0.0, 1.0, True, False)}
     defaults = {}
     kernel_id = K.COOK_TORRANCE
+
+
+@register_brdf("cook_torrance_bernard")
+class CookTorranceBernard(_KernelBRDF):
+    """Cook–Torrance with the diffuse term as printed in Bernard (2021) eq. 5.8.
+
+    f_r = ξ a (n̂·ŝ)/π + (1−ξ) F D G / (4 (n̂·ŝ)(n̂·ô))  [sr⁻¹]
+
+    The extra (n̂·ŝ) of eq. 5.8 counts the illumination cosine twice (eq. 5.5 already carries
+    it), so :class:`CookTorrance` is the physical default; this form reproduces the thesis's
+    own numbers (``variant = "thesis"``). Same parameters, bounds and specular term as
+    :class:`CookTorrance` (standard Fresnel, not eq. 5.10's second denominator).
+    """
+
+    param_names = ("xi", "a", "m")
+    param_bounds = {"xi": (0.0, 1.0, False, False), "a": (0.0, 1.0, True, True),
+                    "m": (0.0, 1.0, True, False)}
+    defaults = {}
+    kernel_id = K.COOK_TORRANCE_THESIS
 
 
 @register_brdf("phong")

@@ -57,7 +57,7 @@ class Shape:
     ------------------------------
     brdf_names : (F,) object array of BRDF names
     model_ids : (F,) int64 numba kernel id per facet (−1: evaluated in numpy)
-    params : (F, 7) float64 packed kernel parameters (see :mod:`.kernels`)
+    params : (F, 7) float64 packed kernel parameters (see :mod:`lightcurve.core.photometry`)
     param_table : dict name -> (F,) float array, NaN where the facet's BRDF lacks the parameter
     """
 

@@ -16,17 +16,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.constants import AU_M, SUN_MAG_V
+from ..core.photometry import brightness_kernel
 from ..rotations import quat_rotate
 from .facets import Shape
-from .kernels import brightness_kernel
 
 __all__ = ["AU_M", "SUN_MAG_V", "apparent_magnitude", "flux_factor", "magnitude_from_flux",
            "body_directions"]
 
-#: Astronomical unit, m (IAU 2012 resolution B2).
-AU_M = 149_597_870_700.0
-#: Apparent V magnitude of the Sun at 1 au (Bernard eq. 5.2).
-SUN_MAG_V = -26.74
 
 
 def _unit(v, name):

@@ -79,7 +79,7 @@ def material_from_section(sec, name: str, base_dir=None) -> Material:
         path = Path(table)
         if not path.is_absolute() and base_dir is not None:
             path = Path(base_dir) / path
-        if not path.is_file():
+        if not path.exists():  # anything else (FIFO, device): refused by the table reader
             raise InputError("BRDF table not found", file=sec.file, field=f"{sec.name}.table",
                              value=str(path))
         key = str(path.resolve())

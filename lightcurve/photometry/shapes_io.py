@@ -42,6 +42,7 @@ import numpy as np
 
 from .._paths import data_dir
 from ..errors import InputError
+from ..io.safe_open import MESH_MAX_BYTES as _MAX_MESH_BYTES
 from ..io.tomlio import Section, load_toml
 from .facets import Shape, facets_convex
 from .materials import Material, material_from_section
@@ -52,7 +53,6 @@ NONCONVEX_NOTE = ("not convex: the magnitude model (Bernard eq. 5.5) sums facets
                   "self-shadowing and occlusion are not modelled for this shape")
 
 _UNIT_TOL = 1e-6
-_MAX_MESH_BYTES = 200 * 1024 * 1024
 
 
 class _Problems:
@@ -106,7 +106,7 @@ def list_shapes(library_dirs=None) -> list[str]:
 # ----------------------------------------------------------------------------------------
 # loading
 # ----------------------------------------------------------------------------------------
-def load_shape(spec, library_dirs=None) -> Shape:
+def load_shape(spec, library_dirs=None, *, library_only: bool = False) -> Shape:
     """Load a shape.
 
     Parameters
@@ -116,6 +116,10 @@ def load_shape(spec, library_dirs=None) -> Shape:
         tuple ``(mesh_path, materials_toml)``. A :class:`Shape` is returned unchanged.
     library_dirs : path or list of paths, optional
         Extra library folders searched before the bundled ``shapes/``.
+    library_only : bool
+        Accept only a library name, never a path: for names read from data files (a
+        lightcurve's ``attrs["shape"]``, a scenario stored in an HDF5 file), which must not
+        make the program read an arbitrary file.
 
     Raises
     ------
@@ -124,6 +128,13 @@ def load_shape(spec, library_dirs=None) -> Shape:
         zero-area or degenerate facets, non-unit normals — naming the file and field.
         Non-convexity is not an error (see :func:`validate_shape`).
     """
+    if library_only and not isinstance(spec, Shape):
+        lib = shape_library(library_dirs)
+        if not isinstance(spec, str) or spec not in lib:
+            raise InputError("not a shape library name (a name read from a data file may not "
+                             "name a file)", field="shape", value=str(spec),
+                             allowed=", ".join(sorted(lib)) or "no shapes in the library")
+        spec = lib[spec]
     shape, _ = _load(spec, library_dirs, _Problems(strict=True))
     return shape
 
@@ -160,7 +171,7 @@ def _resolve_spec(spec, library_dirs):
         raise InputError("a mesh needs a TOML material map: pass (mesh_path, materials_toml) "
                          "or a shape TOML with a 'mesh' key", file=p)
     if p.suffix.lower() == ".toml" or p.exists() or len(p.parts) > 1:
-        if not p.is_file():
+        if not p.exists():  # a FIFO or device is refused by the TOML reader, never opened
             raise InputError("shape file not found", file=p)
         return p, None
     lib = shape_library(library_dirs)
@@ -343,14 +354,18 @@ def _facets_from_toml(root: Section, materials, file, probs):
 def _facets_from_mesh(path: Path, scale, merge, probs):
     import trimesh
 
-    if not path.is_file():
-        raise InputError("mesh file not found", file=path)
     if path.suffix.lower() not in (".obj", ".stl"):
         raise InputError("unsupported mesh format", file=path, value=path.suffix, allowed=".obj, .stl")
-    if path.stat().st_size > _MAX_MESH_BYTES:
-        raise InputError("mesh file too large", file=path, allowed=f"<= {_MAX_MESH_BYTES} bytes")
+    import io
+
+    from ..io.safe_open import read_bytes
+
+    # regular file only, size from the opened descriptor; trimesh parses the bytes (no other
+    # file is opened: an OBJ's mtllib is not followed)
+    raw = read_bytes(path, max_bytes=_MAX_MESH_BYTES, what="mesh file")
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        mesh = trimesh.load(io.BytesIO(raw), file_type=path.suffix.lower().lstrip("."),
+                            force="mesh", process=True)
     except Exception as exc:  # trimesh raises many types for malformed files
         raise InputError(f"cannot read mesh: {type(exc).__name__}: {exc}", file=path) from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:

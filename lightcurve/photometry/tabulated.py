@@ -37,12 +37,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io.safe_open import BRDF_MAX_BYTES as _MAX_TABLE_BYTES
 from .brdf import BRDF
 
 __all__ = ["TabulatedBRDF", "load_brdf_table"]
 
 _FLOOR = 1e-12  # sr⁻¹, floor before taking logs
-_MAX_TABLE_BYTES = 64 * 1024 * 1024
 
 
 def load_brdf_table(path):
@@ -51,15 +51,13 @@ def load_brdf_table(path):
     Raises :class:`InputError` naming the file and line for malformed content, azimuths
     that are not in-plane (source −180°/180°, detector 0°), or non-positive/non-finite values.
     """
+    from ..io.safe_open import read_bytes
+
     path = Path(path)
-    if not path.is_file():
-        raise InputError("BRDF table not found", file=path)
-    size = path.stat().st_size
-    if size > _MAX_TABLE_BYTES:  # refused before reading (bounded time and memory)
-        raise InputError(f"file too large ({size} bytes) for a BRDF table", file=path,
-                         allowed=f"<= {_MAX_TABLE_BYTES} bytes")
+    # a regular file of at most 64 MiB (size from the opened descriptor), refused before reading
+    raw = read_bytes(path, max_bytes=_MAX_TABLE_BYTES, what="BRDF table")
     rows = []
-    for lineno, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+    for lineno, line in enumerate(raw.decode("utf-8", errors="replace").splitlines(), 1):
         text = line.split("#", 1)[0].strip()
         if not text:
             continue

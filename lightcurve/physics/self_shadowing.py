@@ -184,7 +184,7 @@ def visible_fraction_nb(pts, w, pf, normals, areas, tri, tri_facet, s_body, o_bo
 
 def facet_products(shape, s_body, o_body) -> np.ndarray:
     """Per-facet terms A_i max(n̂·ŝ,0) max(n̂·ô,0) f_r,i (N,F), m² sr⁻¹, for (N,3) directions."""
-    from ..photometry.kernels import facet_products_kernel
+    from ..core.photometry import facet_products_kernel
 
     sb = np.ascontiguousarray(s_body, float)
     ob = np.ascontiguousarray(o_body, float)

@@ -12,7 +12,10 @@ main process writes each result as it arrives to ``DIR/<stem>.<method>.h5`` (thr
 :func:`lightcurve.io.paths.safe_output_path`; inputs whose stems collide get ``-2``, ``-3``…
 in input order). A failing file does not stop the others: its error is recorded in
 ``DIR/summary.json`` (key = output stem; ``error`` and ``error_kind``: ``"input"`` for a bad
-input file or setting, ``"runtime"`` for anything else).
+input file or setting, or an output that would replace an input, ``"output"`` for a result
+that could not be written, ``"runtime"`` for anything else). ``summary.json`` is written
+even when the batch is interrupted (the files finished so far). The output folder is locked
+while the batch runs (:mod:`lightcurve.io.locks`).
 """
 
 from __future__ import annotations
@@ -160,9 +163,11 @@ def invert_files(patterns, method: str, out_dir, *, workers: int | None = None,
     """
     import json
 
-    from ..io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text, clean_stale_temp
     from ..io.paths import safe_output_path
     from .runner import iter_results, limit_blas_threads, progress_bar
+
+    from ..io.locks import folder_lock
 
     files = expand_inputs(patterns)
     if not files:
@@ -173,51 +178,101 @@ def invert_files(patterns, method: str, out_dir, *, workers: int | None = None,
     tasks = [InvertTask(k, str(f), method, opts) for k, f in zip(_unique_keys(files), files)]
     if workers is None and scheduler is None and dask_local is None:
         workers = max(1, min(len(tasks), os.cpu_count() or 1))
-    limit_blas_threads()
-    token = uuid.uuid4().hex[:12]  # unique Dask keys even when batches share a scheduler
     say = report or (lambda text, kind="info": None)
     results = {}
-    n_fail = n_input = n_div = 0
-    bar = progress_bar(len(tasks), desc=f"invert {method}", progress=progress)
-    try:
-        for res in iter_results(tasks, execute_invert_task, workers=workers, scheduler=scheduler,
-                                dask_local=dask_local,
-                                key=lambda t: f"lightcurve-invert-{token}-{t.key}"):
-            k = res["key"]
-            if res["status"] != "ok":
-                n_fail += 1
-                n_input += res["error_kind"] == "input"
-                results[k] = {"file": res["file"], "method": method, "error": res["error"],
-                              "error_kind": res["error_kind"]}
-                if res["traceback"]:
-                    results[k]["traceback"] = res["traceback"]
-                say(res["error"] if res["error_kind"] == "input"
-                    else f"{res['file']}: {res['error']}",
-                    "error" if res["error_kind"] == "input" else "failed")
-            else:
-                est = res["estimate"]
-                path = safe_output_path(out, f"{k}.{method}", ".h5", field="file name")
-                est.write(path)
-                s = est.summary()
-                s["file"] = res["file"]
-                s["result"] = str(path)
-                results[k] = s
-                n_div += bool(est.diverged)
-                say(_result_line(res["file"], method, est, s))
-                if plot:
-                    from ..filters.plots import plot_estimate
+    counts = {"fail": 0, "input": 0, "div": 0}
 
-                    png = safe_output_path(out, f"{k}.{method}", ".png", field="file name")
-                    plot_estimate(est, png, title=f"{k} ({method})")
-                    say(f"wrote {png}")
-            bar.set_postfix(failures=n_fail, refresh=False)
-            bar.update(1)
-    finally:
-        bar.close()
-    summary = {t.key: results[t.key] for t in tasks if t.key in results}
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    return {"summary": summary, "n_files": len(tasks), "n_failed": n_fail,
-            "n_input_errors": n_input, "n_diverged": n_div}
+    def failed(k, file, error, kind, tb=""):
+        counts["fail"] += 1
+        counts["input"] += kind == "input"
+        results[k] = {"file": file, "method": method, "error": error, "error_kind": kind}
+        if tb:
+            results[k]["traceback"] = tb
+        say(error if kind == "input" else f"{file}: {error}",
+            "error" if kind == "input" else "failed")
+
+    with folder_lock(out, what="output folder"):
+        clean_stale_temp(out)
+        # an output that would replace an input (x.ukf.h5 given as input next to x.h5):
+        # that file fails as bad input; it is not run and nothing is overwritten
+        outputs = {t.key: [safe_output_path(out, f"{t.key}.{method}", s, field="file name")
+                           for s in (".h5",) + ((".png",) if plot else ())] for t in tasks}
+        runnable = []
+        for t in tasks:
+            clash = next((p for p in outputs[t.key] for f in files if _same_file(p, f)), None)
+            if clash is not None:
+                failed(t.key, t.file, str(InputError(
+                    "the output would overwrite an input file of this batch", file=clash,
+                    field="output", allowed="an output folder without the inputs' result "
+                    "names")), "input")
+            else:
+                runnable.append(t)
+        limit_blas_threads()
+        token = uuid.uuid4().hex[:12]  # unique Dask keys even when batches share a scheduler
+        bar = progress_bar(len(tasks), initial=len(tasks) - len(runnable),
+                           desc=f"invert {method}", progress=progress)
+        it = iter_results(runnable, execute_invert_task, workers=workers, scheduler=scheduler,
+                          dask_local=dask_local,
+                          key=lambda t: f"lightcurve-invert-{token}-{t.key}")
+        try:
+            for res in it:
+                k = res["key"]
+                if res["status"] != "ok":
+                    failed(k, res["file"], res["error"], res["error_kind"], res["traceback"])
+                else:
+                    _store(res, k, method, outputs[k], results, counts, say, failed)
+                bar.set_postfix(failures=counts["fail"], refresh=False)
+                bar.update(1)
+        finally:
+            close = getattr(it, "close", None)
+            if close is not None:
+                close()  # stops the executor now when interrupted
+            bar.close()
+            # written whatever happened: every finished file is recorded (an interrupted
+            # batch lists the files done so far)
+            summary = {t.key: results[t.key] for t in tasks if t.key in results}
+            atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return {"summary": summary, "n_files": len(tasks), "n_failed": counts["fail"],
+            "n_input_errors": counts["input"], "n_diverged": counts["div"]}
+
+
+def _same_file(a, b) -> bool:
+    """True when paths ``a`` and ``b`` name one existing file (links and spellings count)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _store(res, k, method, paths, results, counts, say, failed) -> None:
+    """Write one file's estimate (and plot); a failed write is recorded for that file only."""
+    est = res["estimate"]
+    s = est.summary()
+    s["file"] = res["file"]
+    try:
+        est.write(paths[0])
+    except InputError as exc:
+        failed(k, res["file"], str(exc), "input")
+        return
+    except OSError as exc:  # e.g. the result name is a folder, the disk is full
+        failed(k, res["file"], f"cannot write the result {paths[0]}: {type(exc).__name__}: "
+               f"{exc}", "output")
+        return
+    s["result"] = str(paths[0])
+    results[k] = s
+    counts["div"] += bool(est.diverged)
+    say(_result_line(res["file"], method, est, s))
+    if len(paths) > 1:
+        from ..filters.plots import plot_estimate
+
+        try:
+            plot_estimate(est, paths[1], title=f"{k} ({method})")
+        except OSError as exc:
+            s["plot_error"] = f"cannot write the plot {paths[1]}: {type(exc).__name__}: {exc}"
+            counts["fail"] += 1
+            say(f"{res['file']}: {s['plot_error']}", "failed")
+            return
+        say(f"wrote {paths[1]}")
 
 
 def _result_line(file, method, est, s) -> str:

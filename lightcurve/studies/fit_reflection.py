@@ -57,7 +57,7 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
-from ..photometry.kernels import COOK_TORRANCE, _ct_product
+from ..core.photometry import COOK_TORRANCE, cook_torrance_xyz
 
 __all__ = ["KINDS", "ReflectionPosteriorModel", "ReflectionFit", "ConvergenceError",
            "fit_reflection", "synthetic_reflection_case", "perturb_reflection", "reflection_sbc"]
@@ -96,8 +96,8 @@ def _walker_mags_nb(ns, no, nh, c, fidx, xi, a, m, A, fixed_flux, offset):
             for j in range(K):
                 f = fidx[j]
                 if ns[k, f] > 0.0 and no[k, f] > 0.0:
-                    s += A[w, j] * _ct_product(ns[k, f], no[k, f], nh[k, f], c[k],
-                                               xi[w, j], a[w, j], m[w, j])
+                    s += A[w, j] * cook_torrance_xyz(ns[k, f], no[k, f], nh[k, f], c[k],
+                                                     xi[w, j], a[w, j], m[w, j], False)[0]
             out[w, k] = offset[k] - 2.5 * np.log10(s) if s > 0.0 else np.inf
     return out
 

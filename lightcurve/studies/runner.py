@@ -24,6 +24,7 @@ its absence is a clear error naming the ``distributed`` extra.
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 import os
 import shutil
@@ -36,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_path, atomic_write_text
+from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
 from .metrics import cell_summary, run_metrics
 from .study import GRID_KEYS, RunTask, Study
 
@@ -194,14 +195,10 @@ def write_run(out_dir, result: dict, study_hash: str) -> Path:
 
 def read_run(path) -> dict:
     """Read a run file written by :func:`write_run` (same keys as :func:`execute_task`)."""
-    import h5py
+    from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)
-    try:
-        h = h5py.File(path, "r")
-    except OSError as exc:
-        raise InputError(f"cannot open run file: {exc}", file=path) from None
-    with h:
+    with open_hdf5(path, track=False) as h:  # the study's own files, not inputs
         if h.attrs.get("format") != RUN_FORMAT:
             raise InputError("not a study run file", file=path, field="format",
                              value=h.attrs.get("format"), allowed=RUN_FORMAT)
@@ -212,7 +209,7 @@ def read_run(path) -> dict:
         if out["status"] == "ok":
             out["metrics"] = json.loads(str(h.attrs["metrics_json"]))
             for name, _ in _ARRAYS:
-                out[name] = np.asarray(h[name])
+                out[name] = np.asarray(read_dataset(h, name, max_elements=10**9, file=path))
     return out
 
 
@@ -236,10 +233,16 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
     meta = out / "study.json"
     h = study.hash
     fp = code_fingerprint()
-    if meta.exists():
+    if meta.exists() or meta.is_symlink():
+        from ..io.safe_open import read_text
+
+        # the folder's own state file, but in a user-chosen folder: a regular file only
+        text = read_text(meta, max_bytes=256 * 1024 * 1024, what="study.json", track=False)
         try:
-            olddoc = json.loads(meta.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            olddoc = json.loads(text)
+        except ValueError:
+            olddoc = {}
+        if not isinstance(olddoc, dict):
             olddoc = {}
         old = olddoc.get("study_hash")
         if old != h:
@@ -265,8 +268,9 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
             for f in ("summary.json", "report.html"):
                 (out / f).unlink(missing_ok=True)
     (out / "runs").mkdir(parents=True, exist_ok=True)
-    for stale in (out / "runs").glob(".*.h5.*"):  # temporary files of a killed run
-        stale.unlink(missing_ok=True)
+    # temporary files of killed runs (never a live writer's: lightcurve.io.atomic)
+    clean_stale_temp(out / "runs")
+    clean_stale_temp(out)
     if not meta.exists() or force:
         doc = {"format": "lightcurve-study", "format_version": 1, "study_hash": h,
                "input_hash": study.input_hash, "package_version": fp["package_version"],
@@ -284,14 +288,40 @@ def _iter_inline(tasks, fn=None):
         yield fn(t)
 
 
-def init_worker(numba_threads: int) -> None:
-    """Start-up of a worker process: single-threaded BLAS (:func:`limit_blas_threads`) and at
-    most ``numba_threads`` numba threads (:mod:`lightcurve.threads`: workers × threads ≤
-    cores)."""
+def init_worker(parent_pid: int, numba_threads: int | None = None) -> None:
+    """Initialiser of every pool worker: die with the main process
+    (:func:`lightcurve.process.watch_parent`), single-threaded BLAS
+    (:func:`limit_blas_threads`), at most ``numba_threads`` numba threads
+    (:mod:`lightcurve.threads`: workers × threads ≤ cores)."""
+    from ..process import watch_parent
     from ..threads import limit_numba_threads
 
+    watch_parent(parent_pid)
     limit_blas_threads()
-    limit_numba_threads(numba_threads)
+    if numba_threads is not None:
+        limit_numba_threads(numba_threads)
+
+
+def process_pool(workers: int):
+    """A ``ProcessPoolExecutor`` of ``workers`` processes whose workers die with this process
+    (forkserver start method where available, else spawn; :func:`init_worker`). Stop it with
+    :func:`lightcurve.process.stop_pool` when interrupted."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    from ..threads import threads_per_worker
+
+    nt = threads_per_worker(workers)
+    os.environ["NUMBA_NUM_THREADS"] = str(nt)   # inherited by a forkserver started now
+    # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
+    # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["lightcurve.studies.runner", "lightcurve.filters"])
+    else:
+        ctx = mp.get_context("spawn")
+    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=init_worker,
+                               initargs=(os.getpid(), nt))
 
 
 class _ThreadLimited:
@@ -322,26 +352,17 @@ class _ThreadLimited:
 
 
 def _iter_pool(tasks, workers, fn=None):
-    import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, wait
 
-    from ..threads import threads_per_worker
+    from ..process import stop_pool
 
     fn = execute_task if fn is None else fn
-    nt = threads_per_worker(workers)
-    os.environ["NUMBA_NUM_THREADS"] = str(nt)   # inherited by a forkserver started now
-    # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
-    # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
-    if "forkserver" in mp.get_all_start_methods():
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["lightcurve.studies.runner", "lightcurve.filters"])
-    else:
-        ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                             initializer=init_worker, initargs=(nt,)) as ex:
+    ex = process_pool(workers)
+    try:
         pending = set()
         it = iter(tasks)
-        # bounded in-flight queue: the results come back as they complete
+        # bounded in-flight queue: tasks are taken from the (lazy) iterable as slots free up,
+        # and the results come back as they complete
         for t in it:
             pending.add(ex.submit(fn, t))
             if len(pending) >= 4 * workers:
@@ -353,6 +374,10 @@ def _iter_pool(tasks, workers, fn=None):
                 nxt = next(it, None)
                 if nxt is not None:
                     pending.add(ex.submit(fn, nxt))
+    except BaseException:  # interrupted (signal, consumer gone, error): stop now, not later
+        stop_pool(ex)
+        raise
+    ex.shutdown(wait=True)
 
 
 def _import_distributed():
@@ -385,20 +410,36 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
             raise InputError(f"cannot connect to the Dask scheduler: {exc}", field="--scheduler",
                              value=address) from None
     try:
+        if cluster is not None:  # our own workers die with this process (watch_parent)
+            from ._dask_plugin import ParentWatch
+
+            client.register_plugin(ParentWatch(os.getpid()), name="lightcurve-parent-watch")
+        try:
+            window = max(64, 4 * sum(client.nthreads().values()))
+        except Exception:  # noqa: BLE001 - a scheduler without workers yet
+            window = 64
         hosts = {}
         for addr, info in client.scheduler_info().get("workers", {}).items():
             h = str(addr).split("://")[-1].rsplit(":", 1)[0]
             hosts[h] = hosts.get(h, 0) + int(info.get("nthreads", 1))
         fn = _ThreadLimited(fn, hosts)
-        futs = [client.submit(fn, t, key=key(t), pure=False) for t in tasks]
-        for fut in distributed.as_completed(futs):
+        it = iter(tasks)
+        ac = distributed.as_completed()
+        # bounded in flight: tasks are generated lazily and submitted as results come back
+        for t in itertools.islice(it, window):
+            ac.add(client.submit(fn, t, key=key(t), pure=False))
+        for fut in ac:
             res = fut.result()
             fut.release()
+            nxt = next(it, None)
+            if nxt is not None:
+                ac.add(client.submit(fn, nxt, key=key(nxt), pure=False))
             yield res
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
 
 
 def iter_results(tasks, fn=None, *, workers: int | None = None, scheduler: str | None = None,
@@ -417,9 +458,11 @@ def iter_results(tasks, fn=None, *, workers: int | None = None, scheduler: str |
     if sum(x is not None for x in (workers, scheduler, dask_local)) > 1:
         raise InputError("choose one executor: --workers, --scheduler or --dask-local",
                          field="executor")
-    tasks = list(tasks)
-    if not tasks:
+    tasks = iter(tasks)  # consumed lazily by every executor
+    first = next(tasks, None)
+    if first is None:
         return iter(())
+    tasks = itertools.chain([first], tasks)
     if scheduler is not None:
         return _iter_dask(tasks, address=scheduler, fn=fn, key=key)
     if dask_local is not None:
@@ -466,32 +509,38 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
     n = study.runs if runs is None else int(runs)
     if n < 1:
         raise InputError("runs must be >= 1", field="runs", value=n, allowed=">= 1")
+    from ..io.locks import folder_lock
+
     out = Path(out_dir)
-    prepare_output(out, study, force=force)
-    tasks = study.tasks(n)
-    done = finished_runs(out)
-    todo = [t for t in tasks if t.run_id not in done]
-    # runs sharing a simulated lightcurve (same dynamics, sites, r and run index: common
-    # random numbers) back to back, so each worker's lightcurve cache serves them
-    todo.sort(key=lambda t: (t.cell.scenario_key, t.run))
-    limit_blas_threads()  # before any worker starts (inherited) and for inline runs
-    failures = 0
-    if todo:
-        it = iter_results(todo, execute_task, workers=workers, scheduler=scheduler,
-                          dask_local=dask_local)
-        bar = progress_bar(len(tasks), initial=len(tasks) - len(todo), desc=study.name,
-                           progress=progress)
-        h = study.hash
-        try:
-            for res in it:
-                write_run(out, res, h)
-                if res["status"] != "ok":
-                    failures += 1
-                bar.set_postfix(failures=failures, refresh=False)
-                bar.update(1)
-        finally:
-            bar.close()
-    return summarize(study, out, runs=n, write_report=write_report)
+    with folder_lock(out, what="study folder"):
+        prepare_output(out, study, force=force)
+        done = finished_runs(out)
+        total = len(study.cells) * n
+        n_done = sum(1 for t in study.iter_tasks(n, ids_only=True) if t in done)
+        # generated lazily (a million runs never sit in memory as task objects), in the
+        # order that puts runs sharing a simulated lightcurve (same dynamics, sites, r and
+        # run index: common random numbers) back to back for each worker's cache
+        todo = (t for t in study.iter_tasks(n) if t.run_id not in done)
+        limit_blas_threads()  # before any worker starts (inherited) and for inline runs
+        failures = 0
+        if n_done < total:
+            it = iter_results(todo, execute_task, workers=workers, scheduler=scheduler,
+                              dask_local=dask_local)
+            bar = progress_bar(total, initial=n_done, desc=study.name, progress=progress)
+            h = study.hash
+            try:
+                for res in it:
+                    write_run(out, res, h)
+                    if res["status"] != "ok":
+                        failures += 1
+                    bar.set_postfix(failures=failures, refresh=False)
+                    bar.update(1)
+            finally:
+                close = getattr(it, "close", None)
+                if close is not None:
+                    close()  # stops the executor now (workers terminated if interrupted)
+                bar.close()
+        return summarize(study, out, runs=n, write_report=write_report)
 
 
 def _code_fields() -> dict:

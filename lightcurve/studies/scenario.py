@@ -146,14 +146,19 @@ _TORQUES = ("gravity_gradient", "srp", "drag")
 def load_scenario(path, library_dirs=None, site_dirs=None) -> Scenario:
     """Load and validate a scenario TOML file; relative mesh paths resolve against its folder."""
     path = Path(path)
-    doc = load_toml(path)
-    return parse_scenario(doc, file=path, text=path.read_text(encoding="utf-8"),
+    doc, text = load_toml(path, with_text=True)
+    return parse_scenario(doc, file=path, text=text,
                           library_dirs=library_dirs, site_dirs=site_dirs)
 
 
 def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs=None,
-                   site_dirs=None) -> Scenario:
-    """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`."""
+                   site_dirs=None, *, embedded: bool = False) -> Scenario:
+    """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`.
+
+    ``embedded=True`` for a scenario read from inside a data file (the ``scenario`` attribute
+    of a lightcurve HDF5 file): it may name a library shape only, never a mesh or shape file
+    by path, so a received file cannot make the program read an arbitrary file.
+    """
     from ..geometry.orbits import orbit_from_section
     from ..geometry.sites import get_site
     from ..geometry.time import parse_epoch
@@ -197,6 +202,11 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
 
     sh = root.section("shape")
     base = Path(str(file)).parent if file and not str(file).startswith("<") else Path.cwd()
+    if embedded and (sh.has("mesh") or sh.has("materials")):
+        raise InputError("a scenario stored in a data file may not name mesh or material "
+                         "files", file=file, field="shape.mesh" if sh.has("mesh") else
+                         "shape.materials", allowed="a library shape name (shape.name); give "
+                         "the model scenario as a file instead")
     if sh.has("mesh"):
         mesh = base / sh.str("mesh")
         materials = base / sh.str("materials")
@@ -206,7 +216,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     areas = sh.vector("areas_m2", None, min=0.0, min_open=True)
     sh.check_unknown()
     try:
-        shape = load_shape(spec, library_dirs=library_dirs)
+        shape = load_shape(spec, library_dirs=library_dirs, library_only=embedded)
     except InputError:
         raise
     except (FileNotFoundError, KeyError) as exc:

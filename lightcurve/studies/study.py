@@ -162,6 +162,29 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
+    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
+        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
+        in execution order: scenario keys sorted, then run index, then the cells sharing that
+        scenario key in grid order — runs that share a simulated lightcurve (common random
+        numbers) come back to back. The same set as :meth:`tasks`."""
+        n = self.runs if runs is None else int(runs)
+        opts = tuple(sorted(self.options.items()))
+        groups: dict = {}
+        for c in self.cells:
+            groups.setdefault(c.scenario_key, []).append(c)
+        for key in sorted(groups):
+            cells = groups[key]
+            tags = [c.tag for c in cells]
+            for i in range(n):
+                for c, tag in zip(cells, tags):
+                    if ids_only:
+                        yield f"{tag}_r{i:05d}"
+                        continue
+                    f = self.scenario_files[(c.dynamics, c.sites)]
+                    txt = self.scenario_texts[(c.dynamics, c.sites)]
+                    s, fs = run_seeds(self.seed, c, i)
+                    yield RunTask(c, i, s, fs, txt, str(f), opts)
+
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
@@ -276,6 +299,36 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
     return out
 
 
+def _fill_template(template: str, file, **values) -> str:
+    """``template`` with its ``{name}`` placeholders replaced by ``values``.
+
+    Only bare placeholders are allowed: no attribute or index access (``{dynamics.x}``), no
+    conversion and no format spec (``{sites:>300}`` would pad a path to any length).
+    """
+    import string
+
+    def bad(why):
+        return InputError(f"bad placeholder in the scenario template ({why})", file=file,
+                          field="study.scenario", value=template,
+                          allowed="text with {dynamics} and {sites} placeholders only")
+
+    out = []
+    try:
+        parts = list(string.Formatter().parse(template))
+    except ValueError as exc:
+        raise bad(str(exc)) from None
+    for literal, name, spec, conv in parts:
+        out.append(literal)
+        if name is None:
+            continue
+        if name not in values:
+            raise bad(f"unknown placeholder {{{name}}}")
+        if spec or conv:
+            raise bad(f"{{{name}}} with a format spec or conversion")
+        out.append(str(values[name]))
+    return "".join(out)
+
+
 def load_study(path) -> Study:
     """Load and validate a study TOML (module docstring); every scenario file is parsed.
 
@@ -294,8 +347,7 @@ def load_study(path) -> Study:
     from .scenario import parse_scenario
 
     path = Path(path)
-    doc = load_toml(path)
-    text = path.read_text(encoding="utf-8")
+    doc, text = load_toml(path, with_text=True)
     root = Section(doc, file=path)
     st = root.section("study")
     name = st.str("name", path.stem)
@@ -329,21 +381,16 @@ def load_study(path) -> Study:
     files, texts = {}, {}
     for dyn in axes["dynamics"]:
         for ns in axes["sites"]:
-            try:
-                rel = template.format(dynamics=dyn, sites=ns)
-            except (KeyError, IndexError, ValueError) as exc:
-                raise InputError(f"bad placeholder in the scenario template ({exc}); use "
-                                 "{dynamics} and {sites}", file=path, field="study.scenario",
-                                 value=template) from None
+            rel = _fill_template(template, path, dynamics=dyn, sites=ns)
             f = Path(rel)
             if not f.is_absolute():
                 f = path.parent / f
-            if not f.is_file():
+            if not f.exists():
                 raise InputError("scenario file not found", file=path, field="study.scenario",
                                  value=str(f), allowed="an existing scenario TOML for every "
                                  "(dynamics, sites) of the grid")
-            txt = f.read_text(encoding="utf-8")
-            sc = parse_scenario(txt, file=f)
+            doc_f, txt = load_toml(f, with_text=True)  # regular file, size cap
+            sc = parse_scenario(doc_f, file=f, text=txt)
             if sc.attitude.dynamics != dyn:
                 raise InputError(f"scenario {f.name} has dynamics {sc.attitude.dynamics!r}, the "
                                  f"grid cell needs {dyn!r}", file=path, field="study.scenario",

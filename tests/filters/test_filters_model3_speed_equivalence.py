@@ -1,5 +1,5 @@
 """Issue 6 speed path: the one-pass numba partials and the scalar Joseph kernel of the MEKF
-give the numbers of the NumPy path (the oracle: ``magnitude_partials(backend="numpy")`` on a
+give the numbers of the NumPy path (the oracle: the NumPy algebra of tests/partials_oracle.py on a
 shape copy, and :func:`lightcurve.estimation.joseph_update`) to ≤ 1e-10 relative, and the
 Jacobians they return equal central finite differences to 1e-6 relative.
 
@@ -20,8 +20,9 @@ from lightcurve.filters.facet_states import FacetParameterStates, mag_states_nb
 from lightcurve.filters.invert import invert
 from lightcurve.filters.models import MagnitudeModel
 from lightcurve.photometry import AU_M, Material, Shape, apparent_magnitude, load_shape
-from lightcurve.photometry.partials import (MagnitudePartials, kernel_capable,
-                                            magnitude_partials, magnitude_partials_q_nb)
+from lightcurve.core.photometry import magnitude_partials_q_nb
+from lightcurve.photometry.partials import MagnitudePartials, kernel_capable, magnitude_partials
+from partials_oracle import magnitude_partials_numpy
 from lightcurve.rotations import quat_mult, quat_rotate, rotvec_to_quat
 
 REL = 1e-10
@@ -79,19 +80,17 @@ def test_numba_partials_equal_numpy_partials(name):
     s = _unit(rng.normal(size=(N, 3)))
     o = _unit(s + 0.6 * rng.normal(size=(N, 3)))
     ro, rs = rng.uniform(5e5, 4e7, N), np.full(N, AU_M)
-    a = magnitude_partials(shape, q, s, o, ro, rs, backend="numpy")
-    b = magnitude_partials(shape, q, s, o, ro, rs, backend="numba")
+    a = magnitude_partials_numpy(shape, q, s, o, ro, rs)
+    b = magnitude_partials(shape, q, s, o, ro, rs)
     assert np.isfinite(a.m).sum() > 200 and np.isinf(a.m).sum() > 0   # both regimes occur
     for f in MagnitudePartials.__dataclass_fields__:
         x, y = getattr(b, f), getattr(a, f)
         for i in range(N):
             _close(x[i], y[i], what=f"{name} {f} row {i}")
-    # auto picks the kernel; states axis (N,S,4)
-    c = magnitude_partials(shape, q, s, o, ro, rs)
-    np.testing.assert_array_equal(c.dm_dtheta, b.dm_dtheta)
+    # states axis (N,S,4)
     q3 = _unit(rng.normal(size=(20, 3, 4)))
-    a3 = magnitude_partials(shape, q3, s[:20], o[:20], ro[:20], rs[:20], backend="numpy")
-    b3 = magnitude_partials(shape, q3, s[:20], o[:20], ro[:20], rs[:20], backend="numba")
+    a3 = magnitude_partials_numpy(shape, q3, s[:20], o[:20], ro[:20], rs[:20])
+    b3 = magnitude_partials(shape, q3, s[:20], o[:20], ro[:20], rs[:20])
     assert b3.dm_dtheta.shape == (20, 3, 3)
     for f in MagnitudePartials.__dataclass_fields__:
         x, y = getattr(b3, f), getattr(a3, f)
@@ -100,9 +99,9 @@ def test_numba_partials_equal_numpy_partials(name):
                 _close(x[i, j], y[i, j], what=f"{name} {f} [{i},{j}]")
 
 
-def test_backend_refusal_for_brdfs_without_analytic_partials():
-    """Ashikhmin–Shirley has no analytic partials: backend="numba" refuses, auto falls back
-    to the NumPy path (its finite-difference attitude partial)."""
+def test_brdfs_without_analytic_partials_use_finite_differences():
+    """Ashikhmin–Shirley has no analytic partials: its attitude partial is the central finite
+    difference of the NumPy oracle, mixed shapes combine both (analytic facets by the kernel)."""
     base = load_shape("cube_1u")
     mat = Material.create("as", "ashikhmin_shirley", Rd=0.3, Rs=0.2, nu=30.0, nv=8.0)
     sh = Shape("as", base.areas_m2, base.normals_body, base.centers_body_m,
@@ -110,13 +109,20 @@ def test_backend_refusal_for_brdfs_without_analytic_partials():
     assert not kernel_capable(sh.model_ids)
     q, s, o = np.array([[1.0, 0, 0, 0]]), _unit(np.array([[1.0, 0.4, 0.3]])), \
         _unit(np.array([[1.0, -0.3, 0.5]]))
-    with pytest.raises(ValueError, match="numba"):
-        magnitude_partials(sh, q, s, o, [1e6], [AU_M], backend="numba")
     a = magnitude_partials(sh, q, s, o, [1e6], [AU_M])
-    b = magnitude_partials(sh, q, s, o, [1e6], [AU_M], backend="numpy")
-    np.testing.assert_array_equal(a.dm_dtheta, b.dm_dtheta)
-    with pytest.raises(ValueError, match="backend"):
-        magnitude_partials(sh, q, s, o, [1e6], [AU_M], backend="fast")
+    b = magnitude_partials_numpy(sh, q, s, o, [1e6], [AU_M])
+    np.testing.assert_allclose(a.dm_dtheta, b.dm_dtheta, rtol=1e-9)
+    assert np.all(np.isnan(a.dm_dxi))
+    mixed = Shape("mix", base.areas_m2, base.normals_body, base.centers_body_m,
+                  [mat if i % 2 else base.materials[i] for i in range(base.n_facets)], 1.0,
+                  np.eye(3))
+    qs = _unit(np.random.default_rng(4).normal(size=(30, 4)))
+    ss, oo = np.repeat(s, 30, 0), np.repeat(o, 30, 0)
+    a = magnitude_partials(mixed, qs, ss, oo, np.full(30, 1e6), np.full(30, AU_M))
+    b = magnitude_partials_numpy(mixed, qs, ss, oo, np.full(30, 1e6), np.full(30, AU_M))
+    for f in MagnitudePartials.__dataclass_fields__:
+        for i in range(30):
+            _close(getattr(a, f)[i], getattr(b, f)[i], rel=1e-8, what=f"mixed {f} row {i}")
 
 
 def _central4(fun, h):
@@ -316,7 +322,7 @@ def _old_predict(m, facets, q, z, k, jacobian, ph=None, h=1e-6):
         with np.errstate(divide="ignore", invalid="ignore"):
             mp = magnitude_partials(m.shape, q[None, :], m.s_eci[k:k + 1], m.o_eci[k:k + 1],
                                     m.range_obs[k:k + 1], m.range_sun[k:k + 1],
-                                    sun_mag=m.sun_mag, backend="numpy")
+                                    sun_mag=m.sun_mag)
         return yhat, np.asarray(mp.dm_dtheta, float).reshape(3), np.zeros(0)
     return facets.partials_numpy(m, q, z, k)
 

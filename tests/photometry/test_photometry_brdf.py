@@ -8,7 +8,7 @@ import pytest
 from lightcurve.errors import InputError
 from lightcurve.photometry import (AU_M, Material, Shape, apparent_magnitude, available_brdfs,
                                    get_brdf, register_brdf, unregister_brdf)
-from lightcurve.photometry.kernels import brightness_kernel
+from lightcurve.core.photometry import brightness_kernel
 
 RNG_SEED = 20240601
 
