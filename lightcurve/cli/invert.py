@@ -88,12 +88,16 @@ def register(sub) -> None:
     p.add_argument("--roughening", type=number(0.0), default=0.2,
                    help="BPF roughening constant G (Bernard table 7.9; used with --rejuvenation "
                    "separate; default 0.2)")
-    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic")
-    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
+    p.add_argument("--resampling", choices=("systematic", "multinomial"), default=None,
+                   help="BPF resampling (default: systematic; multinomial, Bernard table 6.3, "
+                   "in the thesis variant)")
+    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint", "table7.9", "none"),
+                   default=None,
                    help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
                    "the whole state with the Musso et al. (2001) bandwidth; separate = the "
-                   "table-7.9 roughening of attitude and rate (uses --roughening); auto = joint "
-                   "when the attitude is estimated (default)")
+                   "table-7.9 sigma added in the GRP chart (uses --roughening); table7.9 = "
+                   "Bernard's table 7.9 as written; none; auto = joint while the attitude cloud "
+                   "is compact, else separate (default: auto; table7.9 in the thesis variant)")
     p.add_argument("--ess-threshold", type=number(0.0, 1.0), default=0.5,
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
     p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",

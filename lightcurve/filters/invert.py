@@ -170,14 +170,14 @@ def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
 
 
 def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
-           particles=10_000, roughening=0.2, resampling="systematic", ess_threshold=0.5,
+           particles=10_000, roughening=0.2, resampling=None, ess_threshold=0.5,
            initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
            acs_mode="random_walk", pseudo_noise=0.0, eta_sigma_deg_s2=None, inertia_kg_m2=None,
            alpha=1.0, beta=2.0, kappa=0.0, error="grp", jacobian="analytic",
            keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
            reflection_process_noise=0.0, reflection_facets=None,
            reflection_kinds=("xi", "a", "m", "A"), gate=None,
-           rejuvenation="auto") -> Estimate:
+           rejuvenation=None, device="cpu") -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
@@ -189,13 +189,17 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
     sigma_theta_deg, sigma_omega_deg_s : float
         1σ of the initial attitude (deg, per axis) and rate (deg/s) errors; also ``P₀``.
     particles, roughening, resampling, ess_threshold :
-        BPF: number of particles, roughening constant 𝒢 (Bernard table 7.9; used by the
-        "separate" rejuvenation), "systematic" or "multinomial", resample when
-        ``N_eff < ess_threshold · N``.
-    rejuvenation : {"auto", "separate", "joint"}
+        BPF: number of particles, roughening constant 𝒢 (Bernard table 7.9), "systematic" or
+        "multinomial" (None: the variant's, :class:`~lightcurve.filters.bpf.BPFConfig`),
+        resample when ``N_eff < ess_threshold · N``. The variant is
+        ``problem.meta["variant"]`` ("robust" when absent).
+    rejuvenation : {"auto", "separate", "joint", "table7.9", "none"} or None (the variant's)
         BPF: how the resampled cloud is moved (:func:`lightcurve.filters.bpf.run_bpf`): "joint"
-        = one Liu–West kernel on the full state (default "auto": joint when the attitude is
-        estimated), "separate" = the table-7.9 roughening of attitude and rate.
+        = one Liu–West kernel on the full state ("auto": joint while the cloud is compact),
+        "separate" = the table-7.9 σ added in the GRP chart, "table7.9" = Bernard's table 7.9
+        as written (the thesis variant's), "none".
+    device : {"cpu", "gpu"} — BPF: the numba CPU kernels or the CUDA kernels of
+        :mod:`lightcurve.filters.bpf_gpu` (needs the ``gpu`` extra and a CUDA device).
     initial_q, initial_omega :
         User initial estimate (inertial→body quaternion; rad/s body axes) instead of the
         perturbed truth.
@@ -279,12 +283,21 @@ def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg
         from .ukf import run_ukf
 
         return run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
-    from .bpf import run_bpf
+    from .bpf import BPFConfig, run_bpf
 
-    extra = {"bias": bias, "facets": facets, "attitude": attitude,
-             "rejuvenation": rejuvenation}
-    problem.meta.update({"particles": int(particles), "roughening": float(roughening),
-                         "resampling": resampling, "ess_threshold": float(ess_threshold)})
-    return run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
-                   resampling=resampling, ess_threshold=ess_threshold, keep_clouds=keep_clouds,
-                   **extra)
+    # the variant's defaults (BPFConfig) unless a setting is given explicitly
+    cfg = BPFConfig(variant=problem.meta.get("variant", "robust"), particles=int(particles),
+                    roughening=float(roughening), ess_threshold=float(ess_threshold),
+                    **{k: v for k, v in (("resampling", resampling),
+                                         ("rejuvenation", rejuvenation)) if v is not None})
+    problem.meta.update({"particles": cfg.particles, "roughening": cfg.roughening,
+                         "resampling": cfg.resampling, "ess_threshold": cfg.ess_threshold})
+    if device == "gpu":
+        from .bpf_gpu import run_bpf_gpu
+
+        return run_bpf_gpu(problem, cfg, seed=seed, bias=bias, facets=facets,
+                           attitude=attitude, keep_clouds=keep_clouds)
+    if device != "cpu":
+        raise InputError("unknown device", field="device", value=device, allowed="cpu, gpu")
+    return run_bpf(problem, cfg, seed=seed, bias=bias, facets=facets, attitude=attitude,
+                   keep_clouds=keep_clouds)
