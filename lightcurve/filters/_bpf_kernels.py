@@ -312,15 +312,18 @@ def roughen_chart(X, z, sig, ncols, qref, a, f, Q, W):
 @nb.njit(cache=True, parallel=True)
 def roughen_compose(Q, W, z, sig, a, f):
     """Bernard table 7.9 "Update state": ``c_i = σ ⊙ z_i``, ``q_i ← q(c_θ,i) ⊗ q_i`` (c_θ a GRP,
-    eq. 7.108) and ``ω_i ← ω_i + c_ω,i`` (eq. 7.109); z (N,6) standard normals."""
+    eq. 7.108) and ``ω_i ← ω_i + c_ω,i`` (eq. 7.109); z (N, ≥6) standard normals (z (N,3):
+    the attitude only)."""
     N = Q.shape[0]
+    rate = z.shape[1] >= 6
     for i in nb.prange(N):
         d0, d1, d2, d3 = grp2q_xyz(sig[0] * z[i, 0], sig[1] * z[i, 1], sig[2] * z[i, 2], a, f)
         e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
         n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
         Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = e0 / n, e1 / n, e2 / n, e3 / n
-        for j in range(3):
-            W[i, j] += sig[3 + j] * z[i, 3 + j]
+        if rate:
+            for j in range(3):
+                W[i, j] += sig[3 + j] * z[i, 3 + j]
 
 
 @nb.njit(cache=True, parallel=True)

@@ -373,8 +373,67 @@ def _wstats_np(X, w):
     return mean, (D * w[:, None]).T @ D
 
 
-class _NumbaOps:
+class _HostOps:
+    """Array handling shared by the two CPU backends (host NumPy arrays)."""
+
+    @staticmethod
+    def empty(shape, dtype=np.float64):
+        return np.empty(shape, dtype=dtype)
+
+    @staticmethod
+    def full(shape, value):
+        return np.full(shape, float(value))
+
+    @staticmethod
+    def from_host(a):
+        return np.ascontiguousarray(a, dtype=np.float64).copy()
+
+    @staticmethod
+    def to_host(a):
+        return a
+
+    @staticmethod
+    def fill(a, value):
+        a[...] = value
+
+    @staticmethod
+    def row(a, i):
+        return a[i].copy()
+
+    @staticmethod
+    def scale(a, f):
+        a *= f
+
+    @staticmethod
+    def normals(draws, out):
+        return draws.normals_into(out)
+
+    systematic = staticmethod(CP.systematic_resample_into)
+    sorted_merge = staticmethod(CP.sorted_resample_into)
+
+    @staticmethod
+    def ranges(Xc):
+        E = np.empty(Xc.shape[1])
+        CP.column_ranges(Xc, E)
+        return E
+
+
+class _NumbaOps(_HostOps):
     """Stages of the filter on numba kernels (in place on the run's buffers)."""
+
+    gather = staticmethod(CP.gather_rows)
+    mean_cov = staticmethod(CP.mean_cov_rows)
+
+    @staticmethod
+    def predict(run, k, dt, z, L, zeta, s):
+        """Propagate the cloud over dt (process noise z Lᵀ) and, for finite s, predict the
+        magnitudes of epoch k into ``run.mpred`` (module docstring, step 2)."""
+        m = run.p.model
+        n_arr, a_arr, ids, prm = m._karrs
+        BK.bpf_predict_nb(run.Q, run.W, dt, run.mode, run.J, run.Ji,
+                          run.p.dynamics.nsub(dt) if (run.mode and dt != 0.0) else 1, z, L,
+                          zeta, s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
+                          run.mpred)
 
     innov = staticmethod(CP.innovation_loglik)
     addnorm = staticmethod(CP.add_loglik_normalize)
@@ -409,8 +468,34 @@ class _NumbaOps:
         BK.liu_west_attitude(X, eps, M, sa, c, qref, GRP_A, GRP_F, Q, W, E)
 
 
-class _NumpyOps:
+class _NumpyOps(_HostOps):
     """The same stages in plain NumPy (new arrays, copied into the run's buffers)."""
+
+    @staticmethod
+    def gather(src, idx, dst):
+        dst[:] = src[idx]
+
+    @staticmethod
+    def mean_cov(X):
+        mean = X.mean(axis=0)
+        D = X - mean
+        return mean, D.T @ D / X.shape[0]
+
+    @staticmethod
+    def predict(run, k, dt, z, L, zeta, s):
+        Qn, Wn = _propagate_np(run.p.dynamics, run.Q, run.W, dt)
+        if z.shape[0]:
+            noise = z @ L.T
+            Qn = rot.quat_mult(rot.rotvec_to_quat(noise[:, :3]), Qn)
+            Qn = Qn / np.linalg.norm(Qn, axis=1, keepdims=True)
+            Wn = Wn + noise[:, 3:]
+        run.Q[:] = Qn
+        run.W[:] = Wn
+        if not np.isnan(s[0]):
+            Qm = run.Q
+            if zeta.shape[0]:
+                Qm = rot.quat_mult(rot.rotvec_to_quat(zeta), Qm)
+            run.mpred[:] = _predict_np(run.p.model, Qm, k)
 
     innov = staticmethod(_innov_np)
     addnorm = staticmethod(_addnorm_np)
@@ -450,10 +535,11 @@ class _NumpyOps:
 
     @staticmethod
     def roughen_compose(Q, W, z, sig):
-        c = z * sig[None, :]
+        c = z[:, :sig.size] * sig[None, :z.shape[1]]
         Qn = rot.quat_mult(rot.grp_to_quat(c[:, :3], GRP_A, GRP_F), Q)
         Q[:] = Qn / np.linalg.norm(Qn, axis=1, keepdims=True)
-        W += c[:, 3:6]
+        if c.shape[1] >= 6:
+            W += c[:, 3:6]
 
     @staticmethod
     def liu_west(X, eps, M, sa, c, qref, Q, W, E):
@@ -777,7 +863,7 @@ class _Run:
             raise ValueError("rejuvenation='joint' needs the attitude estimated (attitude='truth' "
                              "holds q and ω at the truth; use 'separate' or mcmc_moves there)")
         self.p, self.cfg, self.seed, self.backend, self.fixed = p, cfg, int(seed), backend, fixed
-        self.ops = _NumbaOps if backend == "numba" else _NumpyOps
+        self.ops = _BACKENDS[backend]()
         self.draws = _Draws(seed, cfg.rng)
         self.N = N = cfg.particles
         self.keep = ({int(k) % p.n for k in keep_clouds}
@@ -795,15 +881,16 @@ class _Run:
         self.thr = float(cfg.ess_threshold) * N
         self.G = float(cfg.roughening)
         # buffers (allocated once per run)
-        self.logw = np.full(N, -np.log(N))
-        self.w = np.full(N, 1.0 / N)
-        self.ll = np.zeros(N)
-        self.mpred = np.empty(N)
-        self.C = np.empty(N)
-        self.idx = np.empty(N, dtype=np.int64)
-        self.zbuf = np.empty(N * 6)
-        self.zeta = np.empty((N, 3))
-        self.zeta2 = np.empty((N, 3))
+        ops = self.ops
+        self.logw = ops.full(N, -np.log(N))
+        self.w = ops.full(N, 1.0 / N)
+        self.ll = ops.full(N, 0.0)
+        self.mpred = ops.empty(N)
+        self.C = ops.empty(N)
+        self.idx = ops.empty(N, np.int64)
+        self.zbuf = ops.empty(N * 6)
+        self.zeta = ops.empty((N, 3))
+        self.zeta2 = ops.empty((N, 3))
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
         self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
@@ -812,13 +899,15 @@ class _Run:
             mm = 1 if (fixed and facets is not None) else 0
         self.ext.setup_moves(p, mm, self.tq if fixed else None)
         D = 6 + self.ext.ne
-        self.X = np.zeros((N, D))
-        self.X2 = np.zeros((N, D))
-        self.ebuf = np.empty(N * D)
+        self.X = ops.full((N, D), 0.0)
+        self.X2 = ops.full((N, D), 0.0)
+        self.ebuf = ops.empty(N * D)
         self.joint = cfg.rejuvenation in ("auto", "joint") and not fixed
         self.kern = _joint_bandwidth(cfg.kernel_bandwidth, N, D) if self.joint else None
         self.spread = float(np.radians(cfg.joint_max_spread_deg))
         self.n_joint = 0
+        self._empty6 = ops.empty((0, 6))
+        self._zero6 = np.zeros((6, 6))
 
     def _init_cloud(self, initial_cloud):
         p, N = self.p, self.N
@@ -846,8 +935,10 @@ class _Run:
             else:
                 self.Q = np.ascontiguousarray(_from_grp_np(P0, p.q0))
             self.W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
-        self.Q2 = np.empty_like(self.Q)
-        self.W2 = np.empty_like(self.W)
+        self.Q = self.ops.from_host(self.Q)
+        self.W = self.ops.from_host(self.W)
+        self.Q2 = self.ops.empty(self.Q.shape)
+        self.W2 = self.ops.empty(self.W.shape)
 
     # ---------------------------------------------------------------------------------
     def run(self) -> Estimate:
@@ -857,8 +948,8 @@ class _Run:
         t0 = time.perf_counter()
         clouds = {}
         w_mean = p.omega0.copy() if not self.fixed else p.truth_omega[0].copy()
-        empty6 = np.zeros((0, 6))
-        empty3 = np.zeros((0, 3))
+        empty6 = ops.empty((0, 6))
+        empty3 = ops.empty((0, 3))
         nan3 = np.full(3, np.nan)
         zero6 = np.zeros((6, 6))
         karrs = m._karrs
@@ -873,15 +964,15 @@ class _Run:
                     Qd[:3, :3] += dyn.zeta_cov
                 L = np.ascontiguousarray(psd_sqrt(Qd))
                 if L.shape[1]:
-                    z = self.draws.normals_into(_flat(self.zbuf, N, L.shape[1]))
+                    z = ops.normals(self.draws, _flat(self.zbuf, N, L.shape[1]))
             y = m.y[k]
             has_y = bool(np.isfinite(y))
             skipped = has_y and gate.skip_epoch(k, rec)   # object unlit / below the horizon
             has_y = has_y and not skipped
             zeta = empty3
             if has_y and p.jitter_zeta() and not self.fixed:
-                zeta = self.draws.normals_into(self.zeta)
-                zeta *= dyn.acs_sigma
+                zeta = ops.normals(self.draws, self.zeta)
+                ops.scale(zeta, dyn.acs_sigma)
             ext.propagate(dt, w_mean, self.draws)
             mpred = self.mpred
             if self.fixed:
@@ -889,27 +980,13 @@ class _Run:
                 self.W = np.ascontiguousarray(p.truth_omega[k:k + 1])
                 if has_y:
                     self._predict(k, zeta)
-            elif self.backend == "numba":
+            else:
                 s = m.s_eci[k] if (has_y and ext.kind != "facets") else nan3
-                n_arr, a_arr, ids, prm = karrs
-                BK.bpf_predict_nb(self.Q, self.W, dt, self.mode, self.J, self.Ji,
-                                  dyn.nsub(dt) if self.mode else 1, z, L, zeta, s, m.o_eci[k],
-                                  n_arr, a_arr, ids, prm, float(m.offset[k]), mpred)
+                ops.predict(self, k, dt, z, L, zeta, s)
                 if has_y and ext.kind == "facets":
                     _predict_facets(self.backend, p, ext, k, self.Q, zeta, mpred)
                 elif has_y:
                     ext.add_bias(mpred, k)
-            else:
-                Qn, Wn = _propagate_np(dyn, self.Q, self.W, dt)
-                if z.shape[0]:
-                    noise = z @ L.T
-                    Qn = rot.quat_mult(rot.rotvec_to_quat(noise[:, :3]), Qn)
-                    Qn = Qn / np.linalg.norm(Qn, axis=1, keepdims=True)
-                    Wn = Wn + noise[:, 3:]
-                self.Q[:] = Qn
-                self.W[:] = Wn
-                if has_y:
-                    self._predict(k, zeta)
             if skipped:
                 neff, _ = ops.addnorm(self.logw, self.ll, 0.0, self.w)
             elif not has_y:
@@ -949,8 +1026,11 @@ class _Run:
     # ---------------------------------------------------------------------------------
     def _predict(self, k, zeta):
         """Predicted magnitudes of the current cloud at epoch k into ``self.mpred``."""
-        _predict_any(self.backend, self.p, self.ext, k, self.Q, self.W, zeta, self.J, self.Ji,
-                     self.mpred)
+        if self.fixed or self.ext.kind is not None:
+            _predict_any(self.backend, self.p, self.ext, k, self.Q, self.W, zeta, self.J,
+                         self.Ji, self.mpred)
+        else:
+            self.ops.predict(self, k, 0.0, self._empty6, self._zero6, zeta, self.p.model.s_eci[k])
 
     def _update(self, k, y, zeta):
         """Measurement update of epoch k (steps 3, 3b) → (N_eff, ζ after resamplings)."""
@@ -962,7 +1042,7 @@ class _Run:
         R = (gate.check(k, y - yhat, var_m + sig * sig, sig * sig, rec,
                         nu_nearest=ops.nearest(mpred, y)) if any_fin else sig * sig)
         if R is None:
-            ll[:] = 0.0   # outlier rejected: the weights are left unchanged
+            ops.fill(ll, 0.0)   # outlier rejected: the weights are left unchanged
         elif R != sig * sig:
             sig = float(np.sqrt(R))   # gate mode "inflate": the inflated noise
             ops.innov(logw, mpred, y, sig, ll)
@@ -987,26 +1067,26 @@ class _Run:
         neff, ok = ops.addnorm(logw, ll, rest, w)
         if not ok:
             rec.flags[k] |= FLAG_COLLAPSE
-            logw[:] = -np.log(N)
+            ops.fill(logw, -np.log(N))
             neff, _ = ops.addnorm(logw, ll, 0.0, w)
         return neff, zeta
 
     def _resample(self):
         """Resampling indices into ``self.idx`` from the weights ``self.w`` (False: all zero)."""
         if self.cfg.resampling == "systematic":
-            return CP.systematic_resample_into(self.w, self.draws.uniform(), self.C, self.idx)
+            return self.ops.systematic(self.w, self.draws.uniform(), self.C, self.idx)
         u = self.draws.sorted_uniforms_into(self.ubuf)
-        return CP.sorted_resample_into(self.w, u, self.C, self.idx)
+        return self.ops.sorted_merge(self.w, u, self.C, self.idx)
 
     def _gather_qw(self):
         """Q, W ← Q[idx], W[idx] (double buffers swapped)."""
-        CP.gather_rows(self.Q, self.idx, self.Q2)
-        CP.gather_rows(self.W, self.idx, self.W2)
+        self.ops.gather(self.Q, self.idx, self.Q2)
+        self.ops.gather(self.W, self.idx, self.W2)
         self.Q, self.Q2 = self.Q2, self.Q
         self.W, self.W2 = self.W2, self.W
 
     def _reset_weights(self, k):
-        self.logw[:] = -np.log(self.N)
+        self.ops.fill(self.logw, -np.log(self.N))
         self.rec.flags[k] |= FLAG_RESAMPLED
 
     def _stage_move(self, k, rest, zeta):
@@ -1017,14 +1097,14 @@ class _Run:
             self._gather_qw()
         ext.take(self.idx)
         if zeta.shape[0]:
-            CP.gather_rows(zeta, self.idx, self.zeta2)
+            self.ops.gather(zeta, self.idx, self.zeta2)
             self.zeta, self.zeta2 = self.zeta2, self.zeta
             zeta = self.zeta
         self._reset_weights(k)
         if self.fixed:
             self._move_extras(k, 1.0 - rest)
             return zeta
-        self.w[:] = 1.0 / self.N
+        self.ops.fill(self.w, 1.0 / self.N)
         _, _, _, qst = self._estimate(self.w)
         if ext.ne:
             self.X[:, 6:] = ext.E
@@ -1034,14 +1114,12 @@ class _Run:
         if rej != "none" and self.G > 0.0:
             if rej == "table7.9":
                 sig = self._sigma(self.X[:, :3], 3)
-                z = self.draws.normals_into(_flat(self.zbuf, self.N, 3))
+                z = self.ops.normals(self.draws, _flat(self.zbuf, self.N, 3))
                 sig6 = np.concatenate([sig, np.zeros(3)])
-                zz = np.zeros((self.N, 6))
-                zz[:, :3] = z
-                self.ops.roughen_compose(self.Q, self.W, zz, sig6)
+                self.ops.roughen_compose(self.Q, self.W, z, sig6)
             else:
                 sig = self._sigma(self.X[:, :3], 3)
-                z = self.draws.normals_into(_flat(self.zbuf, self.N, 3))
+                z = self.ops.normals(self.draws, _flat(self.zbuf, self.N, 3))
                 self.ops.roughen_chart(self.X, z, sig, 3, qst, self.Q, self.W)
         if rej != "none":
             self._move_extras(k, 1.0 - rest)
@@ -1049,9 +1127,7 @@ class _Run:
 
     def _sigma(self, Xc, n):
         """Table 7.9 roughening σ of the cloud columns Xc (ranges, 𝒢, N, dimension n)."""
-        E = np.empty(Xc.shape[1])
-        CP.column_ranges(Xc, E)
-        return CP.roughening_sigma_nb(E, self.G, self.N, n)
+        return CP.roughening_sigma_nb(self.ops.ranges(Xc), self.G, self.N, n)
 
     def _move_extras(self, k, phi):
         if self.ext.n_moves:
@@ -1073,7 +1149,7 @@ class _Run:
             return
         if ext.ne:
             self.X[:, 6:] = ext.E
-        CP.gather_rows(self.X, self.idx, self.X2)     # [δp about qref, ω, e] of the new cloud
+        self.ops.gather(self.X, self.idx, self.X2)     # [δp about qref, ω, e] of the new cloud
         ext.take(self.idx)
         if self.joint and self._joint_move(self.X2, qref):
             return
@@ -1086,9 +1162,8 @@ class _Run:
             if self.G > 0.0:
                 D = 6 + ext.ne
                 sig = self._sigma(self.X, D)
-                z = self.draws.normals_into(_flat(self.ebuf, N, D))
-                self.ops.roughen_compose(self.Q, self.W, np.ascontiguousarray(z[:, :6]),
-                                         np.ascontiguousarray(sig[:6]))
+                z = self.ops.normals(self.draws, _flat(self.ebuf, N, D))
+                self.ops.roughen_compose(self.Q, self.W, z, np.ascontiguousarray(sig[:6]))
                 if ext.ne:
                     ext.E = np.ascontiguousarray(ext.E + z[:, 6:] * sig[None, 6:])
             return
@@ -1096,7 +1171,7 @@ class _Run:
             self._gather_qw()
         else:
             sig = self._sigma(self.X2[:, :6], 6)
-            z = self.draws.normals_into(_flat(self.zbuf, N, 6))
+            z = self.ops.normals(self.draws, _flat(self.zbuf, N, 6))
             self.ops.roughen_chart(self.X2, z, sig, 6, qref, self.Q, self.W)
         if rej != "none":
             self._move_extras(k, 1.0)
@@ -1113,18 +1188,18 @@ class _Run:
     def _joint_move(self, X, qref):
         """The Liu–West kernel on the resampled chart rows X (N, 6 + ne) when the attitude
         cloud is compact (module docstring, step 5) → True when applied."""
-        mean, C = CP.mean_cov_rows(X)
+        mean, C = self.ops.mean_cov(X)
         if not float(np.sqrt(max(0.0, np.max(np.diag(C)[:3])))) < self.spread:
             return False
         a, h = self.kern
         self.n_joint += 1
         if h == 0.0:
-            self.ops.liu_west(X, np.zeros((self.N, 0)), np.zeros((X.shape[1], 0)), 1.0,
+            self.ops.liu_west(X, self.ops.empty((self.N, 0)), np.zeros((X.shape[1], 0)), 1.0,
                               np.zeros(X.shape[1]), np.ascontiguousarray(qref), self.Q, self.W,
                               self.ext.E)
             return True
         L = _kernel_factor(C)
-        eps = self.draws.normals_into(_flat(self.ebuf, self.N, L.shape[1]))
+        eps = self.ops.normals(self.draws, _flat(self.ebuf, self.N, L.shape[1]))
         self.ops.liu_west(X, eps, np.ascontiguousarray(h * L), a, (1.0 - a) * mean,
                           np.ascontiguousarray(qref), self.Q, self.W, self.ext.E)
         return True
@@ -1134,14 +1209,14 @@ class _Run:
         ``[δp about q_ref, ω]`` of the cloud in ``self.X[:, :6]``."""
         ops, Q = self.ops, self.Q
         imax = int(ops.argmax(w))
-        qmax = Q[imax].copy()
+        qmax = ops.row(Q, imax)
         if self.cfg.reference == "refined":
             qref = rot.quat_mult(rot.grp_to_quat(ops.grp_mean(Q, qmax, w), GRP_A, GRP_F), qmax)
             qref = qref / np.linalg.norm(qref)
         else:
             qref = qmax
         qref = np.ascontiguousarray(qref)
-        mean, C = ops.chart_stats(Q, self.W, w, qref, self.W[imax].copy(), self.X)
+        mean, C = ops.chart_stats(Q, self.W, w, qref, ops.row(self.W, imax), self.X)
         qhat = rot.quat_mult(rot.grp_to_quat(mean[:3], GRP_A, GRP_F), qref)
         return qhat / np.linalg.norm(qhat), mean[3:6].copy(), 0.5 * (C + C.T), qref
 
@@ -1150,9 +1225,12 @@ class _Run:
         epoch k (separate random stream: does not perturb the run)."""
         p, N = self.p, self.N
         crng = np.random.default_rng(np.random.SeedSequence([self.seed, 0xC10D, k]))
-        sel = crng.choice(N, size=min(self.cloud_size, N), p=self.w)
+        sel = crng.choice(N, size=min(self.cloud_size, N), p=self.ops.to_host(self.w))
         tqk = np.broadcast_to(p.truth_q[k] / np.linalg.norm(p.truth_q[k]), (sel.size, 4))
-        return np.degrees(rot.attitude_error_rotvec(tqk, self.Q[sel]))
+        return np.degrees(rot.attitude_error_rotvec(tqk, self.ops.to_host(self.Q)[sel]))
+
+
+_BACKENDS = {"numba": _NumbaOps, "numpy": _NumpyOps}
 
 
 def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
