@@ -16,7 +16,7 @@ def _cmd_compare(args) -> int:
     study = load_study(args.study)
     summary = run_study(study, args.output, runs=args.runs, workers=args.workers,
                         scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
-                        progress=not args.quiet)
+                        progress=not args.quiet, device=args.device)
     cells = summary["cells"]
     cnt = {c: sum(1 for x in cells if x["color"] == c) for c in ("green", "yellow", "red")}
     fails = sum(x["failures"] for x in cells)
@@ -49,5 +49,8 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true",
                    help="discard stored runs of a different (changed) study instead of refusing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                   help="where the particle-filter (bpf) cells run: numba CPU kernels or CUDA "
+                   "kernels (needs the gpu extra and a CUDA device; default cpu)")
     p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
                    "run the same command again to resume")

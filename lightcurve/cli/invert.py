@@ -44,7 +44,8 @@ def _cmd_invert(args) -> int:
                        reflection_facets=(None if args.reflection_facets is None else
                                           csv_ints(args.reflection_facets,
                                                     "--reflection-facets")),
-                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm})
+                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
+                       **({"device": args.device} if args.method == "bpf" else {}))
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -137,6 +138,9 @@ def register(sub) -> None:
     p.add_argument("--gate-false-alarm", type=number(0.0, 0.5, lo_open=True), default=1e-4,
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
+    p.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                   help="BPF: numba CPU kernels or CUDA kernels (needs the gpu extra, "
+                   "pip install 'lightcurve[gpu]', and a CUDA device; default cpu)")
     p.add_argument("--plot", action="store_true", help="also write a PNG per file")
     p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
                    "listed in {output}/summary.json; run the command again on the others")

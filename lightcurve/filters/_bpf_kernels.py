@@ -113,6 +113,58 @@ def _grp_times(p0, p1, p2, a, f, r, out):
     out[3] = e3 / n
 
 
+@nb.njit(cache=True, inline="always")
+def predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta, use_zeta,
+                predict, s, o, hI, cI, Fr, normals, areas, ids, params, offset, m_out):
+    """The prediction of :func:`bpf_predict_nb` for particle i (shared with the CUDA kernel of
+    :mod:`lightcurve.filters.bpf_gpu`): propagate row i of Q, W over dt (``h = dt/nsub``,
+    ``Jt``, ``Kt`` the inertia and its inverse as 9-tuples), add the process noise, and for
+    ``predict`` write its magnitude into ``m_out[i]``."""
+    r = noise.shape[1]
+    q0, q1, q2, q3 = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
+    w0, w1, w2 = W[i, 0], W[i, 1], W[i, 2]
+    if dt != 0.0:
+        if mode == 0:
+            q0, q1, q2, q3 = const_rate_xyz(q0, q1, q2, q3, w0, w1, w2, dt)
+        else:
+            for _ in range(nsub):
+                q0, q1, q2, q3, w0, w1, w2 = rk4_step_xyz(q0, q1, q2, q3, w0, w1, w2, h,
+                                                          Jt, Kt, None, None, None)
+    if use_noise:
+        v0 = 0.0
+        v1 = 0.0
+        v2 = 0.0
+        v3 = 0.0
+        v4 = 0.0
+        v5 = 0.0
+        for cc in range(r):
+            z = noise[i, cc]
+            v0 += Lnoise[0, cc] * z
+            v1 += Lnoise[1, cc] * z
+            v2 += Lnoise[2, cc] * z
+            v3 += Lnoise[3, cc] * z
+            v4 += Lnoise[4, cc] * z
+            v5 += Lnoise[5, cc] * z
+        d0, d1, d2, d3 = rotvec2q_xyz(v0, v1, v2)
+        q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
+        w0 += v3
+        w1 += v4
+        w2 += v5
+    n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0 /= n
+    q1 /= n
+    q2 /= n
+    q3 /= n
+    Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = q0, q1, q2, q3
+    W[i, 0], W[i, 1], W[i, 2] = w0, w1, w2
+    if predict:
+        if use_zeta:
+            d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
+            q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
+        fl = _flux_pre(q0, q1, q2, q3, s, o, hI, cI, Fr, normals, areas, ids, params)
+        m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+
+
 @nb.njit(cache=True, parallel=True)
 def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
                    params, offset, m_out):
@@ -149,48 +201,9 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
         lo = c * N // nch
         hi = (c + 1) * N // nch
         for i in range(lo, hi):
-            q0, q1, q2, q3 = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
-            w0, w1, w2 = W[i, 0], W[i, 1], W[i, 2]
-            if dt != 0.0:
-                if mode == 0:
-                    q0, q1, q2, q3 = const_rate_xyz(q0, q1, q2, q3, w0, w1, w2, dt)
-                else:
-                    for _ in range(nsub):
-                        q0, q1, q2, q3, w0, w1, w2 = rk4_step_xyz(q0, q1, q2, q3, w0, w1, w2, h,
-                                                                  Jt, Kt, None, None, None)
-            if use_noise:
-                v0 = 0.0
-                v1 = 0.0
-                v2 = 0.0
-                v3 = 0.0
-                v4 = 0.0
-                v5 = 0.0
-                for cc in range(r):
-                    z = noise[i, cc]
-                    v0 += Lnoise[0, cc] * z
-                    v1 += Lnoise[1, cc] * z
-                    v2 += Lnoise[2, cc] * z
-                    v3 += Lnoise[3, cc] * z
-                    v4 += Lnoise[4, cc] * z
-                    v5 += Lnoise[5, cc] * z
-                d0, d1, d2, d3 = rotvec2q_xyz(v0, v1, v2)
-                q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
-                w0 += v3
-                w1 += v4
-                w2 += v5
-            n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-            q0 /= n
-            q1 /= n
-            q2 /= n
-            q3 /= n
-            Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = q0, q1, q2, q3
-            W[i, 0], W[i, 1], W[i, 2] = w0, w1, w2
-            if predict:
-                if use_zeta:
-                    d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
-                    q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
-                fl = _flux_pre(q0, q1, q2, q3, s, o, hI, cI, Fr, normals, areas, ids, params)
-                m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+            predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
+                        use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
+                        offset, m_out)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -302,11 +315,17 @@ def roughen_chart(X, z, sig, ncols, qref, a, f, Q, W):
     (ncols = 3: the attitude only, W left as it is). z (N, ncols) standard normals."""
     N = Q.shape[0]
     for i in nb.prange(N):
-        _grp_times(X[i, 0] + sig[0] * z[i, 0], X[i, 1] + sig[1] * z[i, 1],
-                   X[i, 2] + sig[2] * z[i, 2], a, f, qref, Q[i])
-        if ncols == 6:
-            for j in range(3):
-                W[i, j] = X[i, 3 + j] + sig[3 + j] * z[i, 3 + j]
+        roughen_chart_row(i, X, z, sig, ncols, qref, a, f, Q, W)
+
+
+@nb.njit(cache=True, inline="always")
+def roughen_chart_row(i, X, z, sig, ncols, qref, a, f, Q, W):
+    """Row i of :func:`roughen_chart` (shared with the CUDA kernel)."""
+    _grp_times(X[i, 0] + sig[0] * z[i, 0], X[i, 1] + sig[1] * z[i, 1],
+               X[i, 2] + sig[2] * z[i, 2], a, f, qref, Q[i])
+    if ncols == 6:
+        for j in range(3):
+            W[i, j] = X[i, 3 + j] + sig[3 + j] * z[i, 3 + j]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -315,15 +334,20 @@ def roughen_compose(Q, W, z, sig, a, f):
     eq. 7.108) and ``ω_i ← ω_i + c_ω,i`` (eq. 7.109); z (N, ≥6) standard normals (z (N,3):
     the attitude only)."""
     N = Q.shape[0]
-    rate = z.shape[1] >= 6
     for i in nb.prange(N):
-        d0, d1, d2, d3 = grp2q_xyz(sig[0] * z[i, 0], sig[1] * z[i, 1], sig[2] * z[i, 2], a, f)
-        e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
-        n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
-        Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = e0 / n, e1 / n, e2 / n, e3 / n
-        if rate:
-            for j in range(3):
-                W[i, j] += sig[3 + j] * z[i, 3 + j]
+        roughen_compose_row(i, Q, W, z, sig, a, f)
+
+
+@nb.njit(cache=True, inline="always")
+def roughen_compose_row(i, Q, W, z, sig, a, f):
+    """Row i of :func:`roughen_compose` (shared with the CUDA kernel)."""
+    d0, d1, d2, d3 = grp2q_xyz(sig[0] * z[i, 0], sig[1] * z[i, 1], sig[2] * z[i, 2], a, f)
+    e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
+    n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+    Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = e0 / n, e1 / n, e2 / n, e3 / n
+    if z.shape[1] >= 6:
+        for j in range(3):
+            W[i, j] += sig[3 + j] * z[i, 3 + j]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -332,20 +356,28 @@ def liu_west_attitude(X, eps, M, sa, c, qref, a, f, Q, W, E):
     ``x_i ← sa · x_i + c + M eps_i`` (``c = (1 − sa) x̄``, ``M = h L``), then
     ``Q_i = grp2q(δp_i) ⊗ qref``, ``W_i = ω_i``, ``E_i = e_i`` (E (N, ne))."""
     N = Q.shape[0]
-    D = M.shape[0]
-    r = eps.shape[1]
     for i in nb.prange(N):
-        x = np.empty(D)
-        for d in range(D):
-            acc = sa * X[i, d] + c[d]
-            for j in range(r):
-                acc += M[d, j] * eps[i, j]
-            x[d] = acc
-        _grp_times(x[0], x[1], x[2], a, f, qref, Q[i])
-        for j in range(3):
-            W[i, j] = x[3 + j]
-        for d in range(6, D):
-            E[i, d - 6] = x[d]
+        liu_west_row(i, X, eps, M, sa, c, qref, a, f, Q, W, E)
+
+
+@nb.njit(cache=True, inline="always")
+def _lw(i, X, eps, M, sa, c, d):
+    """Component d of the Liu–West move of row i: ``sa X[i,d] + c[d] + Σ_j M[d,j] eps[i,j]``."""
+    acc = sa * X[i, d] + c[d]
+    for j in range(eps.shape[1]):
+        acc += M[d, j] * eps[i, j]
+    return acc
+
+
+@nb.njit(cache=True, inline="always")
+def liu_west_row(i, X, eps, M, sa, c, qref, a, f, Q, W, E):
+    """Row i of :func:`liu_west_attitude` (shared with the CUDA kernel)."""
+    _grp_times(_lw(i, X, eps, M, sa, c, 0), _lw(i, X, eps, M, sa, c, 1),
+               _lw(i, X, eps, M, sa, c, 2), a, f, qref, Q[i])
+    for j in range(3):
+        W[i, j] = _lw(i, X, eps, M, sa, c, 3 + j)
+    for d in range(6, M.shape[0]):
+        E[i, d - 6] = _lw(i, X, eps, M, sa, c, d)
 
 
 @nb.njit(cache=True, parallel=True)

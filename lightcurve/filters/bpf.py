@@ -930,7 +930,7 @@ class _Run:
         else:
             X0 = self.draws.normal((N, 6)) @ psd_sqrt(p.P0).T
             P0 = np.ascontiguousarray(X0[:, :3])
-            if self.backend == "numba":
+            if self.backend != "numpy":
                 self.Q = from_grp_rel_nb(P0, np.ascontiguousarray(p.q0), GRP_A, GRP_F)
             else:
                 self.Q = np.ascontiguousarray(_from_grp_np(P0, p.q0))

@@ -109,7 +109,7 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int):
         return simulate(sc, seed=sim_seed)
 
 
-def execute_task(task: RunTask) -> dict:
+def execute_task(task: RunTask, device: str = "cpu") -> dict:
     """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
     ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
 
@@ -139,6 +139,8 @@ def execute_task(task: RunTask) -> dict:
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])
+        if c.filter == "bpf" and device != "cpu":
+            kw["device"] = device
         if "acs_mode" in opts:
             kw["acs_mode"] = opts["acs_mode"]
         if c.reflection != "none":
@@ -485,7 +487,7 @@ def progress_bar(total: int, *, initial: int = 0, desc: str = "", progress: bool
 # ----------------------------------------------------------------------------------------
 def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | None = None,
               scheduler: str | None = None, dask_local: int | None = None, force: bool = False,
-              progress: bool = True, write_report: bool = True) -> dict:
+              progress: bool = True, write_report: bool = True, device: str = "cpu") -> dict:
     """Run (or resume) a study and write ``summary.json`` and ``report.html``.
 
     Parameters
@@ -498,6 +500,9 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
     dask_local : int, optional — start a Dask LocalCluster with this many worker processes
     force : bool — discard stored runs of a different study instead of refusing
     progress : bool — tqdm progress bar (runs done, failures, time left) on stderr
+    device : {"cpu", "gpu"} — where the particle-filter cells run
+        (:func:`lightcurve.filters.invert`, ``device``); the results of a cell do not depend
+        on it beyond round-off
 
     Returns
     -------
@@ -524,7 +529,9 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         limit_blas_threads()  # before any worker starts (inherited) and for inline runs
         failures = 0
         if n_done < total:
-            it = iter_results(todo, execute_task, workers=workers, scheduler=scheduler,
+            fn = execute_task if device == "cpu" else functools.partial(execute_task,
+                                                                        device=device)
+            it = iter_results(todo, fn, workers=workers, scheduler=scheduler,
                               dask_local=dask_local)
             bar = progress_bar(total, initial=n_done, desc=study.name, progress=progress)
             h = study.hash
