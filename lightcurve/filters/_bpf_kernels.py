@@ -186,7 +186,6 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     N = Q.shape[0]
     h = dt / max(nsub, 1)
     use_noise = noise.shape[0] == N
-    r = noise.shape[1]
     use_zeta = zeta.shape[0] == N
     predict = not np.isnan(s[0])
     Jt = mat9(J)
@@ -448,7 +447,6 @@ def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, ar
     N = m_out.shape[0]
     F = normals.shape[0]
     P = params0.shape[1]
-    D = facet.shape[0]
     qall = Q.shape[0] == N
     zall = Z.shape[0] == N
     use_zeta = zeta.shape[0] == N
@@ -522,7 +520,6 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
     N = Z.shape[0]
     F = normals.shape[0]
     P = params0.shape[1]
-    D = facet.shape[0]
     nch = n_chunks(N)
     for c in nb.prange(nch):
         lo = c * N // nch

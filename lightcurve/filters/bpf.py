@@ -68,7 +68,7 @@ from ..errors import InputError
 from ..threads import limited_threads
 from . import _bpf_kernels as BK
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
-from .gating import GateConfig, InnovationGate
+from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
 __all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS"]
@@ -886,6 +886,7 @@ class _Run:
         self.w = ops.full(N, 1.0 / N)
         self.ll = ops.full(N, 0.0)
         self.mpred = ops.empty(N)
+        self.mpred2 = ops.empty(N)
         self.C = ops.empty(N)
         self.idx = ops.empty(N, np.int64)
         self.zbuf = ops.empty(N * 6)
@@ -952,7 +953,6 @@ class _Run:
         empty3 = ops.empty((0, 3))
         nan3 = np.full(3, np.nan)
         zero6 = np.zeros((6, 6))
-        karrs = m._karrs
         for k in range(p.n):
             dt = float(m.t[k] - m.t[k - 1]) if k > 0 else 0.0
             z = empty6
@@ -1060,8 +1060,13 @@ class _Run:
                 if not ok:
                     break
                 rest -= phi
-                zeta = self._stage_move(k, rest, zeta)
-                self._predict(k, zeta)
+                zeta, moved = self._stage_move(k, rest, zeta)
+                if moved:
+                    self._predict(k, zeta)
+                else:     # no particle moved: the copies keep their predictions
+                    ops.gather(mpred.reshape(N, 1), self.idx, self.mpred2.reshape(N, 1))
+                    self.mpred, self.mpred2 = self.mpred2, self.mpred
+                    mpred = self.mpred
                 ops.innov(logw, mpred, y, sig, ll)
                 rec.stages[k] += 1
         neff, ok = ops.addnorm(logw, ll, rest, w)
@@ -1090,7 +1095,8 @@ class _Run:
         self.rec.flags[k] |= FLAG_RESAMPLED
 
     def _stage_move(self, k, rest, zeta):
-        """Resampling and attitude move between tempering stages (step 3b) → ζ resampled."""
+        """Resampling and attitude move between tempering stages (step 3b) → (ζ resampled,
+        whether any particle moved: without a move the copies keep their predictions)."""
         ext, cfg = self.ext, self.cfg
         self._resample()
         if not self.fixed:
@@ -1101,16 +1107,18 @@ class _Run:
             self.zeta, self.zeta2 = self.zeta2, self.zeta
             zeta = self.zeta
         self._reset_weights(k)
+        rej = cfg.rejuvenation
         if self.fixed:
             self._move_extras(k, 1.0 - rest)
-            return zeta
+            return zeta, True
+        if not self.joint and not ext.ne and (rej == "none" or not self.G > 0.0):
+            return zeta, False
         self.ops.fill(self.w, 1.0 / self.N)
         _, _, _, qst = self._estimate(self.w)
         if ext.ne:
             self.X[:, 6:] = ext.E
         if self.joint and self._joint_move(self.X, qst):
-            return zeta
-        rej = cfg.rejuvenation
+            return zeta, True
         if rej != "none" and self.G > 0.0:
             if rej == "table7.9":
                 sig = self._sigma(self.X[:, :3], 3)
@@ -1123,7 +1131,7 @@ class _Run:
                 self.ops.roughen_chart(self.X, z, sig, 3, qst, self.Q, self.W)
         if rej != "none":
             self._move_extras(k, 1.0 - rest)
-        return zeta
+        return zeta, True
 
     def _sigma(self, Xc, n):
         """Table 7.9 roughening σ of the cloud columns Xc (ranges, 𝒢, N, dimension n)."""

@@ -157,3 +157,20 @@ def test_pool_workers_get_their_share_of_the_cores():
     cores = threads.available_cores()
     got = list(iter_results([numba.get_num_threads] * 4, operator.call, workers=2))
     assert all(1 <= n <= max(1, cores // 2) for n in got), got
+
+
+def test_unmoved_copies_keep_their_predictions(monkeypatch):
+    """Between tempering stages without a move (rejuvenation "none"), the resampled copies keep
+    their predicted magnitudes instead of being predicted again: same posterior as re-predicting
+    (to round-off: a re-prediction renormalises the quaternions)."""
+    import lightcurve.filters.bpf as B
+
+    p = build_problem(make_curve(n=12, seed=4), seed=1, sigma_theta_deg=30.0)
+    a = run_bpf(p, particles=1500, seed=2, rejuvenation="none")
+    assert sum(a.meta["tempering_stages"]) > 0
+    orig = B._Run._stage_move
+    monkeypatch.setattr(B._Run, "_stage_move",
+                        lambda self, k, rest, zeta: (orig(self, k, rest, zeta)[0], True))
+    b = run_bpf(p, particles=1500, seed=2, rejuvenation="none")
+    assert a.meta["tempering_stages"] == b.meta["tempering_stages"]
+    np.testing.assert_allclose(a.q, b.q, atol=1e-10)

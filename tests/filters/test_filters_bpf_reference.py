@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 from bpf_reference import CASES, arrays, run_case
 
-from lightcurve._paths import data_dir  # noqa: F401  (package importable)
 
 REF = np.load(__file__.replace("test_filters_bpf_reference.py",
                                "data/bpf_reference_main_ab055e3.npz"))
