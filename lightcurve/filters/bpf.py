@@ -886,12 +886,12 @@ class _Run:
         self.w = ops.full(N, 1.0 / N)
         self.ll = ops.full(N, 0.0)
         self.mpred = ops.empty(N)
-        self.mpred2 = ops.empty(N)
+        self.mpred2 = None            # allocated when a stage keeps the copies' predictions
         self.C = ops.empty(N)
         self.idx = ops.empty(N, np.int64)
-        self.zbuf = ops.empty(N * 6)
-        self.zeta = ops.empty((N, 3))
-        self.zeta2 = ops.empty((N, 3))
+        nz = N if (p.jitter_zeta() and not fixed) else 0
+        self.zeta = ops.empty((nz, 3))
+        self.zeta2 = ops.empty((nz, 3))
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
         self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
@@ -902,7 +902,9 @@ class _Run:
         D = 6 + self.ext.ne
         self.X = ops.full((N, D), 0.0)
         self.X2 = ops.full((N, D), 0.0)
-        self.ebuf = ops.empty(N * D)
+        # normals of the process noise, the roughening and the kernel moves (never at once)
+        self.ebuf = ops.empty(N * max(D, 6))
+        self.zbuf = self.ebuf
         self.joint = cfg.rejuvenation in ("auto", "joint") and not fixed
         self.kern = _joint_bandwidth(cfg.kernel_bandwidth, N, D) if self.joint else None
         self.spread = float(np.radians(cfg.joint_max_spread_deg))
@@ -1064,6 +1066,8 @@ class _Run:
                 if moved:
                     self._predict(k, zeta)
                 else:     # no particle moved: the copies keep their predictions
+                    if self.mpred2 is None:
+                        self.mpred2 = ops.empty(N)
                     ops.gather(mpred.reshape(N, 1), self.idx, self.mpred2.reshape(N, 1))
                     self.mpred, self.mpred2 = self.mpred2, self.mpred
                     mpred = self.mpred
