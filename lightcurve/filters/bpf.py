@@ -65,6 +65,7 @@ from .. import rotations as rot
 from ..core import particles as CP
 from ..core.rotations import from_grp_rel_nb
 from ..errors import InputError
+from ..memory import check_allocation
 from ..threads import limited_threads
 from . import _bpf_kernels as BK
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
@@ -866,6 +867,10 @@ class _Run:
         self.ops = _BACKENDS[backend]()
         self.draws = _Draws(seed, cfg.rng)
         self.N = N = cfg.particles
+        # the run's buffers: ≈ 32 + 3 (6 + e) doubles per particle (refused before allocating)
+        ne = bias.n_sites if bias is not None else (facets.dim if facets is not None else 0)
+        check_allocation(8 * N * (32 + 3 * (6 + ne)), "particle-filter buffers",
+                         field="particles", value=N)
         self.keep = ({int(k) % p.n for k in keep_clouds}
                      if (p.truth_q is not None and not fixed) else set())
         self.cloud_size = int(cloud_size)
