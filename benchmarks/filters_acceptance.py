@@ -1,4 +1,4 @@
-"""Issue 5 acceptance runs on the thesis LEO fast-spin case (pipelines/default.toml).
+"""Issue 5 acceptance runs on the thesis LEO fast-spin case (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml).
 
 Controlled 1U cube seen from Socorro, σω = 0.02°/s, r = 1 %, eclipse ignored as in the thesis
 (Bernard 2021 §9.3.3). Each run i simulates the lightcurve with seed i (truth ACS noise and
@@ -42,7 +42,7 @@ def main(argv=None):
     from lightcurve.studies.scenario import load_scenario
     from lightcurve.studies.simulate import simulate
 
-    sc = load_scenario(data_dir("pipelines") / "default.toml")
+    sc = load_scenario(data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml")
     t0 = time.perf_counter()
     res = {"benchmark": "filters_acceptance", "cpu_count": os.cpu_count(), "gate": args.gate}
     gate_flagged = {"ukf": 0, "mekf": 0, "bpf": 0}

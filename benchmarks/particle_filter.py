@@ -1,7 +1,7 @@
 """Benchmark: bootstrap particle filter (numba) vs the same algorithm with NumPy stages.
 
-Scenario: the bundled thesis LEO fast-spin case (pipelines/default.toml: controlled 1U cube,
-Socorro, 73 epochs, r = 1 %), σθ = 60°, σω = 0.02°/s. Each size runs the robust filter with the
+Scenario: the bundled thesis LEO fast-spin case (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml:
+controlled 1U cube, Socorro, 73 epochs, r = 1 %), σθ = 60°, σω = 0.02°/s. Each size runs the robust filter with the
 progressive correction ("progressive", which re-predicts the cloud at every tempering stage:
 ``predictions_per_particle`` counts those) and the plain bootstrap filter ("plain",
 ``progressive=False``), with numba at 1 and at ``--threads`` threads (thread scaling) and with
@@ -47,7 +47,7 @@ from lightcurve.studies.simulate import simulate
 from lightcurve.filters import build_problem, run_bpf, run_bpf_numpy
 
 backend, N, prog = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
-sc = load_scenario(data_dir("pipelines") / "default.toml")
+sc = load_scenario(data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml")
 lc = simulate(sc, 1)
 prob = build_problem(lc, seed=0, sigma_theta_deg=60.0, sigma_omega_deg_s=0.02)
 run = run_bpf if backend == "numba" else run_bpf_numpy

@@ -8,12 +8,17 @@ is a usage error (exit 2) at parse time, never a crash later on.
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input"]
+__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input", "naming_file",
+           "csv_floats", "initial_q", "initial_omega_rad_s", "SHARED_OPTIONS", "add_output",
+           "add_library", "add_sites", "add_shape", "add_model_options", "add_seed",
+           "add_executors", "add_workers", "add_quiet", "add_plot", "add_variant", "add_device",
+           "given", "refuse_inapplicable", "progress_bar"]
 
 
 def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
@@ -86,3 +91,212 @@ def output_not_input(output, *inputs, option: str = "-o/--output") -> None:
             raise InputError("the output would overwrite an input file of this command",
                              file=output, field=option, value=str(inp),
                              allowed="an output path that is not one of the inputs")
+
+
+class naming_file:  # noqa: N801 - used as a context manager: ``with naming_file(path):``
+    """Re-raise an :class:`InputError` that names no file as one naming ``path`` (the input
+    the command was working on), so every error line says which file it is about."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        if isinstance(exc, InputError) and not exc.file and self.path is not None:
+            raise InputError(exc.bare_message, file=self.path, field=exc.field,
+                             value=exc.value, allowed=exc.allowed) from None
+        return False
+
+
+def csv_floats(text, option, n=None):
+    """Comma-separated finite numbers from a CLI value (exactly ``n`` when given)."""
+    out = []
+    for x in csv_list(text, option):
+        try:
+            v = float(x)
+        except ValueError:
+            v = float("nan")
+        if not np.isfinite(v):
+            raise InputError("not a finite number", field=option, value=x)
+        out.append(v)
+    if n is not None and len(out) != n:
+        raise InputError(f"expected {n} comma-separated numbers", field=option, value=text)
+    return tuple(out)
+
+
+def initial_q(text, option="--initial-q"):
+    """A unit quaternion ``q1,q2,q3,q4`` (scalar first, inertial→body) from the CLI.
+
+    Values whose norm is within 1e-3 of one are normalised (four typed decimals are rarely
+    exactly unit); anything else is refused.
+    """
+    q = np.asarray(csv_floats(text, option, 4))
+    nq = float(np.linalg.norm(q))
+    if abs(nq - 1.0) > 1e-3:
+        raise InputError("not a unit quaternion", field=option, value=text,
+                         allowed="q1,q2,q3,q4 (scalar first) with norm 1 (to 1e-3)")
+    return tuple(float(x) for x in q / nq)
+
+
+def initial_omega_rad_s(text, option="--initial-omega-deg-s"):
+    """A body rate ``wx,wy,wz`` given in deg/s on the CLI, returned in rad/s."""
+    w = np.radians(csv_floats(text, option, 3))
+    if np.any(np.abs(w) > np.radians(3600.0)):
+        raise InputError("body rate out of range", field=option, value=text,
+                         allowed="|w| <= 3600 deg/s per axis")
+    return tuple(float(x) for x in w)
+
+
+# ------------------------------------------------------------------------------------------
+# One spelling per shared option. Subcommands add these with the helpers below (never by
+# hand) so that `tests/cli/test_cli_consistency.py` finds each option spelled and explained
+# the same way everywhere.
+
+#: The shared options: dest -> (flags, metavar). The consistency test checks every parser.
+SHARED_OPTIONS = {
+    "output": (("-o", "--output"), None),
+    "library": (("--library",), "DIR"),
+    "sites": (("--sites",), "DIR"),
+    "seed": (("--seed",), "SEED"),
+    "workers": (("--workers",), "N"),
+    "dask_local": (("--dask-local",), "W"),
+    "scheduler": (("--scheduler",), "ADDRESS"),
+    "variant": (("--variant",), None),
+    "device": (("--device",), None),
+    "quiet": (("-q", "--quiet"), None),
+    "plot": (("--plot",), None),
+}
+
+
+def add_output(p, *, what="folder", required=False, default=None, help=None):
+    """``-o/--output`` (``what`` = "folder" or "file"); ``help`` describes what goes there."""
+    meta = "DIR" if what == "folder" else "FILE"
+    text = help or ("output folder" if what == "folder" else "output file")
+    if default is not None and "default" not in text:
+        text += f" (default: {default})"
+    return p.add_argument("-o", "--output", metavar=meta, required=required, default=default,
+                          help=text)
+
+
+def add_library(p):
+    """``--library DIR`` (repeatable): extra shape folders searched before the bundled ones."""
+    return p.add_argument("--library", action="append", default=None, metavar="DIR",
+                          help="extra shape library folder, searched before the bundled "
+                          "shapes/ (repeatable)")
+
+
+def add_sites(p):
+    """``--sites DIR`` (repeatable): extra observatory folders."""
+    return p.add_argument("--sites", action="append", default=None, metavar="DIR",
+                          help="extra folder of observatory TOML files (repeatable; later "
+                          "folders override earlier ones)")
+
+
+def add_seed(p, default=0, help=None):
+    """``--seed SEED`` (non-negative integer)."""
+    text = help or "random seed"
+    text += " (default: the scenario's)" if default is None else f" (default {default})"
+    return p.add_argument("--seed", type=SEED, default=default, metavar="SEED", help=text)
+
+
+def add_executors(p, *, workers_help=None):
+    """``--workers N`` | ``--dask-local W`` | ``--scheduler ADDRESS`` (mutually exclusive)."""
+    ex = p.add_mutually_exclusive_group()
+    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None, metavar="N",
+                    help=workers_help or "local process-pool size (default: one per CPU; 1 "
+                    "runs in this process)")
+    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None,
+                    metavar="W", help="start a Dask LocalCluster with W worker processes")
+    return ex
+
+
+def add_workers(p, default=None, help=None):
+    """``--workers N`` alone (commands without the Dask executors)."""
+    return p.add_argument("--workers", type=number(1, 4096, integer=True), default=default,
+                          metavar="N", help=help or "local worker processes (default: "
+                          + ("one per CPU" if default is None else str(default)) + ")")
+
+
+def add_quiet(p, help="no progress bar or progress messages"):
+    """``-q/--quiet``."""
+    return p.add_argument("-q", "--quiet", action="store_true", help=help)
+
+
+def add_plot(p, help="also write PNG figures next to the outputs"):
+    """``--plot`` (a flag; commands whose figure needs a path take ``--plot`` plus ``-o``)."""
+    return p.add_argument("--plot", action="store_true", help=help)
+
+
+def add_variant(p, default="robust"):
+    """``--variant {thesis,robust}``: the source's algorithm or our improved one."""
+    return p.add_argument("--variant", choices=("thesis", "robust"), default=default,
+                          help="thesis: the source text's algorithm exactly; robust: the "
+                          f"improved default (default {default})")
+
+
+def add_device(p, default="cpu"):
+    """``--device {cpu,gpu}``."""
+    return p.add_argument("--device", choices=("cpu", "gpu"), default=default,
+                          help=f"where the particle kernels run (default {default})")
+
+
+# ------------------------------------------------------------------------------------------
+# Options that do not apply to the chosen method are refused (exit 2), never silently ignored.
+
+def given(args, dest) -> bool:
+    """True when option ``dest`` was typed on the command line (not just defaulted).
+
+    ``lightcurve.cli.main`` stores the set of typed options in ``args._given``; without it
+    (a handler called directly) an option counts as given when it differs from None/False.
+    """
+    g = getattr(args, "_given", None)
+    if g is not None:
+        return dest in g
+    v = getattr(args, dest, None)
+    return v is not None and v is not False
+
+
+def refuse_inapplicable(args, selector, rules):
+    """Raise :class:`InputError` when an option was given that the chosen method ignores.
+
+    ``selector`` is the dest that chooses (``"method"``); ``rules`` maps an option's dest to
+    the values of ``selector`` it applies to, e.g. ``{"particles": {"bpf"}}``.
+    """
+    chosen = getattr(args, selector)
+    flag = "--" + selector.replace("_", "-")
+    for dest, allowed in rules.items():
+        if chosen not in allowed and given(args, dest):
+            opt = "--" + dest.replace("_", "-")
+            raise InputError(
+                f"{opt} does not apply to {flag} {chosen}", field=opt,
+                allowed=f"{flag} {' or '.join(sorted(allowed))}")
+
+
+def progress_bar(total=None, desc=None, quiet=False, unit="it"):
+    """A tqdm progress bar on stderr (disabled by ``--quiet``). Use as a context manager."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, disable=bool(quiet), file=sys.stderr, unit=unit,
+                dynamic_ncols=True, leave=False)
+
+
+def add_shape(p):
+    """``--shape NAME|FILE.toml``: a shape replacing the one a lightcurve file carries."""
+    return p.add_argument("--shape", default=None, metavar="NAME|FILE.toml",
+                          help="shape to model with instead of the one the file carries (a "
+                          "library name, looked up in --library folders first, or a shape TOML)")
+
+
+def add_model_options(p, *, shape=True, library=True, sites=True) -> None:
+    """The model-input options ``--shape``, ``--library``, ``--sites`` (values land in
+    ``args.shape``, ``args.library``, ``args.sites``), spelled as everywhere else."""
+    if shape:
+        add_shape(p)
+    if library:
+        add_library(p)
+    if sites:
+        add_sites(p)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._args import number
+from ._args import add_device, add_executors, add_model_options, add_output, add_quiet, number
 
 __all__ = ["register"]
 
@@ -13,7 +13,7 @@ def _cmd_compare(args) -> int:
     from ..studies.runner import run_study
     from ..studies.study import load_study
 
-    study = load_study(args.study)
+    study = load_study(args.study, library_dirs=args.library, site_dirs=args.sites)
     summary = run_study(study, args.output, runs=args.runs, workers=args.workers,
                         scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
                         progress=not args.quiet, device=args.device)
@@ -38,19 +38,14 @@ def register(sub) -> None:
     p.add_argument("study", metavar="STUDY.toml", help="study file (docs/formats.md, Studies)")
     p.add_argument("--runs", type=number(1, 1_000_000, integer=True), default=None,
                    help="runs per cell (default: the study's [study] runs)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    ex = p.add_mutually_exclusive_group()
-    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None,
-                    help="local process-pool size (default: all CPUs; 1 runs in this process)")
-    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
-    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None, metavar="W",
-                    help="start a Dask LocalCluster with W worker processes")
+    add_output(p, what="folder", required=True,
+               help="output folder (runs/, summary.json, report.html; reused to resume)")
+    add_executors(p, workers_help="local process-pool size (default: all CPUs; 1 runs in this "
+                  "process)")
     p.add_argument("--force", action="store_true",
                    help="discard stored runs of a different (changed) study instead of refusing")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
-                   help="where the particle-filter (bpf) cells run: numba CPU kernels or CUDA "
-                   "kernels (needs the gpu extra and a CUDA device; default cpu)")
+    add_quiet(p, help="no progress bar")
+    add_model_options(p, shape=False)
+    add_device(p)
     p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
                    "run the same command again to resume")

@@ -1,6 +1,8 @@
-"""``lightcurve selfcheck``: quick numerical checks of the installation."""
+"""``lightcurve selfcheck`` and ``warmup``: check the installation, compile the kernels once."""
 
 from __future__ import annotations
+
+from ._args import add_quiet
 
 __all__ = ["register"]
 
@@ -12,6 +14,19 @@ def _cmd_selfcheck(args) -> int:
     return 0 if ok else 1
 
 
+def _cmd_warmup(args) -> int:
+    import time
+
+    from ..warmup import warm_up
+
+    t0 = time.perf_counter()
+    steps = warm_up(reflection=args.reflection)
+    if not args.quiet:
+        print("compiled or loaded from the cache: " + ", ".join(
+            f"{k} {v:.1f} s" for k, v in steps.items()) + f"; total {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def register(sub) -> None:
     p = sub.add_parser(
         "selfcheck",
@@ -20,5 +35,17 @@ def register(sub) -> None:
         "algebra against scipy, angular-momentum conservation of the rigid-body integrator, "
         "offline ephemeris availability) and print one line per check.",
     )
-    p.add_argument("-q", "--quiet", action="store_true", help="print only failures")
+    add_quiet(p, help="print only failures")
     p.set_defaults(func=_cmd_selfcheck)
+
+    p = sub.add_parser(
+        "warmup",
+        help="compile the numba kernels once (run after installing; later runs start fast)",
+        description="Run a tiny simulation and every attitude filter on it so that numba "
+        "compiles the hot kernels and stores them in its on-disk cache (next to the package, or "
+        "~/.cache/numba when that is read-only). Later processes load them instead of "
+        "recompiling. Safe to run again: then it only loads the cache.")
+    p.add_argument("--reflection", action="store_true",
+                   help="also compile the Model 3 reflection-state filters (slower)")
+    add_quiet(p, help="print nothing")
+    p.set_defaults(func=_cmd_warmup)

@@ -26,6 +26,7 @@ import h5py
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.time import epoch_iso
 from ..io.atomic import atomic_path
 from .sensors import CSSArray
 
@@ -48,7 +49,7 @@ def write_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = "lightcurve-css"
             f.attrs["format_version"] = 1
-            f.attrs["epoch_utc"] = epoch_utc
+            f.attrs["epoch_utc"] = epoch_utc if isinstance(epoch_utc, str) else epoch_iso(epoch_utc)
             f.attrs["configuration"] = css.name
             f["t"] = result.t
             f["y"] = result.y

@@ -3,14 +3,21 @@
 The objective is Σ z², z = (y − ŷ(θ, φ))/σ (:meth:`Problem.standardized`), over the free
 baseline parameters θ (:class:`~.problem.FreeParam`, bounded) and the continuous parameters
 φ of the effect terms. Effect-parameter bounds are the *prior's* support (uniform and
-log-uniform: [a, b]; signed uniform: [−b, b]; normal: mean ± 4 sd) intersected with the
-parameter's allowed range: the fit looks for realistic values only. Integer parameters (a
-CSS sensor index) and step times (``t_start_s``) are not differentiable: they are held at
-the values of each start and enumerated by the caller (:mod:`.candidates`).
+log-uniform: [a, b]; signed uniform: [−b, b]; normal: mean ± 4 sd) widened by a quarter of
+its span on each side (in log space for log-uniform priors; angles by 90°) and intersected
+with the parameter's allowed range: the fit looks for realistic values, and a true value
+anywhere inside the prior's support is never pinned at a fit bound (a fitted value at a
+bound therefore means "not identified", :mod:`.identify`). Integer parameters (a CSS sensor
+index) and step times (``t_start_s``) are not differentiable: they are held at the values of
+each start and enumerated by the caller (:mod:`.candidates`); so are the parameters an
+effect lists in ``hold`` (held at a reference value when the data do not identify them) and
+in its class attribute ``diagnosis_hold`` (parameters only identifiable in combination with
+others, e.g. a common CSS scale factor with the individual ones).
 
 Uncertainties: the covariance of the fitted vector is (JᵀJ)⁺ (J the Jacobian of z at the
 solution), scaled by max(1, χ²/dof) — the usual inflation when the residuals are wider
-than their stated σ. Reported 1σ values are its diagonal's square roots.
+than their stated σ. Reported 1σ values are its diagonal's square roots; parameters the data
+do not constrain at all (a zero Jacobian column) have no uncertainty (``dead``).
 """
 
 from __future__ import annotations
@@ -22,7 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ["Fit", "typical_params", "fit_terms", "fit_baseline", "param_layout", "GRID_PARAMS", "prior_bounds"]
+__all__ = ["Fit", "typical_params", "fit_terms", "fit_baseline", "param_layout", "GRID_PARAMS",
+           "prior_bounds", "prior_support", "held_names", "BOUND_MARGIN"]
 
 #: effect parameters that are stepped by the caller rather than optimised
 GRID_PARAMS = ("t_start_s",)
@@ -33,8 +41,12 @@ def typical_params(effect, ctx=None) -> dict:
     return effect.typical_params(ctx)
 
 
-def prior_bounds(spec) -> tuple[float, float]:
-    """Fit bounds of one :class:`~lightcurve.physics.ParamSpec` (module docstring)."""
+#: fraction of the prior's span added on each side for the fit bounds
+BOUND_MARGIN = 0.25
+
+
+def prior_support(spec) -> tuple[float, float]:
+    """The support of a parameter's prior (normal: mean ± 4 sd), within its allowed range."""
     pr = spec.prior
     if pr.kind in ("uniform", "log_uniform"):
         lo, hi = pr.a, pr.b
@@ -44,11 +56,29 @@ def prior_bounds(spec) -> tuple[float, float]:
         lo, hi = pr.a - 4 * pr.b, pr.a + 4 * pr.b
     else:
         lo, hi = spec.min, spec.max
-    lo, hi = max(lo, spec.min), min(hi, spec.max)
-    if spec.name.endswith("_deg") and spec.prior.kind == "uniform" and spec.prior.b - spec.prior.a >= 180:
+    return float(max(lo, spec.min)), float(min(hi, spec.max))
+
+
+def prior_bounds(spec) -> tuple[float, float]:
+    """Fit bounds of one :class:`~lightcurve.physics.ParamSpec` (module docstring)."""
+    lo, hi = prior_support(spec)
+    pr = spec.prior
+    if spec.name.endswith("_deg") and pr.kind == "uniform" and pr.b - pr.a >= 180:
         # angles: allow wrapping past the prior's edges (the optimiser should not get stuck there)
-        lo, hi = max(spec.min, lo - 90.0), min(spec.max, hi + 90.0)
-    return float(lo), float(hi)
+        lo, hi = lo - 90.0, hi + 90.0
+    elif pr.kind == "log_uniform":
+        f = (hi / lo) ** BOUND_MARGIN
+        lo, hi = lo / f, hi * f
+    elif np.isfinite(hi - lo):
+        d = BOUND_MARGIN * (hi - lo)
+        lo, hi = lo - d, hi + d
+    return float(max(lo, spec.min)), float(min(hi, spec.max))
+
+
+def held_names(effect) -> set:
+    """Names of the effect's parameters that fits hold fixed (integer, grid, held)."""
+    return ({s.name for s in effect.params if s.integer or s.name in GRID_PARAMS}
+            | set(getattr(effect, "hold", ()) or ()) | set(getattr(effect, "diagnosis_hold", {}) or {}))
 
 
 @dataclass
@@ -86,8 +116,9 @@ class _Layout:
 def param_layout(effect, ctx) -> _Layout:
     """The continuous-parameter layout of ``effect`` for context ``ctx``."""
     entries, fixed, sizes = [], [], {}
+    hold = held_names(effect)
     for s in effect.params:
-        if s.integer or s.name in GRID_PARAMS:
+        if s.name in hold:
             fixed.append(s.name)
             continue
         n = effect._size(s, ctx)
@@ -115,6 +146,15 @@ class Fit:
     n_effect_params: int = 0
     success: bool = True
     message: str = ""
+    #: covariance of ``x`` (scaled as the module docstring says), fit bounds of ``x``
+    cov: np.ndarray | None = None
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    #: (len(x),) True where the Jacobian column is zero (the data do not constrain it)
+    dead: np.ndarray | None = None
+    #: owner of each entry of ``x``: (-1, FreeParam, None) for baseline parameters,
+    #: (effect index, ParamSpec, component or None) for effect parameters
+    owners: list = field(default_factory=list)
 
     @property
     def n_params(self) -> int:
@@ -208,23 +248,27 @@ def fit_terms(problem, effects=(), starts=None, *, theta0=None, fit_theta: bool 
         for s, c in L.entries:
             sname = s.name if c is None else f"{s.name}[{_comp_name(problem, s, c)}]"
             names.append(f"{e.name}.{sname}")
-    sd = None
+    owners = [(-1, p, None) for p in problem.free][:nth]
+    for i, L in enumerate(layouts):
+        owners.extend((i, s, c) for s, c in L.entries)
+    sd = cov = dead = None
     if res.x.size:
         J = np.asarray(res.jac, float)
         dof = max(problem.n - res.x.size, 1)
         scale = max(1.0, c2 / dof)
+        dead = ~np.any(J != 0, axis=0)
         try:
             cov = np.linalg.pinv(J.T @ J) * scale
             sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
             # parameters the data do not constrain (zero Jacobian column): unknown
-            dead = ~np.any(J != 0, axis=0)
             sd[dead] = np.nan
         except np.linalg.LinAlgError:  # pragma: no cover
             sd = np.full(res.x.size, np.nan)
     n_eff = sum(L.n + len(L.fixed) for L in layouts)
     return Fit(theta=np.asarray(theta, float), terms=terms, pred=pred, z=z, chi2=float(z @ z),
                names=names, x=np.asarray(res.x, float), sd=sd, n_effect_params=n_eff,
-               success=bool(getattr(res, "success", True)), message=str(getattr(res, "message", "")))
+               success=bool(getattr(res, "success", True)), message=str(getattr(res, "message", "")),
+               cov=cov, lo=lo, hi=hi, dead=dead, owners=owners)
 
 
 class _Res:
@@ -233,8 +277,10 @@ class _Res:
 
 
 def _comp_name(problem, spec, c):
-    if spec.per == "site" and c < len(problem.site_names) and problem.kind == "magnitude":
-        return problem.site_names[c]
+    if problem.kind == "magnitude" and spec.per in ("site", "camera"):
+        names = problem.site_names if spec.per == "site" else problem.channel_names
+        if c < len(names):
+            return names[c]
     return str(c)
 
 

@@ -26,11 +26,13 @@ import warnings
 
 import numpy as np
 
-from .baseline import bic_gain, fit_terms, param_layout, prior_bounds, typical_params
+from .baseline import (GRID_PARAMS, bic_gain, fit_terms, held_names, param_layout, prior_bounds,
+                       typical_params)
 from ..physics.registry import Effect
 from .fast import diagnosis_effect
 
-__all__ = ["score_candidates", "signature_matrix", "candidate_starts", "params_to_json"]
+__all__ = ["score_candidates", "signature_matrix", "candidate_starts", "params_to_json",
+           "held_values"]
 
 #: linearised start: effect → (parameter, transform of the regression coefficient)
 _LINEAR = {"extinction": ("k_mag_per_airmass", "id"), "zero_point": ("offset_mag", "id"),
@@ -103,11 +105,12 @@ def candidate_starts(effect, problem, ctx, z, S, b, rng) -> list[dict]:
         lo, hi = prior_bounds(spec)
         vals = np.sqrt(np.maximum(b, 0.0)) if how == "sqrt" else b
         vals = np.clip(vals, lo, hi)
-        if spec.per == "site":
-            if vals.size == problem.ctx.n_sites:
+        if spec.per in ("site", "camera"):
+            n = problem.ctx.n_sites if spec.per == "site" else problem.ctx.n_cameras
+            if vals.size == n:
                 starts.append({pname: vals})
             elif vals.size == 1:
-                starts.append({pname: np.full(problem.ctx.n_sites, float(vals[0]))})
+                starts.append({pname: np.full(n, float(vals[0]))})
         elif vals.size:
             starts.append({pname: float(vals[0])})
     names = effect.param_names()
@@ -155,8 +158,8 @@ def params_to_json(fit, problem, effect_index: int) -> dict:
     for s in eff.params:
         v = params[s.name]
         if np.ndim(v):
-            if s.per == "site" and problem.kind == "magnitude":
-                keys = problem.site_names
+            if s.per in ("site", "camera") and problem.kind == "magnitude":
+                keys = problem.site_names if s.per == "site" else problem.channel_names
             else:
                 keys = [str(k) for k in range(len(v))]
             out[s.name] = {"unit": s.unit, "per": s.per, "values": {
@@ -172,39 +175,66 @@ def _nan_none(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
 
+#: scan points per component for single-parameter effects (module docstring of _quick_starts)
+_SCAN_POINTS = {"clock_offset": 241}
+
+
 def _quick_starts(effect, problem, starts, base_fit):
     """Stage-1 starts: the linearised (or typical) start, the first geometric start, and for
-    a single scalar non-linear parameter the best point of a 41-point scan of its bounds."""
+    an effect with a single continuous parameter (scalar, or one value per site/camera/sensor)
+    the best point of a scan of its bounds, component by component (41 points; 241 for a
+    clock offset: for a fast rotator χ²(δt) has one basin per flash, ~0.05 s wide at 40°/s,
+    and a shift of a whole flash period is far outside the reach of the linearised start)."""
     quick = starts[:2] if effect.name in _LINEAR else starts[:1]
     extra = [s for s in starts[1:] if "az_deg" in s][:1]
     quick = quick + extra
     L = param_layout(effect, problem.ctx)
-    if L.n == 1 and L.entries[0][1] is None and effect.name not in _LINEAR:
-        spec = L.entries[0][0]
-        lo, hi = prior_bounds(spec)
+    specs = {id(e[0]): e[0] for e in L.entries}
+    if len(specs) != 1 or (L.n == 1 and effect.name in _LINEAR and L.entries[0][1] is None):
+        return quick
+    spec = L.entries[0][0]
+    lo, hi = prior_bounds(spec)
+    grid = np.linspace(lo, hi, _SCAN_POINTS.get(effect.name, 41))
+    base = {**typical_params(effect, problem.ctx), **(quick[1] if len(quick) > 1 and effect.name in _LINEAR else {})}
+    cur = base[spec.name]
+    cur = np.array(cur, float, copy=True) if np.ndim(cur) else float(cur)
+    best_c2 = None
+    for _, comp in L.entries:
         best = None
-        for v in np.linspace(lo, hi, 41):
+        for v in grid:
+            trial = cur
+            if comp is None:
+                trial = float(v)
+            else:
+                trial = np.array(cur, float, copy=True)
+                trial[comp] = v
             try:
-                pred = problem.predict(base_fit.theta, [(effect, {**typical_params(effect, problem.ctx),
-                                                                  spec.name: float(v)})])
+                pred = problem.predict(base_fit.theta, [(effect, {**base, spec.name: trial})])
             except Exception:  # pragma: no cover - defensive
                 continue
             c2 = problem.chi2(pred)
             if best is None or c2 < best[0]:
-                best = (c2, float(v))
+                best = (c2, trial)
         if best is not None:
-            quick = quick + [{spec.name: best[1]}]
+            best_c2, cur = best
+    if best_c2 is not None:
+        quick = quick + [{spec.name: cur}]
     return quick
 
 
 def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
+    """Best fit over the integer/grid values (stage 1: all; refinement: the best only).
+
+    Stage 1 records the profile ``[(grid values, χ²)]`` in ``rec["_profiles"]`` (for the
+    profile-likelihood identification of grid parameters)."""
     best = None
     grid = _grid_values(eff, problem)
+    gnames = {s.name for s in eff.params if s.integer or s.name in GRID_PARAMS}
     if around is not None and len(grid) > 1:
         # refine only at the best grid point of stage 1
-        fx = {k: v for k, v in around.terms[0][1].items() if k in {s.name for s in eff.params
-                                                                  if s.integer or s.name == "t_start_s"}}
+        fx = {k: v for k, v in around.terms[0][1].items() if k in gnames}
         grid = [fx]
+    profile = []
     for fixed in grid:
         try:
             f = fit_terms(problem, [eff], [[s] for s in starts], theta0=base_fit.theta,
@@ -212,9 +242,18 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
         except Exception as exc:
             rec.setdefault("errors", []).append(f"{type(exc).__name__}: {exc}")
             continue
+        if fixed:
+            profile.append((dict(fixed), float(f.chi2)))
         if best is None or f.chi2 < best.chi2:
             best = f
+    if around is None and len(grid) > 1:
+        rec["_profiles"] = profile
     return best
+
+
+def held_values(effect, params) -> dict:
+    """The values of the parameters fits hold fixed (integer, grid, held) in ``params``."""
+    return {k: v for k, v in params.items() if k in held_names(effect)}
 
 
 def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: int = 60,
@@ -238,7 +277,7 @@ def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: 
         rec = {"name": name}
         t_start = None
         try:
-            eff = diagnosis_effect(name)
+            eff = diagnosis_effect(name, problem.ctx)
         except Exception as exc:  # pragma: no cover - registry problems
             rec.update(applicable=False, reason=f"cannot create: {exc}")
             out.append(rec)
@@ -292,8 +331,7 @@ def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: 
             continue
         best = rec["_fit"]
         rec.pop("_t")
-        rec.pop("_starts")
-        rec.pop("_eff")
+        rec["_fixed"] = held_values(rec["_eff"], best.terms[0][1])
         k = best.n_effect_params
         dof = max(problem.n - best.n_params, 1)
         rec.update(applicable=True, reason="",

@@ -1,48 +1,65 @@
-"""Orchestration of a diagnosis: baseline → residual analysis → candidates → refit → verdict.
+"""Orchestration of a diagnosis: baseline → residuals → candidates → held-out selection → verdict.
 
 Steps (:func:`diagnose`):
 
-1. fit the baseline (:func:`~.baseline.fit_baseline`: the free parameters the user marks);
-2. standardised residuals; consistency = χ²/dof inside its two-sided 99.8 % band and the
-   Ljung–Box and runs tests passing at 0.1 % (:func:`~.residuals.consistency`; false-alarm
-   rate ≤ 0.4 % for white N(0,1) residuals); systematic segments
-   (:func:`~.residuals.find_segments`);
-3. score and rank every registered effect (:func:`~.candidates.score_candidates`);
-4. if the baseline is not consistent: take the best candidate when its ΔBIC > ``min_delta_bic``
-   (10: "very strong" evidence); if the residuals are still not consistent, refit it jointly
-   with each of the next few candidates and keep the best pair when it gains another
-   ΔBIC > ``min_delta_bic``; stop when consistent or when nothing gains enough;
-5. verdict: ``consistent`` when the baseline already explains the recording, ``mismatch``
-   otherwise (``final`` then shows how far the chosen effects bring it);
-6. for recordings spanning several nights: leave-one-night-out cross-validation of the
-   baseline and of baseline + chosen effects (:func:`cross_validate`): every night is
-   predicted by the model fitted to the other nights (free parameters and effect
-   parameters refitted without it). The effects themselves are chosen on all the data
-   (the selection is not cross-validated; the report says so).
+1. fit the baseline (:func:`~.baseline.fit_baseline`: only the parameters the user frees);
+2. standardised residuals; consistency (:func:`~.residuals.consistency`: χ²/dof not above
+   its 99.8 % band and white residuals, or χ²/dof ≤ 1 — a fit at or below the noise is never
+   a mismatch); where the residuals are systematic (:func:`~.residuals.find_segments`);
+3. cross-validation folds over whatever the recording has (:mod:`.folds`: objects, nights,
+   passes or contiguous time blocks; or the grouping the user asks for). When no folds are
+   possible the diagnosis says so (screen and ``diagnosis.json``) and falls back to the
+   in-sample ΔBIC > ``min_gain`` for choosing;
+4. every registry effect of the problem's kind is scored and fitted alone
+   (:func:`~.candidates.score_candidates`), and the surface refit (:mod:`.surface`) joins as
+   one more candidate;
+5. greedy search by held-out gain (:mod:`.selection`): each remaining candidate is fitted
+   jointly with the model so far — in-sample and fold by fold — and the one with the largest
+   held-out gain G is added if G > ``min_gain`` and its parameters are identified
+   (:mod:`.identify`). When the candidate with the largest G is not identified, it is
+   reported as "fits, but unidentifiable with these data" and the search stops: naming a
+   lesser, identified candidate would present an inferior explanation as the answer. A fixable parameter (``ParamSpec.fixable``,
+   e.g. the penumbra's atmospheric shadow height) that the data do not identify is held at its
+   reference value and the candidate refitted before it is judged;
+6. verdict: ``consistent`` when the baseline already explains the recording, ``mismatch``
+   otherwise; the final model is the baseline plus the named effects. Further groupings
+   (``cv_report``) re-evaluate the baseline and the final model held out, for the report.
 
-:func:`diagnose_recording` builds the problem from files (HDF5 lightcurve, or CSV + scenario).
+:func:`diagnose_recording` builds the problem from files (HDF5 lightcurve, CSV + scenario, or
+a CSS recording); :func:`load_problem` is the same without diagnosing (used by
+:mod:`.transfer` to apply a fitted model to new recordings).
 """
 
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..report.views import DiagnosisViews
 from .baseline import bic_gain, fit_baseline, fit_terms
 from .candidates import params_to_json, score_candidates
+from .folds import DEFAULT_FOLDS, make_folds
+from .identify import identify_free, identify_term
 from .residuals import consistency, find_segments
+from .selection import (MIN_GAIN, Model, cv_predict, folds_improved, held_out_gain,
+                        held_out_summary)
+from .surface import SURFACE_DESCRIPTION, identifiable_subset, surface_free_params
 
-__all__ = ["Diagnosis", "diagnose", "cross_validate", "diagnose_recording", "TIMING_EFFECTS",
-           "load_model_scenario", "diagnose_css_recording"]
+__all__ = ["Diagnosis", "diagnose", "diagnose_recording", "TIMING_EFFECTS", "load_model_scenario",
+           "diagnose_css_recording", "load_problem", "SURFACE"]
 
 TIMING_EFFECTS = ("light_time", "clock_offset", "exposure_smearing")
+#: name of the surface-refit candidate
+SURFACE = "surface"
 
 
-@dataclass
-class Diagnosis:
-    """Everything :func:`~.report.write_report` needs."""
+@dataclass(repr=False)
+class Diagnosis(DiagnosisViews):
+    """Everything :func:`~.report.write_report` needs (views: short repr, ``_repr_html_``,
+    ``to_pandas("candidates" | "segments")``)."""
 
     problem: object
     verdict: str
@@ -53,8 +70,14 @@ class Diagnosis:
     chosen: list
     final_fit: object
     final_check: dict
+    final_model: object = None
+    folds: object = None
+    cv_reason: str | None = None
+    steps: list = field(default_factory=list)
+    unidentified: list = field(default_factory=list)
     cross_validation: dict | None = None
     notes: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         """The ``diagnosis.json`` content (schema in :mod:`.report`)."""
@@ -62,250 +85,426 @@ class Diagnosis:
 
         return diagnosis_json(self)
 
+    def to_pandas(self, table="candidates"):
+        """``"candidates"``: one row per candidate (:func:`~.report.candidates_table`: first
+        step's in-sample and held-out numbers, identified, decision); ``"segments"``: the time
+        spans, sites and geometry regimes tested."""
+        if table != "candidates":
+            return super().to_pandas(table)
+        from ..report.views import require_pandas
+        from .report import candidates_table
 
-def _rms(problem, pred):
-    d = problem.y - pred
-    d = d[np.isfinite(d)]
-    return float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
+        pd = require_pandas()
+        return pd.DataFrame(candidates_table(self.summary())).set_index("name")
 
 
-def _starts_from(c):
-    eff, params = c["_fit"].terms[0]
-    return eff, params
+def _in_sample(problem, fit, ref_fit):
+    dof = max(problem.n - fit.n_params, 1)
+    k = max(fit.n_params - ref_fit.n_params, 0)
+    return {"chi2_dof": fit.chi2 / dof, "rms": fit.rms(problem.y),
+            "delta_chi2": float(ref_fit.chi2 - fit.chi2),
+            "delta_bic": bic_gain(ref_fit.chi2, fit.chi2, problem.n, k), "n_params_added": int(k)}
 
 
-def diagnose(problem, *, min_delta_bic: float = 10.0, max_effects: int = 2, pair_candidates: int = 3,
-             cross_validation: bool | None = None, skip_reasons=None, seed: int = 0,
-             max_nfev: int = 60, progress=None) -> Diagnosis:
-    """Run the diagnosis of ``problem`` (module docstring). ``progress``: callable(str) or None."""
+def _surface_trial(current, cand, max_nfev):
+    """Fit the current model with the identifiable surface parameters freed."""
+    prob = current.problem
+    extra = surface_free_params(prob)
+    if not extra:
+        return None, "every surface parameter is already free (or the shape has none)"
+    terms = current.fit.terms
+    kept, dropped = identifiable_subset(prob, current.fit.theta, extra, terms)
+    cand["_dropped"] = [(p.name, why) for p, why in dropped]
+    if not kept:
+        return None, "the data identify none of the surface parameters"
+    prob2 = prob.with_free(list(prob.free) + kept)
+    theta0 = np.r_[current.fit.theta, [p.x0 for p in kept]]
+    fit = fit_terms(prob2, current.effects, current.starts(), theta0=theta0, max_nfev=max_nfev,
+                    fixed_effect_params=current.fixed or None)
+    return Model(prob2, list(current.effects), list(current.fixed), fit,
+                 current.names + [SURFACE]), [p.name for p in kept]
+
+
+def _effect_trial(current, cand, max_nfev, first):
+    from .candidates import held_values
+
+    eff = cand["_eff"]
+    single = cand["_fit"]
+    fixed = held_values(eff, single.terms[0][1])
+    if first and not current.effects and current.problem is cand["_problem"]:
+        fit = single
+    else:
+        starts = [[dict(p) for _, p in current.fit.terms] + [dict(single.terms[0][1])]]
+        fit = fit_terms(current.problem, current.effects + [eff], starts,
+                        theta0=current.fit.theta if current.problem.n_free else None,
+                        max_nfev=max_nfev, fixed_effect_params=current.fixed + [fixed])
+    return Model(current.problem, current.effects + [eff], current.fixed + [fixed], fit,
+                 current.names + [cand["name"]])
+
+
+def _refit_holding(model, eff_index, names, max_nfev):
+    """Refit ``model`` with the fixable parameters ``names`` of one effect held at defaults."""
+    eff = model.effects[eff_index]
+    eff.hold = frozenset(set(eff.hold) | set(names))
+    specs = {s.name: s for s in eff.params}
+    fixed = [dict(f) for f in model.fixed]
+    for nm in names:
+        v = model.fit.terms[eff_index][1][nm]
+        d = specs[nm].default
+        fixed[eff_index][nm] = np.full(np.shape(v), d) if np.ndim(v) else float(d)
+    starts = [[dict(p) for _, p in model.fit.terms]]
+    fit = fit_terms(model.problem, model.effects, starts,
+                    theta0=model.fit.theta if model.problem.n_free else None,
+                    max_nfev=max_nfev, fixed_effect_params=fixed)
+    return Model(model.problem, model.effects, fixed, fit, model.names)
+
+
+def _identify(model, cand, first):
+    if cand["name"] == SURFACE:
+        return identify_free(model.fit, set(cand.get("_kept", ())))
+    return identify_term(model.fit, len(model.effects) - 1,
+                         profiles=cand.get("_profiles") if first else None)
+
+
+def _fixable_failures(ident, eff):
+    fx = {s.name for s in eff.params if s.fixable}
+    bad = {k.split("[", 1)[0] for k, r in ident["params"].items() if not r.get("ok", True)}
+    return bad if bad and bad <= fx else set()
+
+
+def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
+    """One candidate at one step: joint fit, identification, in-sample and held-out numbers."""
+    rec = {"name": cand["name"]}
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        if cand["name"] == SURFACE:
+            model, kept = _surface_trial(current, cand, max_nfev)
+            if model is None:
+                rec.update(applicable=False, reason=kept)
+                return rec, None
+            cand["_kept"] = kept
+        else:
+            model = _effect_trial(current, cand, max_nfev, first)
+        ident = _identify(model, cand, first)
+        if not ident["identified"] and cand["name"] != SURFACE:
+            held = _fixable_failures(ident, cand["_eff"])
+            if held:
+                model = _refit_holding(model, len(model.effects) - 1, held, max_nfev)
+                ident = _identify(model, cand, first)
+    rec.update(applicable=True, identified=ident["identified"], identification=ident,
+               in_sample=_in_sample(model.problem, model.fit, current.fit))
+    if folds is not None:
+        cv = cv_predict(model, folds, max_nfev=cv_nfev)
+        hs = held_out_summary(model.problem, cv["pred"], folds)
+        hs["gain"] = held_out_gain(cur_hs, hs)
+        hs["folds_improved"] = folds_improved(cur_hs, hs)
+        hs["n_folds"] = folds.n_folds
+        hs["fold_params"] = cv["fold_params"]
+        rec["held_out"] = hs
+        rec["gain"] = hs["gain"]
+    else:
+        rec["gain"] = rec["in_sample"]["delta_bic"]
+    return rec, model
+
+
+def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: float = MIN_GAIN,
+             max_effects: int = 2, pair_candidates: int = 3, surface: bool = True,
+             cv_report=(), skip_reasons=None, seed: int = 0, max_nfev: int = 60,
+             cv_nfev: int = 30, progress=None) -> Diagnosis:
+    """Run the diagnosis of ``problem`` (module docstring).
+
+    ``folds``: grouping for the selection ("auto" or one of :data:`~.folds.GROUPINGS`, or
+    None for no cross-validation); ``n_folds``: number of folds; ``min_gain``: held-out gain
+    needed to add a candidate (ΔBIC without folds); ``max_effects``: at most this many
+    additions; ``pair_candidates``: candidates tried at later steps (the best by the first
+    step's held-out gain); ``surface``: include the surface refit candidate; ``cv_report``:
+    further groupings to report held-out numbers for; ``progress``: callable(str) or None.
+    """
     say = progress or (lambda s: None)
+    tim = {}
+    t0 = time.perf_counter()
     notes = []
     say("fitting the baseline")
     base = fit_baseline(problem)
     chk0 = consistency(base.z, problem.t, base.n_params)
     segs = find_segments(problem, base.z)
-    say(f"baseline chi2/dof {chk0['chi2_dof']:.3g}; scoring candidates")
+    fo, cv_reason = (None, "cross-validation switched off") if folds is None else \
+        make_folds(problem, folds, n_folds)
+    if fo is None:
+        say(f"{cv_reason}; effects are chosen by in-sample ΔBIC")
+    else:
+        say(f"cross-validation: {fo.describe()}")
+    tim["baseline_s"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    say(f"baseline chi2/dof {chk0['chi2_dof']:.3g}; fitting every candidate effect")
     cands = score_candidates(problem, base, seed=seed, max_nfev=max_nfev, skip_reasons=skip_reasons)
-    chosen, final = [], base
+    for c in cands:
+        c["kind"] = "effect"
+        c["_problem"] = problem
+    if surface and problem.kind == "magnitude":
+        sc = {"name": SURFACE, "kind": "surface", "description": SURFACE_DESCRIPTION}
+        if SURFACE in (skip_reasons or {}):
+            sc.update(applicable=False, reason=skip_reasons[SURFACE])
+        else:
+            sc["applicable"] = True
+        cands.append(sc)
+    tim["candidates_s"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    current = Model(problem, [], [], base, [])
+    base_hs = cur_hs = None
+    if fo is not None:
+        base_cv = cv_predict(current, fo, max_nfev=cv_nfev)
+        base_hs = cur_hs = held_out_summary(problem, base_cv["pred"], fo)
+    steps, chosen, unidentified = [], [], []
     chk = chk0
-    if not chk0["consistent"]:
-        top = [c for c in cands if c.get("applicable") and c.get("delta_bic", -np.inf) > min_delta_bic]
-        if top:
-            chosen = [top[0]["name"]]
-            final = top[0]["_fit"]
-            chk = consistency(final.z, problem.t, final.n_params)
-            if not chk["consistent"] and max_effects >= 2 and len(top) > 1:
-                say(f"chose {chosen[0]}; trying pairs")
-                e1, p1 = _starts_from(top[0])
-                best_pair = None
-                for c in top[1:1 + pair_candidates]:
-                    e2, p2 = _starts_from(c)
-                    try:
-                        f2 = fit_terms(problem, [e1, e2], [[p1, p2]], theta0=final.theta,
-                                       max_nfev=max_nfev, fixed_effect_params=[
-                                           {k: v for k, v in p1.items() if k in _fixed_names(e1)},
-                                           {k: v for k, v in p2.items() if k in _fixed_names(e2)}])
-                    except Exception as exc:  # pragma: no cover - defensive
-                        notes.append(f"joint fit with {c['name']} failed: {exc}")
-                        continue
-                    gain = bic_gain(final.chi2, f2.chi2, problem.n, f2.n_effect_params - final.n_effect_params)
-                    if gain > min_delta_bic and (best_pair is None or f2.chi2 < best_pair[1].chi2):
-                        best_pair = (c["name"], f2, gain)
-                if best_pair is not None:
-                    chosen.append(best_pair[0])
-                    final = best_pair[1]
-                    chk = consistency(final.z, problem.t, final.n_params)
+    by_name = {c["name"]: c for c in cands}
+    pool = [c for c in cands if c.get("applicable")]
+    step = 0
+    while not chk["consistent"] and len(chosen) < max_effects and pool:
+        step += 1
+        say(f"step {step}: {len(pool)} candidate(s), held-out gain over "
+            f"{'+'.join(chosen) or 'the baseline'}")
+        recs, models = [], {}
+        for c in pool:
+            try:
+                rec, model = _evaluate(current, c, fo, cur_hs, max_nfev=max_nfev,
+                                       cv_nfev=cv_nfev, first=step == 1)
+            except Exception as exc:  # pragma: no cover - a failing candidate is reported
+                rec, model = {"name": c["name"], "applicable": False,
+                              "reason": f"fit failed: {type(exc).__name__}: {exc}"}, None
+            rec["step"] = step
+            recs.append(rec)
+            if model is not None:
+                models[c["name"]] = model
+            c.setdefault("steps", []).append(rec)
+        ok = [r for r in recs if r.get("applicable") and np.isfinite(r.get("gain", np.nan))]
+        ok.sort(key=lambda r: -r["gain"])
+        pick = None
+        top = ok[0] if ok else None
+        for r in ok:
+            if r["gain"] <= min_gain:
+                r["decision"] = "held-out gain too small" if fo is not None else "ΔBIC too small"
+                continue
+            if not r["identified"]:
+                r["decision"] = "fits, but unidentifiable with these data"
+                if r["name"] not in [u["name"] for u in unidentified]:
+                    unidentified.append({"name": r["name"], "step": step, "gain": r["gain"],
+                                         "reasons": r["identification"]["reasons"]})
+                continue
+            if pick is None and r is top:
+                pick = r
+                r["decision"] = "added"
+            elif pick is None:
+                # the best explanation is not identifiable: a lesser one would mislead
+                r["decision"] = f"not named: {top['name']} explains more but is unidentifiable"
+            else:
+                r["decision"] = "smaller held-out gain than " + pick["name"]
+        steps.append({"step": step, "base": list(chosen), "records": recs})
+        if pick is None:
+            break
+        current = models[pick["name"]]
+        chosen.append(pick["name"])
+        chk = consistency(current.fit.z, current.problem.t, current.fit.n_params)
+        if fo is not None:
+            cv = cv_predict(current, fo, max_nfev=cv_nfev)
+            cur_hs = held_out_summary(current.problem, cv["pred"], fo)
+        # later steps: the most promising of the rest (by this step's gain)
+        rest = [r["name"] for r in ok if r["name"] != pick["name"] and r["gain"] > 0]
+        pool = [by_name[n] for n in rest[:pair_candidates]]
+    tim["selection_s"] = time.perf_counter() - t2
     verdict = "consistent" if chk0["consistent"] else "mismatch"
     d = Diagnosis(problem=problem, verdict=verdict, baseline_fit=base, baseline_check=chk0,
-                  segments=segs, candidates=cands, chosen=chosen, final_fit=final, final_check=chk,
-                  notes=notes)
-    if cross_validation is None:
-        cross_validation = problem.night is not None and np.unique(
-            np.asarray(problem.night)[problem.epoch_index]).size >= 3
-    if cross_validation and problem.night is not None:
-        say("leave-one-night-out cross-validation")
-        d.cross_validation = cross_validate(problem, final, max_nfev=max_nfev, progress=say)
+                  segments=segs, candidates=cands, chosen=chosen, final_fit=current.fit,
+                  final_check=chk, final_model=current, folds=fo, cv_reason=cv_reason,
+                  steps=steps, unidentified=unidentified, notes=notes)
+    t3 = time.perf_counter()
+    d.cross_validation = _cross_validation(d, base_hs, cur_hs, cv_report, n_folds, cv_nfev, say)
+    tim["cv_report_s"] = time.perf_counter() - t3
+    tim["total_s"] = time.perf_counter() - t0
+    d.timings = tim
     return d
 
 
-def _fixed_names(effect):
-    from .baseline import GRID_PARAMS
+def _cross_validation(d, base_hs, final_hs, cv_report, n_folds, cv_nfev, say):
+    """Held-out numbers of the baseline and the final model, for the selection folds and
+    any further groupings asked for."""
+    out = {"possible": d.folds is not None, "reason": d.cv_reason, "schemes": []}
+    if d.folds is not None:
+        out["selection"] = d.folds.as_dict()
+        out["gain_statistic"] = ("G = n ln(chi2_held(before)/chi2_held(after)): held-out Gaussian "
+                                 "log-likelihood ratio x2, noise scale profiled")
+        out["schemes"].append(_scheme(d.folds, base_hs, final_hs))
+    base_model = Model(d.problem, [], [], d.baseline_fit, [])
+    for g in cv_report:
+        if d.folds is not None and g == d.folds.grouping:
+            continue
+        fo, why = make_folds(d.problem, g, n_folds)
+        if fo is None:
+            out["schemes"].append({"grouping": g, "possible": False, "reason": why})
+            continue
+        say(f"held-out check: {fo.describe()}")
+        b = held_out_summary(d.problem, cv_predict(base_model, fo, max_nfev=cv_nfev)["pred"], fo)
+        fm = d.final_model
+        f = held_out_summary(fm.problem, cv_predict(fm, fo, max_nfev=cv_nfev)["pred"], fo)
+        out["schemes"].append(_scheme(fo, b, f))
+    return out
 
-    return {s.name for s in effect.params if s.integer or s.name in GRID_PARAMS}
 
-
-def _pearson(a, b):
-    ok = np.isfinite(a) & np.isfinite(b)
-    a, b = a[ok], b[ok]
-    if a.size < 2:
-        return float("nan")
-    da, db = a - a.mean(), b - b.mean()
-    den = np.sqrt(np.sum(da * da) * np.sum(db * db))
-    return float(np.sum(da * db) / den) if den > 0 else float("nan")
-
-
-def cross_validate(problem, final_fit, *, max_nfev: int = 60, progress=None) -> dict:
-    """Leave-one-night-out predictions of the baseline and of baseline + chosen effects.
-
-    For each night: the free baseline parameters (and the chosen effects' continuous
-    parameters) are refitted on the other nights, starting from the all-data values, and the
-    held-out night is predicted. Returns RMS (same unit as the data) and Pearson R of the
-    out-of-sample predictions, before (baseline) and after (with the chosen effects), plus
-    the in-sample values and the number of folds.
-    """
-    say = progress or (lambda s: None)
-    night = np.asarray(problem.night)[problem.epoch_index]
-    nights = np.unique(night)
-    pred_b = np.full(problem.n, np.nan)
-    pred_a = np.full(problem.n, np.nan)
-    terms = final_fit.terms
-    effects = [e for e, _ in terms]
-    starts = [[dict(p) for _, p in terms]]
-    fixed = [{k: v for k, v in p.items() if k in _fixed_names(e)} for e, p in terms]
-    base_theta = problem.x0()
-    for i, nt in enumerate(nights):
-        test = night == nt
-        train = problem.subset(~test)
-        held = problem.subset(test)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            if problem.n_free:
-                fb = fit_terms(train, [], None, theta0=base_theta, max_nfev=max_nfev)
-                th_b = fb.theta
-            else:
-                th_b = None
-            pred_b[test] = held.predict(th_b)
-            if effects:
-                fa = fit_terms(train, effects, starts, theta0=final_fit.theta if problem.n_free else None,
-                               max_nfev=max_nfev, fixed_effect_params=fixed)
-                pred_a[test] = held.predict(fa.theta if problem.n_free else None, fa.terms)
-            else:
-                pred_a[test] = pred_b[test]
-        if (i + 1) % 10 == 0:
-            say(f"  fold {i + 1}/{nights.size}")
-    y = problem.y
-
-    def rms(p):
-        d = y - p
-        d = d[np.isfinite(d)]
-        return float(np.sqrt(np.mean(d * d)))
-
-    return {"method": "leave-one-night-out", "n_folds": int(nights.size),
-            "effects": [e.name for e in effects],
-            "rms_mag_before": rms(pred_b), "rms_mag_after": rms(pred_a),
-            "r_before": _pearson(y, pred_b), "r_after": _pearson(y, pred_a),
-            "n_nonfinite_after": int(np.sum(~np.isfinite(pred_a))),
-            "selection_cross_validated": False}
+def _scheme(fo, b, f):
+    return {"grouping": fo.grouping, "method": fo.method, "possible": True,
+            "n_groups": fo.n_groups, "n_folds": fo.n_folds,
+            "baseline": {k: b[k] for k in ("rms", "chi2_per_n", "r", "n_unpredicted")},
+            "final": {k: f[k] for k in ("rms", "chi2_per_n", "r", "n_unpredicted")},
+            "gain": held_out_gain(b, f)}
 
 
 # ----------------------------------------------------------------------------------------
 # from files
 # ----------------------------------------------------------------------------------------
-def load_model_scenario(path):
+def load_model_scenario(path, *, library_dirs=None, site_dirs=None, shape=None):
     """Load a scenario TOML for diagnosis: the scenario with its ``[effects]`` switched off
     (the model whose missing physics is being looked for) and the ``[diagnosis]`` table, if
     any (keys ``free`` (list of words, see :func:`~.problem.parse_free`), ``exclude`` (effect
-    names not to propose), ``max_effects`` (1 or 2), ``min_delta_bic`` (> 0)). Returns
-    ``(scenario, options)``."""
+    names, or "surface", not to propose), ``max_effects`` (1 or 2), ``min_gain`` (> 0)).
+    Returns ``(scenario, options)``. ``library_dirs``/``site_dirs``: extra shape-library and
+    observatory folders; ``shape``: a resolved Shape replacing the scenario's ``[shape]``."""
     from pathlib import Path
 
+    from ..errors import InputError
     from ..io.tomlio import Section, load_toml
+    from ..physics import available_effects
     from ..studies.scenario import parse_scenario
 
     path = Path(path)
     doc, text = load_toml(path, with_text=True)
     diag = doc.pop("diagnosis", None)
     had_effects = bool(doc.pop("effects", None))
-    sc = parse_scenario(doc, file=path, text=text)
+    sc = parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                        site_dirs=site_dirs, shape=shape)
     opts = {}
     if diag is not None:
         sec = Section(diag, file=path, name="diagnosis")
         free = sec.raw("free", None)
         if free is not None:
             if not isinstance(free, list) or not all(isinstance(w, str) for w in free):
-                from ..errors import InputError
-
                 raise InputError("expected a list of names", file=path, field="diagnosis.free", value=free)
             opts["free"] = ",".join(free) if free else "none"
         ex = sec.raw("exclude", None)
         if ex is not None:
-            from ..physics import available_effects
-
-            if not isinstance(ex, list) or any(e not in available_effects() for e in ex):
-                from ..errors import InputError
-
+            allowed = available_effects() + [SURFACE]
+            if not isinstance(ex, list) or any(e not in allowed for e in ex):
                 raise InputError("expected a list of effect names", file=path, field="diagnosis.exclude",
-                                 value=ex, allowed=", ".join(available_effects()))
+                                 value=ex, allowed=", ".join(allowed))
             opts["exclude"] = list(ex)
         opts["max_effects"] = sec.int("max_effects", 2, min=1, max=2)
-        opts["min_delta_bic"] = sec.float("min_delta_bic", 10.0, min=0.0, min_open=True)
+        opts["min_gain"] = sec.float("min_gain", MIN_GAIN, min=0.0, min_open=True)
         sec.check_unknown()
     opts["model_had_effects"] = had_effects
     return sc, opts
 
 
-def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progress=None,
-                       cross_validation=None, max_effects=None, min_delta_bic=None, seed=0):
-    """Diagnose a recording file against a model.
+def load_problem(recording, scenario=None, *, free=None, exclude=(), shape=None,
+                 library_dirs=None, site_dirs=None):
+    """The diagnosis problem of one magnitude recording file — or of several, one object each
+    (a list of paths: :func:`~.problem.combine_problems`, so that objects can be held out) —
+    and the model it is checked against. Returns ``(problem, skip_reasons, options, notes)``;
+    :func:`_load_one` documents the single-file case."""
+    from pathlib import Path
 
-    ``recording``: our lightcurve HDF5 (model = the file's own scenario or ``scenario``;
-    attitude = the file's truth), a CSS recording (HDF5 with ``format = "lightcurve-css"``,
-    detected from the file: :func:`diagnose_css_recording`) or a CSV recording (needs ``scenario``; attitude = the
+    from .problem import combine_problems, parse_free, with_free_words
+
+    if isinstance(recording, (str, Path)):
+        return _load_one(recording, scenario, free=free, exclude=exclude, shape=shape,
+                         library_dirs=library_dirs, site_dirs=site_dirs)
+    recs = [Path(r) for r in recording]
+    if len(recs) == 1:
+        return _load_one(recs[0], scenario, free=free, exclude=exclude, shape=shape,
+                         library_dirs=library_dirs, site_dirs=site_dirs)
+    loaded = [_load_one(r, scenario, free="none", exclude=exclude, shape=shape,
+                        library_dirs=library_dirs, site_dirs=site_dirs) for r in recs]
+    probs = [x[0] for x in loaded]
+    names = []
+    for r in recs:
+        nm = r.stem
+        while nm in names:
+            nm += "'"
+        names.append(nm)
+    prob = combine_problems(probs, names)
+    skip = {}
+    for x in loaded:
+        skip.update(x[1])
+    opts = loaded[0][2]
+    words = parse_free(free if free is not None else opts.get("free", "none"), prob.ctx.shape)
+    prob = with_free_words(prob, words)
+    notes = [f"{len(recs)} recordings, one object each: {', '.join(names)} (times from "
+             f"{prob.ctx.epoch_utc})",
+             f"free baseline parameters: {', '.join(p.name for p in prob.free) or 'none'}"]
+    notes += [n for x in loaded for n in x[3] if not n.startswith("free baseline")][:5]
+    return prob, skip, opts, notes
+
+
+def _load_one(recording, scenario=None, *, free=None, exclude=(), shape=None,
+              library_dirs=None, site_dirs=None):
+    """The diagnosis problem of a magnitude recording file and the model it is checked against.
+
+    ``recording``: our lightcurve HDF5 (model = the file's own scenario — with the shape and
+    sites the file carries — or ``scenario``; attitude = the file's truth, else the model's
+    attitude from the scenario epoch) or a CSV recording (needs ``scenario``; attitude = the
     scenario's law or noise-free dynamics). ``free``: comma-separated words
-    (:func:`~.problem.parse_free`); default ``none`` for files with a truth attitude,
-    ``reflection`` for CSV recordings. Returns a :class:`Diagnosis`.
+    (:func:`~.problem.parse_free`), default ``none``: refitting the object's surfaces is a
+    candidate that competes on held-out gain (:mod:`.surface`), never silently on. ``shape``
+    (a Shape, library name or shape TOML) replaces the model's shape; ``library_dirs`` /
+    ``site_dirs`` are extra shape-library and observatory folders. Files without truth that
+    give exposure times are modelled with the model's body rates, so the timing effects are
+    evaluated for them. A file with a photometric band (``attrs["band"]``) is modelled with
+    that band's Sun magnitude (``attrs["sun_mag"]``). Returns ``(problem, skip_reasons,
+    options, notes)``.
     """
     from pathlib import Path
 
     from ..errors import InputError
-    from ..studies.scenario import parse_scenario
+    from ..studies.evaluate import model_attitude
+    from ..studies.scenario import scenario_from_lightcurve
     from .problem import magnitude_problem, parse_free
 
     recording = Path(recording)
-    from .css_recording import is_css_recording
-
-    if is_css_recording(recording):
-        return diagnose_css_recording(recording, scenario, free=free, exclude=exclude,
-                                      progress=progress, max_effects=max_effects,
-                                      min_delta_bic=min_delta_bic, seed=seed)
     opts = {}
-    sc = None
-    if scenario is not None:
-        sc, opts = load_model_scenario(scenario)
+    notes = []
+    if shape is not None and not hasattr(shape, "n_facets"):
+        from ..photometry import load_shape
+
+        shape = load_shape(str(shape), library_dirs=library_dirs)
     if recording.suffix.lower() in (".h5", ".hdf5"):
         from ..io.lightcurve_h5 import read_lightcurve
 
         lc = read_lightcurve(recording)
-        if sc is None:
-            if not lc.scenario_toml:
-                raise InputError("the file has no embedded scenario: give --scenario", file=recording)
-            from ..io.tomlio import loads_toml
-
-            doc = loads_toml(lc.scenario_toml, file=f"{recording}:scenario")
-            doc.pop("effects", None)
-            doc.pop("diagnosis", None)
-            sc = parse_scenario(doc, file=str(recording), embedded=True)
-        default_free = "none"
+        if scenario is not None:
+            sc, opts = load_model_scenario(scenario, library_dirs=library_dirs,
+                                           site_dirs=site_dirs, shape=shape)
+        else:
+            sc = scenario_from_lightcurve(lc, recording, drop=("effects", "diagnosis"),
+                                          library_dirs=library_dirs, site_dirs=site_dirs,
+                                          shape=shape)
         q = lc.truth_q
         omega = lc.truth_omega_rad_s
         if q is None:
-            from ..studies.evaluate import model_attitude
-
-            q = model_attitude(sc, lc)
-            omega = None
+            q, omega = model_attitude(sc, lc, return_omega=True)
     else:
-        if sc is None:
+        if scenario is None:
             raise InputError("a CSV recording needs --scenario MODEL.toml (shape, attitude, sites)",
                              file=recording)
+        sc, opts = load_model_scenario(scenario, library_dirs=library_dirs, site_dirs=site_dirs,
+                                       shape=shape)
         from ..io.recording import read_recording
-        from ..studies.evaluate import model_attitude
 
         # rows in the Earth's full shadow are kept (counted, warned) for shadow/clock effects
-        lc = read_recording(recording, sc, unlit="keep")
-        q = model_attitude(sc, lc)
-        omega = None
-        default_free = "reflection"
-    words = parse_free(free if free is not None else opts.get("free", default_free), sc.shape)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            lc = read_recording(recording, sc, unlit="keep", site_dirs=site_dirs)
+        q, omega = model_attitude(sc, lc, return_omega=True)
+    if not lc.has_truth and (lc.exposure_s is None or not np.any(np.isfinite(lc.exposure_s))):
+        omega = None  # no exposure times: the timing effects stay off (docstring)
+    words = parse_free(free if free is not None else opts.get("free", "none"), sc.shape)
     skip = {}
     if omega is None:
         for name in TIMING_EFFECTS:
@@ -313,29 +512,58 @@ def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progr
                           "rate and the object's velocity, unknown for this recording")
     for name in list(exclude) + list(opts.get("exclude", [])):
         skip[name] = "excluded by the user"
-    prob = magnitude_problem(lc, sc.shape, q=q, omega=omega, sun_mag=sc.measurement.sun_mag,
+    sun_mag = float(lc.attrs["sun_mag"]) if "band" in (lc.attrs or {}) else sc.measurement.sun_mag
+    prob = magnitude_problem(lc, sc.shape, q=q, omega=omega, sun_mag=sun_mag,
                              ignore_eclipse=sc.measurement.ignore_eclipse, free=words,
                              label=recording.name)
     if sc.measurement.ignore_eclipse:
         # the model ignores the eclipse: umbra epochs are modelled as sunlit; the penumbra
         # effect then means "switch the partial solar disc (and the umbra) on"
         prob.ctx = prob.ctx.with_state(ignore_eclipse=True)
-    d = diagnose(prob, progress=progress, cross_validation=cross_validation, skip_reasons=skip,
-                 max_effects=max_effects or opts.get("max_effects", 2),
-                 min_delta_bic=min_delta_bic or opts.get("min_delta_bic", 10.0), seed=seed)
-    d.notes.append(f"free baseline parameters: {', '.join(p.name for p in prob.free) or 'none'}")
+    notes.append(f"free baseline parameters: {', '.join(p.name for p in prob.free) or 'none'}")
     if opts.get("model_had_effects"):
-        d.notes.append("the scenario's [effects] table was switched off for the model")
+        notes.append("the scenario's [effects] table was switched off for the model")
+    return prob, skip, opts, notes
+
+
+def diagnose_recording(recording, scenario=None, *, free=None, exclude=(), progress=None,
+                       folds="auto", n_folds=DEFAULT_FOLDS, cv_report=(), max_effects=None,
+                       min_gain=None, seed=0, shape=None, library_dirs=None, site_dirs=None):
+    """Diagnose a recording file (or several, one object each) against a model
+    (:func:`load_problem`; a CSS recording, detected from the file, goes to
+    :func:`diagnose_css_recording`). Returns a :class:`Diagnosis`."""
+    from pathlib import Path
+
+    from ..errors import InputError
+    from .css_recording import is_css_recording
+
+    recs = [recording] if isinstance(recording, (str, Path)) else list(recording)
+    css = [is_css_recording(Path(r)) for r in recs]
+    if any(css):
+        if len(recs) > 1:
+            raise InputError("CSS recordings are diagnosed one at a time", field="recording",
+                             value=", ".join(map(str, recs)))
+        return diagnose_css_recording(Path(recs[0]), scenario, free=free, exclude=exclude,
+                                      progress=progress, max_effects=max_effects,
+                                      min_gain=min_gain, seed=seed, folds=folds, n_folds=n_folds)
+    prob, skip, opts, notes = load_problem(recording, scenario, free=free, exclude=exclude,
+                                           shape=shape, library_dirs=library_dirs,
+                                           site_dirs=site_dirs)
+    d = diagnose(prob, progress=progress, folds=folds, n_folds=n_folds, cv_report=cv_report,
+                 skip_reasons=skip, max_effects=max_effects or opts.get("max_effects", 2),
+                 min_gain=min_gain or opts.get("min_gain", MIN_GAIN), seed=seed)
+    d.notes.extend(notes)
     return d
 
 
 def diagnose_css_recording(recording, configuration=None, *, free=None, exclude=(), progress=None,
-                           max_effects=None, min_delta_bic=None, seed=0, max_epochs=400):
+                           max_effects=None, min_gain=None, seed=0, max_epochs=400,
+                           folds="auto", n_folds=DEFAULT_FOLDS):
     """Diagnose a CSS recording (:mod:`.css_recording`) against the sensors' direct-Sun model.
 
     ``configuration``: optional CSS configuration TOML (the model's nominal sensors; the
     file's are used otherwise). The baseline has no free parameters (``free`` must be None
-    or ``none``); the ``css_*`` effects are the candidates. No cross-validation (one pass).
+    or ``none``); the ``css_*`` effects are the candidates; folds are contiguous time blocks.
     """
     from ..errors import InputError
     from .css_recording import css_recording_problem
@@ -346,8 +574,8 @@ def diagnose_css_recording(recording, configuration=None, *, free=None, exclude=
     prob, notes = css_recording_problem(recording, configuration=configuration,
                                         max_epochs=max_epochs)
     skip = {name: "excluded by the user" for name in exclude}
-    d = diagnose(prob, progress=progress, cross_validation=False, skip_reasons=skip,
-                 max_effects=max_effects or 2, min_delta_bic=min_delta_bic or 10.0, seed=seed)
+    d = diagnose(prob, progress=progress, skip_reasons=skip, folds=folds, n_folds=n_folds,
+                 max_effects=max_effects or 2, min_gain=min_gain or MIN_GAIN, seed=seed)
     d.notes.extend(notes)
     d.notes.append("model: nominal sensors, direct Sun only (no albedo, nominal scale factors "
                    "and normals), attitude and orbit from the recording")

@@ -9,8 +9,10 @@ A :class:`Problem` holds
 * ``free`` the baseline's free parameters (:class:`FreeParam`): a per-site photometric zero
   point (mag, additive) and/or per-facet reflection parameters of the shape's BRDFs
   (``Kd``, ``Ks``, ``n`` of Phong, ``xi``/``a``/``m`` of Cook–Torrance …), each with bounds;
-* per-measurement bookkeeping for the residual analysis: time ``t`` (s since the epoch),
-  ``site`` index, ``epoch_index`` (row of ``ctx``), and geometry regimes.
+* per-measurement bookkeeping for the residual analysis and the cross-validation folds:
+  time ``t`` (s since the epoch), ``site`` index, ``epoch_index`` (row of ``ctx``), geometry
+  regimes, and per epoch the local night, the object and the camera (when the recording
+  names them).
 
 :meth:`Problem.predict` evaluates the model for a baseline parameter vector and a list of
 effect terms ``[(Effect, params), …]`` through :func:`lightcurve.physics.apply_effects`
@@ -22,14 +24,14 @@ fixed large standardised residual (:data:`Z_NONFINITE`) so that optimisers stay 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..errors import InputError
 
 __all__ = ["FreeParam", "Problem", "Z_NONFINITE", "magnitude_problem", "css_problem",
-           "parse_free", "clipped_gaussian_mean", "clipped_gaussian_sd"]
+           "parse_free", "recording_columns", "combine_problems", "with_free_words", "clipped_gaussian_mean", "clipped_gaussian_sd"]
 
 #: Standardised residual assigned to a non-finite prediction (e.g. an epoch put in umbra).
 Z_NONFINITE = 30.0
@@ -83,6 +85,12 @@ class Problem:
     #: predictions are then the mean of that clipped Gaussian, s Φ(s/σ) + σ φ(s/σ), so
     #: residuals of dark sensors are unbiased (:meth:`predict`)
     censored_at_zero: bool = False
+    #: optional (E,) object index per epoch (several satellites in one recording) and names
+    object: np.ndarray | None = None
+    object_names: list | None = None
+    #: optional (E,) camera index per epoch and names (the context carries them too)
+    camera: np.ndarray | None = None
+    camera_names: list | None = None
 
     def __post_init__(self):
         self.y = np.asarray(self.y, float).ravel()
@@ -127,10 +135,23 @@ class Problem:
         out = np.zeros(self.n)
         if theta is None:
             return out
+        ch = self.channel
         for p, v in zip(self.free, np.asarray(theta, float)):
             if p.kind == "zero_point":
-                out[self.site == p.index] += v
+                out[ch == p.index] += v
         return out
+
+    @property
+    def channel(self) -> np.ndarray:
+        """(M,) photometric channel of each measurement: its camera, else its site."""
+        if self.camera is not None:
+            return np.asarray(self.camera)[self.epoch_index]
+        return self.site
+
+    @property
+    def channel_names(self) -> list:
+        """Names of the photometric channels (cameras, else sites)."""
+        return list(self.camera_names) if self.camera_names is not None else list(self.site_names)
 
     def predict(self, theta=None, terms=()) -> np.ndarray:
         """Model measurements (M,) for baseline parameters ``theta`` and effect ``terms``.
@@ -187,17 +208,16 @@ class Problem:
             S = self.ctx.n_sensors
             full = np.zeros(len(self.ctx), bool)
             full[ep] = True
-            m2 = np.repeat(full, S)
-            return Problem(self.kind, ctx, self.y[m2], self.sigma[m2], self.t[m2], self.site[m2],
-                           remap[self.epoch_index[m2]], self.site_names, list(self.free),
-                           sel(self.elevation_rad), sel(self.phase_rad), sel(self.shadow_margin),
-                           sel(self.night), self.exclude, self.label,
-                           censored_at_zero=self.censored_at_zero)
-        return Problem(self.kind, ctx, self.y[mask], self.sigma[mask], self.t[mask], self.site[mask],
-                       remap[self.epoch_index[mask]], self.site_names, list(self.free),
-                       sel(self.elevation_rad), sel(self.phase_rad), sel(self.shadow_margin),
-                       sel(self.night), self.exclude, self.label,
-                       censored_at_zero=self.censored_at_zero)
+            mask = np.repeat(full, S)
+        return replace(self, ctx=ctx, y=self.y[mask], sigma=self.sigma[mask], t=self.t[mask],
+                       site=self.site[mask], epoch_index=remap[self.epoch_index[mask]],
+                       free=list(self.free), elevation_rad=sel(self.elevation_rad),
+                       phase_rad=sel(self.phase_rad), shadow_margin=sel(self.shadow_margin),
+                       night=sel(self.night), object=sel(self.object), camera=sel(self.camera))
+
+    def with_free(self, free) -> "Problem":
+        """The same problem with the free baseline parameters ``free`` (list of FreeParam)."""
+        return replace(self, free=list(free))
 
 
 def clipped_gaussian_mean(s, sigma):
@@ -303,6 +323,8 @@ def parse_free(text, shape=None) -> list[str]:
 
 
 def _free_params(words, shape, site_names, zero_point_span_mag=3.0):
+    """Free baseline parameters for ``words`` (``site_names``: the photometric channels —
+    cameras, else sites — of the per-channel zero points)."""
     from ..photometry.brdf import get_brdf  # noqa: F401  (registry import for bounds)
 
     out = []
@@ -367,6 +389,9 @@ def magnitude_problem(lc, shape, *, q=None, omega=None, attitude_fn=None, sun_ma
 
     ctx = ModelContext.from_lightcurve(lc, shape, q=q, omega=omega, sun_mag=sun_mag,
                                        ignore_eclipse=ignore_eclipse, attitude_fn=attitude_fn)
+    obj, obj_names, cam, cam_names = recording_columns(lc)
+    if cam is not None:
+        ctx = ctx.with_state(camera_index=cam, camera_names=cam_names)
     m0 = ctx.evaluate()
     keep = np.isfinite(m0) & np.isfinite(lc.mag) & np.isfinite(lc.mag_sigma)
     if not np.any(keep):
@@ -375,14 +400,138 @@ def magnitude_problem(lc, shape, *, q=None, omega=None, attitude_fn=None, sun_ma
     free_words = list(free)
     phase = lc.phase_angle_rad
     n = len(lc)
+    channels = cam_names if cam_names is not None else list(lc.site_names)
     prob = Problem("magnitude", ctx, lc.mag, lc.mag_sigma, lc.t, lc.site, np.arange(n),
-                   list(lc.site_names), _free_params(free_words, shape, lc.site_names),
+                   list(lc.site_names), _free_params(free_words, shape, channels),
                    elevation_rad=lc.elevation_rad, phase_rad=phase,
                    shadow_margin=_shadow_margin(lc.r_obj_eci_m, lc.r_sun_eci_m),
                    night=_night_index(lc.t, lc.site, lc.site_lla_deg_m, lc.epoch_utc),
                    exclude=("zero_point",) if "zero_point" in free_words else (),
-                   label=label)
+                   label=label, object=obj, object_names=obj_names, camera=cam,
+                   camera_names=cam_names)
     return prob if np.all(keep) else prob.subset(keep)
+
+
+def recording_columns(lc):
+    """``(object (N,) | None, object names, camera (N,) | None, camera names)`` of a lightcurve.
+
+    Read from the optional attributes ``object_index``/``object_names`` and
+    ``camera_index``/``camera_names`` of :class:`~lightcurve.io.Lightcurve` (recordings of
+    several objects or cameras); None when the recording has no such column or only one.
+    """
+    out = []
+    for idx, names in (("object_index", "object_names"), ("camera_index", "camera_names")):
+        i = getattr(lc, idx, None)
+        nm = getattr(lc, names, None)
+        if i is None or nm is None or len(nm) < 1:
+            out += [None, None]
+            continue
+        i = np.asarray(i, np.int64).reshape(-1)
+        if i.size != len(lc) or i.min() < 0 or i.max() >= len(nm):
+            raise InputError(f"{idx} must index {names} for every row", field=idx)
+        out += [i, [str(x) for x in nm]]
+    return tuple(out)
+
+
+def _union(names_list):
+    out = []
+    for names in names_list:
+        for n in names:
+            if n not in out:
+                out.append(n)
+    return out
+
+
+def combine_problems(problems, object_names) -> Problem:
+    """One magnitude problem of several recordings, one object each (``lightcurve import``
+    writes one file per object): rows concatenated, times rebased onto the first recording's
+    epoch, sites and cameras merged by name, and ``object`` = the recording's index (named
+    ``object_names``), so that objects can be held out (:mod:`.folds`). The recordings must
+    share the model (shape, Sun magnitude, eclipse handling) and have no free baseline
+    parameters yet (:func:`with_free_words` adds them for the merged channels).
+    """
+    from dataclasses import replace as _replace
+
+    from ..geometry.time import parse_epoch
+    from ..physics import ModelContext
+
+    problems = list(problems)
+    if len(problems) == 1:
+        return _replace(problems[0], object=np.zeros(len(problems[0].ctx), np.int64),
+                        object_names=list(object_names))
+    p0 = problems[0]
+    for k, p in enumerate(problems):
+        if p.kind != "magnitude" or p.free:
+            raise ValueError("combine_problems takes magnitude problems without free parameters")
+        c, c0 = p.ctx, p0.ctx
+        same = (c.shape.n_facets == c0.shape.n_facets
+                and np.allclose(c.shape.normals_body, c0.shape.normals_body)
+                and np.allclose(c.shape.areas_m2, c0.shape.areas_m2)
+                and all(np.allclose(c.shape.param_table[key], c0.shape.param_table[key], equal_nan=True)
+                        for key in c0.shape.param_table) and set(c.shape.param_table) == set(c0.shape.param_table))
+        if not same:
+            raise InputError("the recordings are modelled with different shapes; diagnose them "
+                             "separately or give one --scenario/--shape", field="recording",
+                             value=object_names[k])
+        if c.sun_mag != c0.sun_mag or c.ignore_eclipse != c0.ignore_eclipse:
+            raise InputError("the recordings use different Sun magnitudes (bands) or eclipse "
+                             "handling", field="recording", value=object_names[k])
+        if c.attitude_fn is not None or c.orbit_fn is not None:
+            raise ValueError("cannot combine contexts with attitude/orbit callables")
+    e0 = parse_epoch(p0.ctx.epoch_utc)
+    shifts = [(parse_epoch(p.ctx.epoch_utc) - e0).total_seconds() for p in problems]
+    sites = _union([p.site_names for p in problems])
+    chans = _union([p.channel_names for p in problems])
+    has_cam = any(p.camera is not None for p in problems)
+
+    def cat(get):
+        vals = [get(p) for p in problems]
+        if any(v is None for v in vals):
+            return None
+        return np.concatenate([np.asarray(v) for v in vals])
+
+    site_map = [np.array([sites.index(n) for n in p.site_names], np.int64) for p in problems]
+    ctx_site = np.concatenate([m[p.ctx.site_index] for m, p in zip(site_map, problems)])
+    cam_ctx = None
+    if has_cam:
+        cam_ctx = np.concatenate([np.array([chans.index(n) for n in p.channel_names], np.int64)
+                                  [p.ctx.camera_index_rows] for p in problems])
+    omega = cat(lambda p: p.ctx.omega)
+    ctx = ModelContext(epoch_utc=p0.ctx.epoch_utc,
+                       t=np.concatenate([p.ctx.t + s for p, s in zip(problems, shifts)]),
+                       site_index=ctx_site, site_names=sites, shape=p0.ctx.shape,
+                       q=cat(lambda p: p.ctx.q), omega=omega,
+                       r_obj_eci_m=cat(lambda p: p.ctx.r_obj_eci_m),
+                       v_obj_eci_m_s=cat(lambda p: p.ctx.v_obj_eci_m_s),
+                       r_site_eci_m=cat(lambda p: p.ctx.r_site_eci_m),
+                       r_sun_eci_m=cat(lambda p: p.ctx.r_sun_eci_m),
+                       elevation_rad=cat(lambda p: p.ctx.elevation_rad), sun_mag=p0.ctx.sun_mag,
+                       ignore_eclipse=p0.ctx.ignore_eclipse,
+                       camera_index=cam_ctx, camera_names=chans if has_cam else None)
+    offs = np.cumsum([0] + [len(p.ctx) for p in problems[:-1]])
+    obj = np.concatenate([np.full(len(p.ctx), k, np.int64) for k, p in enumerate(problems)])
+    night = None
+    if all(p.night is not None for p in problems):
+        night = np.concatenate([np.asarray(p.night) for p in problems])
+    return Problem("magnitude", ctx, cat(lambda p: p.y), cat(lambda p: p.sigma),
+                   np.concatenate([p.t + s for p, s in zip(problems, shifts)]),
+                   np.concatenate([m[p.site] for m, p in zip(site_map, problems)]),
+                   np.concatenate([p.epoch_index + o for p, o in zip(problems, offs)]),
+                   sites, [], elevation_rad=cat(lambda p: p.elevation_rad),
+                   phase_rad=cat(lambda p: p.phase_rad), shadow_margin=cat(lambda p: p.shadow_margin),
+                   night=night, label=", ".join(p.label for p in problems), object=obj,
+                   object_names=list(object_names),
+                   camera=cam_ctx, camera_names=chans if has_cam else None)
+
+
+def with_free_words(problem, words) -> Problem:
+    """``problem`` with the free baseline parameters of ``words`` (:func:`parse_free`) for
+    its shape and photometric channels; a free zero point excludes the zero_point effect."""
+    free = _free_params(list(words), problem.ctx.shape, problem.channel_names)
+    ex = tuple(problem.exclude) + (("zero_point",) if "zero_point" in words else ())
+    from dataclasses import replace as _replace
+
+    return _replace(problem, free=free, exclude=ex)
 
 
 def css_problem(ctx, y, sigma, *, label="", censored_at_zero=False) -> Problem:

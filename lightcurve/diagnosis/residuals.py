@@ -18,6 +18,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import stats
 
@@ -80,20 +82,27 @@ def whiteness(z, t, alpha: float = 0.001) -> dict:
 
 
 def consistency(z, t, n_params: int, *, alpha_chi2: float = 0.002, alpha_white: float = 0.001) -> dict:
-    """χ²/dof against its band plus whiteness; ``consistent`` when both pass.
+    """Is the model consistent with the stated noise? χ²/dof against its band, whiteness.
 
-    False-alarm rate for residuals that really are white N(0,1): ≤ alpha_chi2 + 2·alpha_white
-    (0.4 % with the defaults).
+    ``consistent`` when χ²/dof is not above the upper edge of its two-sided (1 − alpha_chi2)
+    band and either the residuals are white (Ljung–Box and runs tests at alpha_white) or
+    χ²/dof ≤ 1. A χ²/dof at or below 1 — even below the band, a fit tighter than the stated
+    noise (the σ are overstated) — is consistency, never a mismatch: whatever structure the
+    residuals have is smaller than the noise the recording claims. ``tighter_than_noise``
+    flags χ²/dof below the band. False-alarm rate for residuals that really are white
+    N(0,1): ≤ alpha_chi2/2 + 2·alpha_white (0.3 % with the defaults).
     """
     z = np.asarray(z, float)
     dof = max(z.size - int(n_params), 1)
     c2 = float(z @ z)
     lo, hi = chi2_band(dof, alpha_chi2)
     w = whiteness(z, t, alpha_white)
-    in_band = lo <= c2 / dof <= hi
-    return {"chi2": c2, "dof": dof, "chi2_dof": c2 / dof, "chi2_dof_band": [lo, hi],
-            "chi2_in_band": bool(in_band), "whiteness": w,
-            "consistent": bool(in_band and w["white"])}
+    r = c2 / dof
+    in_band = lo <= r <= hi
+    ok = bool(r <= hi and (w["white"] or r <= 1.0))
+    return {"chi2": c2, "dof": dof, "chi2_dof": r, "chi2_dof_band": [lo, hi],
+            "chi2_in_band": bool(in_band), "tighter_than_noise": bool(r < lo), "whiteness": w,
+            "consistent": ok}
 
 
 def _segment(kind, label, m, z, t, n_tests, alpha):
@@ -108,13 +117,34 @@ def _segment(kind, label, m, z, t, n_tests, alpha):
             "p_value": p, "systematic": bool(p < alpha / max(n_tests, 1))}
 
 
+def _time_label(problem, t0, t1) -> str:
+    """'YYYY-MM-DD hh:mm:ss–hh:mm:ss UTC' when the problem has an epoch, else seconds."""
+    epoch = getattr(problem.ctx, "epoch_utc", None)
+    if not epoch:
+        return f"{t0:.1f}-{t1:.1f} s"
+    from datetime import timedelta
+
+    from ..geometry.time import parse_epoch
+
+    e = parse_epoch(epoch)
+    a, b = e + timedelta(seconds=float(t0)), e + timedelta(seconds=float(t1))
+    tail = b.strftime("%H:%M:%S") if a.date() == b.date() else b.strftime("%Y-%m-%d %H:%M:%S")
+    return f"{a.strftime('%Y-%m-%d %H:%M:%S')}–{tail} UTC"
+
+
 def find_segments(problem, z, *, alpha: float = 0.01, block: int = 30, min_n: int = 5) -> list[dict]:
     """Locate systematic residuals (module docstring); sorted by p-value, systematic first.
 
     ``problem`` supplies ``t``, ``site``, ``site_names``, ``epoch_index`` and the per-epoch
     geometry (``elevation_rad``, ``phase_rad``, ``shadow_margin``, NaN/None when unknown).
+    When the residuals as a whole are wider than the noise (χ²/n = s² > 1), every segment
+    would fail a test against N(0, 1); the segments are then tested against N(0, s²) —
+    "worse than the rest of the recording" — and ``scale`` records s.
     """
     z = np.asarray(z, float)
+    s2 = float(z @ z) / max(z.size, 1)
+    scale = math.sqrt(s2) if s2 > 1.0 else 1.0
+    z = z / scale
     t = np.asarray(problem.t, float)
     cands = []
     site_word = "sensor" if problem.kind == "css" else "site"
@@ -135,7 +165,7 @@ def find_segments(problem, z, *, alpha: float = 0.01, block: int = 30, min_n: in
             if c.size >= min_n:
                 m = np.zeros(z.size, bool)
                 m[c] = True
-                cands.append(("time", f"{t[c].min():.1f}-{t[c].max():.1f} s", m))
+                cands.append(("time", _time_label(problem, t[c].min(), t[c].max()), m))
     ei = problem.epoch_index
     if problem.elevation_rad is not None:
         el = np.degrees(np.asarray(problem.elevation_rad, float))[ei]
@@ -154,5 +184,7 @@ def find_segments(problem, z, *, alpha: float = 0.01, block: int = 30, min_n: in
         if min_n <= m.sum() < z.size:
             cands.append(("geometry", f"high phase (> {HIGH_PHASE_DEG:.0f} deg)", m))
     segs = [_segment(kind, label, m, z, t, len(cands), alpha) for kind, label, m in cands]
+    for sg in segs:
+        sg["scale"] = scale
     segs.sort(key=lambda s: (not s["systematic"], s["p_value"]))
     return segs

@@ -25,6 +25,7 @@ from ..core.particles import n_chunks
 from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, brdf_product_nb,
                                cook_torrance_fresnel_xyz, facet_flux_nb, fresnel_xyz)
 from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
+from .facet_states import fill_facet_arrays_nb
 
 __all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
            "chart_rows", "chart_stats", "roughen_chart", "roughen_compose", "liu_west_attitude",
@@ -403,28 +404,6 @@ def min_abs_residual(mpred, y):
     return b
 
 
-@nb.njit(cache=True, inline="always")
-def _fill_facet_arrays(z, facet, kind_col, logit, areas0, params0, ar, pr):
-    """Facet areas ``ar`` (F,) m² and BRDF parameters ``pr`` (F,P) of one Model 3 state z (D,).
-
-    Starts from the nominal ``areas0``/``params0`` and overwrites the estimated entries with
-    ``p = 1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``; ``kind_col[d] == 3`` is an area, otherwise
-    the BRDF parameter column of facet ``facet[d]``.
-    """
-    F, P = params0.shape
-    for f in range(F):
-        ar[f] = areas0[f]
-        for j in range(P):
-            pr[f, j] = params0[f, j]
-    for d in range(z.shape[0]):
-        zz = z[d]
-        v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
-        if kind_col[d] == 3:
-            ar[facet[d]] = v
-        else:
-            pr[facet[d], kind_col[d]] = v
-
-
 @nb.njit(cache=True, parallel=True)
 def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, areas0, ids,
                            params0, offset, m_out):
@@ -460,7 +439,7 @@ def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, ar
         for i in range(lo, hi):
             iq = i if qall else 0
             iz = i if zall else 0
-            _fill_facet_arrays(Z[iz], facet, kind_col, logit, areas0, params0, ar, pr)
+            fill_facet_arrays_nb(Z[iz], facet, kind_col, logit, areas0, params0, ar, pr)
             if use_zeta:
                 d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
                 qm[0], qm[1], qm[2], qm[3] = qmul_xyz(d0, d1, d2, d3, Q[iq, 0], Q[iq, 1],
@@ -527,7 +506,7 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
         ar = np.empty(F)
         pr = np.empty((F, P))
         for i in range(lo, hi):
-            _fill_facet_arrays(Z[i], facet, kind_col, logit, areas0, params0, ar, pr)
+            fill_facet_arrays_nb(Z[i], facet, kind_col, logit, areas0, params0, ar, pr)
             acc = 0.0
             for j in range(kmax + 1):
                 wj = 1.0 if j < kmax else phi_last

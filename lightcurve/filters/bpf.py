@@ -58,6 +58,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -69,6 +70,7 @@ from ..memory import check_allocation
 from ..threads import limited_threads
 from . import _bpf_kernels as BK
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
+from .config import ConfigBase, register_filter_config
 from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
@@ -81,16 +83,18 @@ RNGS = ("philox", "numpy")
 
 # variant → defaults of the fields left None (module docstring, "Variants")
 _VARIANT_DEFAULTS = {
-    "robust": dict(resampling="systematic", progressive=True, rejuvenation="auto", gate=True,
+    "robust": dict(resampling="systematic", progressive=True, rejuvenation="auto", gating=True,
                    reference="refined"),
     "thesis": dict(resampling="multinomial", progressive=False, rejuvenation="table7.9",
-                   gate=False, reference="heaviest"),
+                   gating=False, reference="heaviest"),
 }
 
 
+@register_filter_config
 @dataclass(frozen=True)
-class BPFConfig:
-    """Settings of one bootstrap particle filter (validated on construction).
+class BPFConfig(ConfigBase):
+    """Settings of one bootstrap particle filter (validated on construction; the particle
+    filter's configuration object of :mod:`lightcurve.filters.config`).
 
     Fields left ``None`` take the defaults of ``variant`` (module docstring, "Variants"); a field
     given explicitly overrides the variant (a named departure, recorded in the Estimate's meta).
@@ -114,11 +118,18 @@ class BPFConfig:
         (separate rejuvenation; 1 disables it).
     mcmc_moves : int ≥ 0 or None — attitude-known Model 3 runs: Metropolis resample-move steps
         per resampling (None: 1 there, else 0).
-    gate : bool — the outlier gate of :mod:`lightcurve.filters.gating` (False: none, as ch. 7).
+    gating : bool — the outlier gate of :mod:`lightcurve.filters.gating` (False: none, as ch. 7;
+        the gate's own settings are the problem's ``gate``).
     reference : {"refined", "heaviest"} — reference attitude of the estimate (step 4).
     rng : {"philox", "numpy"} — random-number source (module docstring).
+    keep_clouds : tuple of int — epochs (negative from the end) at which to keep the error
+        rotation vectors of ``cloud_size`` particles (needs truth; fig. 9.6-style plots).
+    cloud_size : int ≥ 1
+    device : {"cpu", "gpu"} — numba CPU kernels or the CUDA kernels of
+        :mod:`lightcurve.filters.bpf_gpu`.
     """
 
+    method: ClassVar[str] = "bpf"
     particles: int = 10_000
     variant: str = "robust"
     resampling: str | None = None
@@ -131,9 +142,12 @@ class BPFConfig:
     joint_max_spread_deg: float = 25.0
     param_discount: float = 0.98
     mcmc_moves: int | None = None
-    gate: bool | None = None
+    gating: bool | None = None
     reference: str | None = None
     rng: str = "philox"
+    keep_clouds: tuple = ()
+    cloud_size: int = 2000
+    device: str = "cpu"
 
     def __post_init__(self):
         if self.variant not in VARIANTS:
@@ -171,6 +185,11 @@ class BPFConfig:
             raise ValueError(f"reference must be 'refined' or 'heaviest', got {self.reference!r}")
         if self.rng not in RNGS:
             raise ValueError(f"rng must be one of {', '.join(RNGS)}, got {self.rng!r}")
+        object.__setattr__(self, "keep_clouds", tuple(int(k) for k in self.keep_clouds))
+        if int(self.cloud_size) < 1:
+            raise ValueError(f"cloud_size must be >= 1, got {self.cloud_size}")
+        if self.device not in ("cpu", "gpu"):
+            raise ValueError(f"device must be 'cpu' or 'gpu', got {self.device!r}")
 
     @classmethod
     def thesis(cls, **kw) -> "BPFConfig":
@@ -181,10 +200,6 @@ class BPFConfig:
     def robust(cls, **kw) -> "BPFConfig":
         """Our default: progressive correction, joint kernel, outlier gate."""
         return cls(variant="robust", **kw)
-
-    def replace(self, **kw) -> "BPFConfig":
-        """A copy with some fields changed (validated)."""
-        return dataclasses.replace(self, **kw)
 
     def as_dict(self) -> dict:
         """JSON-ready fields."""
@@ -253,7 +268,7 @@ def _flat(buf, n, r):
 
 
 def run_bpf(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0, bias=None,
-            facets=None, attitude="estimate", keep_clouds=(), cloud_size=2000,
+            facets=None, attitude="estimate", keep_clouds=None, cloud_size=None,
             initial_cloud=None, **overrides) -> Estimate:
     """Run the bootstrap particle filter (module docstring) with numba kernels → Estimate.
 
@@ -273,15 +288,22 @@ def run_bpf(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0, 
     attitude : {"estimate", "truth"} — "truth" (or ``problem.attitude_known``) holds q and ω
         at the lightcurve's truth (§10.7 parameter-only runs) and estimates only the extra
         states.
-    keep_clouds : sequence of int — epochs (negative from the end) at which to keep the error
-        rotation vectors of ``cloud_size`` particles (needs truth; fig. 9.6-style plots).
+    keep_clouds, cloud_size : override the configuration's (None: the configuration's).
     initial_cloud : (Q (N,4), W (N,3)) or None — start from these particles instead of the
         draw from ``P₀`` (N must equal ``particles``).
     """
     cfg = _config(config, overrides)
+    if keep_clouds is not None or cloud_size is not None:
+        cfg = cfg.replace(**{k: v for k, v in (("keep_clouds", keep_clouds),
+                                               ("cloud_size", cloud_size)) if v is not None})
+    if cfg.device == "gpu":
+        from .bpf_gpu import run_bpf_gpu
+
+        return run_bpf_gpu(problem, cfg, seed=seed, bias=bias, facets=facets,
+                           attitude=attitude, initial_cloud=initial_cloud)
     backend = "numba" if problem.model.kernel_ok else "numpy"
-    run = _Run(problem, cfg, seed, backend, bias, facets, attitude, keep_clouds, cloud_size,
-               initial_cloud)
+    run = _Run(problem, cfg, seed, backend, bias, facets, attitude, cfg.keep_clouds,
+               cfg.cloud_size, initial_cloud)
     # one chunk of particles per thread at most: a small cloud runs on fewer threads (waking
     # idle threads costs more than its work, most of all on a busy machine)
     with limited_threads(CP.n_chunks(cfg.particles)):
@@ -295,8 +317,8 @@ def run_bpf_numpy(problem: FilterProblem, config: BPFConfig | None = None, *, se
     NumPy (the benchmark reference; :func:`run_bpf` for the arguments). With the same draws
     (``rng``) its results agree with :func:`run_bpf` to floating-point round-off."""
     cfg = _config(config, overrides)
-    return _Run(problem, cfg, seed, "numpy", bias, facets, attitude, (), 2000,
-                initial_cloud).run()
+    return _Run(problem, cfg, seed, "numpy", bias, facets, attitude, cfg.keep_clouds,
+                cfg.cloud_size, initial_cloud).run()
 
 
 def _config(config, overrides):
@@ -877,7 +899,7 @@ class _Run:
         self.rec = Recorder(p, "bpf")
         self.rec.stages = np.zeros(p.n, dtype=np.int64)
         self.gate = InnovationGate(p, auto="inflate")
-        if not cfg.gate:
+        if not cfg.gating:
             self.gate.cfg = dataclasses.replace(self.gate.cfg, mode="off")
         dyn = p.dynamics
         self.mode = 0 if dyn.kind == "controlled" else 1

@@ -305,7 +305,7 @@ class _CudaOps:
 
 
 def run_bpf_gpu(problem, config=None, *, seed=0, bias=None, facets=None, attitude="estimate",
-                keep_clouds=(), cloud_size=2000, initial_cloud=None, **overrides):
+                initial_cloud=None, **overrides):
     """:func:`lightcurve.filters.bpf.run_bpf` with the CUDA backend (module docstring) →
     Estimate. Same arguments; ``est.meta["bpf"]["backend"] == "cuda"``."""
     from ..errors import InputError
@@ -325,6 +325,6 @@ def run_bpf_gpu(problem, config=None, *, seed=0, bias=None, facets=None, attitud
     if not problem.model.kernel_ok:
         raise NotImplementedError("the shape has BRDFs without a kernel; use device='cpu'")
     B._BACKENDS.setdefault("cuda", _CudaOps)
-    run = B._Run(problem, cfg, seed, "cuda", None, None, attitude, keep_clouds, cloud_size,
-                 initial_cloud)
+    run = B._Run(problem, cfg, seed, "cuda", None, None, attitude, cfg.keep_clouds,
+                 cfg.cloud_size, initial_cloud)
     return run.run()

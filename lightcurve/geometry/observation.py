@@ -21,7 +21,7 @@ import numpy as np
 from .eclipse import lit_fraction as _lit_fraction
 from .frames import enu_to_altaz, itrs_rotation
 from .sites import enu_matrix, get_site, site_itrs_m
-from .time import skyfield_times, sun_position_gcrs
+from .time import epoch_iso, skyfield_times, sun_position_gcrs
 from .visibility import DEFAULT_TWILIGHT_DEG, airmass_kasten_young, check_illumination
 
 __all__ = ["ObservationGeometry", "compute_geometry"]
@@ -193,7 +193,7 @@ def compute_geometry(epoch_utc, t_s, site_index, sites, r_obj_eci_m, v_obj_eci_m
     dark = sun_el < np.radians(twilight_deg)
     sunlit = lit > 0.0
     return ObservationGeometry(
-        epoch_utc=str(epoch_utc), sites=sites, twilight_deg=float(twilight_deg),
+        epoch_utc=epoch_utc if isinstance(epoch_utc, str) else epoch_iso(epoch_utc), sites=sites, twilight_deg=float(twilight_deg),
         eclipse_model=eclipse_model, t=t, site_index=sidx, r_obj_eci_m=r_obj,
         v_obj_eci_m_s=v_obj, r_site_eci_m=r_site, r_sun_eci_m=r_sun, obj_to_sun_unit=to_sun,
         obj_to_obs_unit=to_obs, range_obs_m=range_obs, range_sun_m=range_sun,

@@ -21,7 +21,7 @@ import atexit
 import functools
 import os
 import warnings
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 
 import numpy as np
 
@@ -36,6 +36,7 @@ __all__ = [
     "timescale",
     "ephemeris",
     "parse_epoch",
+    "epoch_iso",
     "skyfield_times",
     "sun_position_gcrs",
     "moon_position_gcrs",
@@ -109,8 +110,10 @@ def parse_epoch(epoch_utc) -> datetime:
     """Parse an ISO 8601 UTC epoch into a timezone-aware :class:`datetime` in UTC.
 
     Accepts ``"2020-03-01T08:08:40"``, ``"2020-03-01 08:08:40.5Z"``, ``"...+00:00"`` (any
-    explicit offset is converted to UTC; text without an offset is taken as UTC) or a
-    ``datetime`` (naive = UTC).
+    explicit offset is converted to UTC; text without an offset is taken as UTC), a
+    ``datetime`` (naive = UTC; pandas ``Timestamp`` included), a ``numpy.datetime64`` (UTC), a
+    scalar skyfield ``Time`` or a scalar astropy ``Time`` (any scale; converted to UTC).
+    Sub-microsecond digits are dropped (``datetime`` resolution).
 
     Raises
     ------
@@ -120,6 +123,13 @@ def parse_epoch(epoch_utc) -> datetime:
     """
     if isinstance(epoch_utc, datetime):
         dt = epoch_utc
+    elif isinstance(epoch_utc, np.datetime64):
+        if np.isnat(epoch_utc):
+            raise InputError("not a date-time (NaT)", field="epoch_utc", value=str(epoch_utc))
+        us = int(epoch_utc.astype("datetime64[us]").astype("int64"))
+        dt = datetime(1970, 1, 1, tzinfo=timezone.utc) + timedelta(microseconds=us)
+    elif _is_skyfield_time(epoch_utc) or _is_astropy_time(epoch_utc):
+        dt = _time_object_to_datetime(epoch_utc)
     elif isinstance(epoch_utc, str):
         text = epoch_utc.strip()
         if text.endswith(("Z", "z")):
@@ -130,13 +140,45 @@ def parse_epoch(epoch_utc) -> datetime:
             raise InputError("not an ISO 8601 date-time", field="epoch_utc", value=epoch_utc,
                              allowed="e.g. 2020-03-01T08:08:40Z") from None
     else:
-        raise InputError("expected an ISO 8601 UTC text", field="epoch_utc", value=epoch_utc)
+        raise InputError("expected an ISO 8601 UTC text, a datetime or a Time",
+                         field="epoch_utc", value=epoch_utc)
     if dt.tzinfo is None:
         dt = dt.replace(tzinfo=timezone.utc)
-    dt = dt.astimezone(timezone.utc)
+    try:
+        dt = dt.astimezone(timezone.utc)
+    except (OverflowError, ValueError):  # e.g. 0001-01-01T00:00:00+01:00 is before year 1 UTC
+        raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
+                         value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC") from None
     if not (DE421_START_UTC <= dt <= DE421_END_UTC):
         raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
                          value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC")
+    return dt
+
+
+def epoch_iso(epoch_utc) -> str:
+    """The epoch as ISO 8601 UTC text with a ``Z`` (what files and scenarios store).
+
+    Takes anything :func:`parse_epoch` accepts; whole seconds print without a fraction,
+    otherwise microseconds are kept (``"2020-03-01T08:08:40.250000Z"``).
+    """
+    dt = parse_epoch(epoch_utc)
+    spec = "seconds" if dt.microsecond == 0 else "microseconds"
+    return dt.replace(tzinfo=None).isoformat(timespec=spec) + "Z"
+
+
+def _is_astropy_time(x) -> bool:
+    return type(x).__name__ == "Time" and type(x).__module__.startswith("astropy")
+
+
+def _time_object_to_datetime(t) -> datetime:
+    """A scalar skyfield or astropy ``Time`` as an aware UTC datetime (InputError otherwise)."""
+    if np.ndim(getattr(t, "tt", getattr(t, "jd", 0.0))) != 0 or getattr(t, "shape", ()) != ():
+        raise InputError("an epoch must be one time, not an array of times", field="epoch_utc",
+                         value=str(t))
+    if _is_astropy_time(t):
+        dt = t.utc.to_datetime(timezone=timezone.utc)
+    else:  # skyfield: utc_datetime() rounds to the microsecond and handles leap seconds
+        dt = t.utc_datetime()
     return dt
 
 
@@ -174,7 +216,7 @@ def skyfield_times(epoch_utc, t_s):
 
 def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     eph = ephemeris()
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     earth, body = eph["earth"], eph[name]
     if light_time:
         pos = earth.at(t).observe(body).position.m
@@ -183,8 +225,14 @@ def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(pos, dtype=float).reshape(3, -1).T)
 
 
-def _is_time(x) -> bool:
-    return type(x).__name__ == "Time" and hasattr(x, "tt")
+def _is_skyfield_time(x) -> bool:
+    return type(x).__name__ == "Time" and hasattr(x, "tt") and hasattr(x, "ts")
+
+
+def is_time(x) -> bool:
+    """True for a skyfield ``Time`` *array* (the explicit-times form of the geometry
+    functions, ``t_s`` ignored); a scalar ``Time`` is an epoch like any other."""
+    return _is_skyfield_time(x) and np.ndim(x.tt) > 0
 
 
 def sun_position_gcrs(epoch_utc, t_s=0.0, *, light_time: bool = True) -> np.ndarray:
@@ -192,9 +240,9 @@ def sun_position_gcrs(epoch_utc, t_s=0.0, *, light_time: bool = True) -> np.ndar
 
     Parameters
     ----------
-    epoch_utc : str or datetime or skyfield Time
-        Scenario epoch (ISO 8601 UTC). A skyfield ``Time`` array may be passed instead, in
-        which case ``t_s`` is ignored.
+    epoch_utc : str, datetime, numpy.datetime64, skyfield or astropy Time
+        Scenario epoch (:func:`parse_epoch`). A skyfield ``Time`` *array* may be passed
+        instead, in which case ``t_s`` is ignored.
     t_s : float or array (N,)
         Seconds since the epoch.
     light_time : bool

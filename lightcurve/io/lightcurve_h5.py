@@ -15,15 +15,23 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..report.views import LightcurveViews
 from .atomic import atomic_path
 
-__all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
+__all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION", "MAG_RANGE", "MIN_OBJECT_RADIUS_M"]
 
 FORMAT_VERSION = 1
+#: apparent magnitudes accepted from any source (open interval): the Sun is −26.7, the
+#: faintest objects measured (Hubble deep fields) about +31; beyond this a value is a unit or
+#: parsing error, not a measurement (1e300 overflowed the filters' likelihoods)
+MAG_RANGE = (-30.0, 40.0)
+#: an observed object is outside the Earth: its distance from the centre exceeds the polar
+#: radius, WGS84 b = 6356752.3 m (an object at the Earth's centre used to be inverted)
+MIN_OBJECT_RADIUS_M = 6_356_752.3
 
 
-@dataclass
-class Lightcurve:
+@dataclass(repr=False)
+class Lightcurve(LightcurveViews):
     """Apparent-magnitude time series with its observation geometry.
 
     Attributes (N measurements, K sites)
@@ -42,8 +50,14 @@ class Lightcurve:
     truth_q : (N, 4) or None, inertial→body quaternion (scalar first)
     truth_omega_rad_s : (N, 3) or None, body angular velocity in body axes
     truth_mag : (N,) or None, noise-free magnitude
-    scenario_toml : str, the scenario that produced the file ('' for imported recordings)
-    attrs : dict, further metadata (e.g. shape name, r_percent)
+    scenario_toml : str, the scenario that produced (or models) the file ('' when none)
+    attrs : dict, further metadata (e.g. shape name, r_percent, band, sun_mag, object_id)
+    camera : (N,) int or None, index into ``camera_names`` (None: one camera per site)
+    camera_names : list[str] or None, camera ids (each belongs to one site)
+    exposure_s : (N,) float or None, exposure duration (s; NaN where unknown); ``t`` is then
+        the mid-exposure time
+    shape : Shape or None, the resolved shape (facets, materials, mesh) the file carries
+        (:mod:`lightcurve.io.shape_h5`); every command uses it unless told otherwise
     """
 
     epoch_utc: str
@@ -63,8 +77,16 @@ class Lightcurve:
     truth_mag: np.ndarray | None = None
     scenario_toml: str = ""
     attrs: dict = field(default_factory=dict)
+    camera: np.ndarray | None = None
+    camera_names: list | None = None
+    exposure_s: np.ndarray | None = None
+    shape: object = None
 
     def __post_init__(self):
+        if not isinstance(self.epoch_utc, str):  # datetime, numpy.datetime64, skyfield/astropy Time
+            from ..geometry.time import epoch_iso
+
+            self.epoch_utc = epoch_iso(self.epoch_utc)
         self.validate()
 
     # ------------------------------------------------------------------------------------
@@ -75,6 +97,11 @@ class Lightcurve:
     def has_truth(self) -> bool:
         """True when the file carries the truth attitude (simulated data)."""
         return self.truth_q is not None
+
+    @property
+    def camera_index(self) -> np.ndarray | None:
+        """Alias of :attr:`camera` (per-row camera index, or None)."""
+        return self.camera
 
     @property
     def obj_to_sun_unit(self) -> np.ndarray:
@@ -154,6 +181,12 @@ class Lightcurve:
             k = int(np.argmax(np.isinf(self.mag)))
             raise err("mag", f"infinite magnitude at row {k}", value=float(self.mag[k]),
                       allowed="finite, or NaN for not measured")
+        lo, hi = MAG_RANGE
+        out = np.isfinite(self.mag) & ~((self.mag > lo) & (self.mag < hi))
+        if np.any(out):
+            k = int(np.argmax(out))
+            raise err("mag", f"magnitude out of range at row {k}", value=float(self.mag[k]),
+                      allowed=f"({lo:g}, {hi:g}), or NaN for not measured")
         bad_sig = ~((self.mag_sigma > 0) & np.isfinite(self.mag_sigma)) & np.isfinite(self.mag)
         if np.any(bad_sig):
             k = int(np.argmax(bad_sig))
@@ -167,16 +200,19 @@ class Lightcurve:
         self.site_names = [str(s) for s in self.site_names]
         if n and (self.site.min() < 0 or self.site.max() >= k):
             raise err("site", "site index out of range", allowed=f"0..{k - 1}")
-        if n > 1:  # the same site measuring twice at one instant: a duplicated row
+        self._validate_cameras(err, n)
+        if n > 1:  # the same camera measuring twice at one instant: a duplicated row
             same = (np.diff(self.t) == 0)
             if np.any(same):
-                order = np.lexsort((self.site, self.t))
-                dup = (np.diff(self.t[order]) == 0) & (np.diff(self.site[order]) == 0)
+                cam = self.camera if self.camera is not None else np.zeros(n, np.int64)
+                order = np.lexsort((cam, self.site, self.t))
+                dup = ((np.diff(self.t[order]) == 0) & (np.diff(self.site[order]) == 0)
+                       & (np.diff(cam[order]) == 0))
                 if np.any(dup):
                     j = int(order[int(np.argmax(dup)) + 1])
-                    raise err("t", f"duplicated measurement: row {j} repeats the time and site of "
-                              "another row", value=float(self.t[j]),
-                              allowed="one measurement per (time, site)")
+                    raise err("t", f"duplicated measurement: row {j} repeats the time, site and "
+                              "camera of another row", value=float(self.t[j]),
+                              allowed="one measurement per (time, site, camera)")
         try:
             self.site_lla_deg_m = np.asarray(self.site_lla_deg_m, dtype=float).reshape(k, 3)
         except ValueError:
@@ -187,11 +223,61 @@ class Lightcurve:
                 and np.all((lla[:, 1] >= -180) & (lla[:, 1] <= 360))):
             raise err("sites/lla_deg_m", "site latitude/longitude not finite or out of range",
                       allowed="lat in [-90, 90] deg, lon in [-180, 360] deg")
+        self._check_geometry(err)
         self._check_time_span(err)
         if self.truth_q is not None:
             nq = np.linalg.norm(self.truth_q, axis=1)
             if np.any(np.abs(nq - 1) > 1e-6):
                 raise err("truth_q", "quaternions must have unit norm")
+
+    def _check_geometry(self, err) -> None:
+        """The object is outside the Earth (|r_obj| > :data:`MIN_OBJECT_RADIUS_M`) and apart
+        from the site and the Sun (an inversion needs the object-to-observer and
+        object-to-Sun directions)."""
+        if not len(self):
+            return
+        r = np.linalg.norm(self.r_obj_eci_m, axis=1)
+        bad = ~(r > MIN_OBJECT_RADIUS_M)
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise err("geometry/r_obj_eci_m", f"object inside the Earth at row {k}",
+                      value=float(r[k]), allowed=f"|r| > {MIN_OBJECT_RADIUS_M:.1f} m (WGS84 "
+                      "polar radius)")
+        for name, other in (("geometry/r_site_eci_m", self.r_site_eci_m),
+                            ("geometry/r_sun_eci_m", self.r_sun_eci_m)):
+            d = np.linalg.norm(other - self.r_obj_eci_m, axis=1)
+            if not np.all(d > 0):
+                k = int(np.argmax(~(d > 0)))
+                raise err(name, f"object and {name.split('_')[1]} at the same place at row {k}",
+                          allowed="distinct positions")
+    def _validate_cameras(self, err, n) -> None:
+        """Camera indices, names and exposure times (all optional)."""
+        if (self.camera is None) != (self.camera_names is None):
+            raise err("camera", "camera and cameras/name must both be present or both absent")
+        if self.camera is not None:
+            f = np.asarray(self.camera, dtype=float)
+            if f.shape != (n,) or not np.all(np.isfinite(f) & (f == np.round(f))):
+                raise err("camera", f"expected ({n},) integer camera indices", value=f.shape)
+            self.camera = f.astype(np.int64)
+            self.camera_names = [str(c) for c in self.camera_names]
+            kc = len(self.camera_names)
+            if n and (self.camera.min() < 0 or self.camera.max() >= kc):
+                raise err("camera", "camera index out of range", allowed=f"0..{kc - 1}")
+            if len(set(self.camera_names)) != kc:
+                raise err("cameras/name", "camera ids must be distinct", value=self.camera_names)
+            for c in range(kc):  # a camera belongs to one site
+                sites = np.unique(self.site[self.camera == c])
+                if sites.size > 1:
+                    raise err("camera", f"camera {self.camera_names[c]!r} appears at several sites",
+                              value=[self.site_names[i] for i in sites],
+                              allowed="one site per camera id")
+        if self.exposure_s is not None:
+            e = np.asarray(self.exposure_s, dtype=float)
+            if e.shape != (n,):
+                raise err("exposure_s", f"expected shape ({n},), got {e.shape}")
+            if np.any(np.isinf(e) | (e < 0)) or np.any(e > 3600.0):
+                raise err("exposure_s", "exposure times must be in [0, 3600] s (NaN = unknown)")
+            self.exposure_s = e
 
     def _check_time_span(self, err) -> None:
         """The epoch parses and every time lies inside the DE421 ephemeris (1899-07-30 to
@@ -210,6 +296,33 @@ class Lightcurve:
                 raise err("t", f"time at row {k} is outside the DE421 ephemeris",
                           value=float(self.t[k]), allowed=f"[{lo:.0f}, {hi:.0f}] s from epoch_utc "
                           "(1899-07-30 to 2053-10-08 UTC)")
+
+    def resolve_shape(self, shape=None, library_dirs=None):
+        """The shape to model this lightcurve with.
+
+        In this order: ``shape`` when given (a :class:`Shape`, a library name or a shape TOML
+        path, looked up in ``library_dirs`` then the bundled library); else the shape the file
+        carries (:attr:`shape`); else the library shape named by ``attrs["shape"]``.
+
+        Raises
+        ------
+        InputError
+            No shape given, stored or named; or the named shape cannot be loaded.
+        """
+        from ..photometry import load_shape
+
+        if shape is not None:
+            return shape if not isinstance(shape, (str, Path, tuple)) else \
+                load_shape(shape if isinstance(shape, tuple) else str(shape),
+                           library_dirs=library_dirs)
+        if self.shape is not None:
+            return self.shape
+        name = (self.attrs or {}).get("shape", "")
+        if not name:
+            raise InputError("the lightcurve carries no shape and names none: give a shape "
+                             "(--shape NAME|FILE.toml, with --library DIR for a user library)",
+                             field="shape")
+        return load_shape(str(name), library_dirs=library_dirs, library_only=True)  # a name from data
 
     def count_unusable(self) -> dict:
         """Counts of rows a filter must skip: ``{"nan_mag": ...}`` (NaN = not measured)."""
@@ -244,6 +357,17 @@ class Lightcurve:
                     g["lit_fraction"] = self.lit_fraction
                 if self.elevation_rad is not None:
                     g["elevation_rad"] = self.elevation_rad
+                if self.camera is not None:
+                    h["camera"] = self.camera.astype(np.int32)
+                    h.create_group("cameras")["name"] = np.array(self.camera_names,
+                                                                 dtype=h5py.string_dtype())
+                if self.exposure_s is not None:
+                    h["exposure_s"] = self.exposure_s
+                    h["exposure_s"].attrs["units"] = "s (NaN = unknown); t is mid-exposure"
+                if self.shape is not None:
+                    from .shape_h5 import write_shape
+
+                    write_shape(h.create_group("shape"), self.shape)
                 if self.truth_q is not None:
                     g = h.create_group("truth")
                     g["q"] = self.truth_q
@@ -307,8 +431,27 @@ def read_lightcurve(path) -> Lightcurve:
                 truth_mag=ds("truth/mag", False),
                 scenario_toml=str(scen),
                 attrs=meta,
+                camera=ds("camera", False), exposure_s=ds("exposure_s", False),
             )
-    except InputError:
+            cams = ds("cameras/name", False)
+            kw["camera_names"] = None if cams is None else [
+                c.decode() if isinstance(c, bytes) else str(c) for c in np.atleast_1d(cams)]
+            if "shape" in h:
+                import h5py
+
+                from .shape_h5 import read_shape
+
+                if not isinstance(h["shape"], h5py.Group):
+                    raise InputError("expected a group", file=path, field="shape")
+                kw["shape"] = read_shape(h["shape"], file=path)
+            else:
+                kw["shape"] = None
+    except InputError as exc:
+        if exc.bare_message.startswith("not a readable HDF5") and \
+                path.suffix.lower() in (".csv", ".txt", ".tsv", ".dat"):
+            raise InputError("not an HDF5 lightcurve: a CSV recording is imported first "
+                             "('lightcurve import RECORDING.csv -o OUT.h5 --scenario MODEL.toml', "
+                             "docs/formats.md)", file=path) from None
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py: damaged file
         raise InputError(f"corrupted or unexpected HDF5 content: {exc}", file=path) from None

@@ -1,16 +1,50 @@
-"""Recording import: real apparent-magnitude measurements from CSV files.
+"""Recording import: real apparent-magnitude measurements from observatory CSV files.
 
-The default layout (docs/formats.md, "Recordings (CSV)") is a header line and the columns
-``utc, mag[, mag_sigma], site[, alt_deg, az_deg, range_m | height_m]``. Other layouts are read
-as shipped through a scenario's ``[recording]`` table (:class:`RecordingSpec`), which names or
-numbers the columns, sets a fixed site or a default sigma, the units of range/height, the
-comment character, the delimiter and the time format.
+The column mapping (docs/formats.md, "Recordings (CSV)") is a :class:`RecordingSpec`: the
+built-in default layout (header names ``utc`` or ``jd``, ``mag``, ``mag_sigma``, ``site``,
+``object``, ``camera``, ``band``, ``exposure_start``/``exposure_end`` or ``exposure_s``,
+``alt_deg``/``az_deg`` with ``range_m`` or ``height_m``, ``phase_deg``; every column but time
+and magnitude optional) or a ``[recording]`` table (a scenario's, or a mapping file of its
+own) that names or numbers the columns and sets fixed values (one site, one object, one band,
+a default σ), units, the comment character, the delimiter and the time format.
 
-Geometry (object GCRS position) comes from the topocentric columns (alt/az + range or height,
-via :func:`lightcurve.geometry.orbits.positions_from_topocentric`) or, when those columns are
-absent, from the scenario's ``[orbit]`` (Kepler/TLE). Site and Sun positions, elevations and
-lit fractions come from :func:`lightcurve.geometry.observation.compute_geometry`. The result
-is a :class:`~lightcurve.io.lightcurve_h5.Lightcurve` without truth.
+One CSV may hold several objects, sites, cameras and bands: two objects, or two cameras, at
+one instant are ordinary data. :func:`read_recordings` returns one
+:class:`~lightcurve.io.lightcurve_h5.Lightcurve` per (object, band); :func:`read_recording`
+the only one (an error naming the groups when there are several).
+
+Pipeline (one small function per step): read the text (bounded, regular files only) →
+resolve the columns → parse the rows → group by object and band → per group: resolve the
+sites, sort and drop exact copies, times since the epoch, geometry, build, screen.
+
+Geometry (object GCRS position), per object, from the first that applies:
+
+1. ``topocentric``: alt/az + range or height columns
+   (:func:`lightcurve.geometry.orbits.positions_from_topocentric`);
+2. ``range_phase``: a range column and a solar phase angle column without alt/az. The phase
+   angle fixes the observer direction only up to a rotation about the Sun line, so the line
+   of sight comes from the object's orbit (its element set, else the model scenario's
+   ``[orbit]``) and the recorded range is placed along it; the recomputed phase angle must
+   agree with the recorded one within ``phase_tolerance_deg`` (else the orbit is not this
+   object's: InputError naming the line). Largest differences in ``attrs``
+   (``max_phase_residual_deg``, ``max_range_residual_m``);
+3. ``elements``: the object's TLE/OMM element set (``element_sets``, matched by NORAD number or
+   name; :mod:`lightcurve.geometry.tle`), with an :class:`ElementAgeWarning` far from its epoch;
+4. ``orbit``: the model scenario's ``[orbit]``.
+
+Site and Sun positions, elevations and lit fractions come from
+:func:`lightcurve.geometry.observation.compute_geometry`.
+
+Sites: per-row ids (``site`` column) or one fixed site, resolved against the model scenario's
+``[[sites]]`` (catalogue or inline entries, ids by the rule of
+:func:`lightcurve.geometry.sites.inline_site_id`), then the ``site_dirs`` folders, then the
+bundled catalogue. Cameras: ids per row; stored as ``<site>/<camera>`` (a camera belongs to one
+site). Band: the ``band`` column, else ``[recording] band``; the Sun magnitude is that band's
+(:mod:`lightcurve.photometry.bands`) or ``[recording] sun_mag``; without either the file has no
+``band`` attribute and the model's ``measurement.sun_mag`` applies. Exposures: ``t`` is the
+mid-exposure time — the midpoint of ``exposure_start``/``exposure_end``, or the time column
+shifted by half of ``exposure_s`` when ``time_stamp = "start"``/``"end"``; the duration is
+stored per row (``Lightcurve.exposure_s``).
 
 Row handling (documented, counted in ``Lightcurve.attrs``):
 
@@ -18,53 +52,64 @@ Row handling (documented, counted in ``Lightcurve.attrs``):
 * an empty or ``nan`` magnitude skips the row (``attrs["skipped_nan_mag"]``);
 * rows not in time order are sorted (stable); ``attrs["sorted_by_time"] = 1`` and
   ``attrs["n_out_of_order"]`` say so;
-* an exact copy of a row (same time, site and values) is skipped
-  (``attrs["skipped_duplicate"]``); two different values at the same time and site are an
-  error naming both lines;
+* an exact copy of a row (same time, object, site, camera and values) is skipped
+  (``attrs["skipped_duplicate"]``); two different values at the same time from the same camera
+  of the same site for the same object are an error naming both lines;
 * rows with the object below the site's geometric horizon are skipped
   (``attrs["skipped_below_horizon"]``);
 * rows with the object in the Earth's full shadow (lit fraction 0: it reflects no sunlight,
   so the model cannot have produced the measurement) are skipped by default and counted
   (``attrs["skipped_unlit"]``). ``unlit="keep"`` keeps them — counted in ``attrs["n_unlit"]``
-  and announced with an ``UnlitPassWarning`` — for diagnosing shadow effects (an object
-  measured where the model puts it in the umbra points at a mis-modelled shadow or clock) and
-  for scenarios with ``measurement.ignore_eclipse = true`` (Bernard's published cases model
-  umbral passes as if sunlit; that is the default when such a scenario is given). Partly lit
-  rows (penumbra, 0 < lit fraction < 1) are always kept. The attitude filters skip, flag and
-  count any unlit row that reaches them (:mod:`lightcurve.filters.gating`);
+  and announced with an ``UnlitPassWarning`` — for diagnosing shadow effects and for scenarios
+  with ``measurement.ignore_eclipse = true`` (the default when such a scenario is given).
+  Partly lit rows (penumbra) are always kept. The attitude filters skip, flag and count any
+  unlit row that reaches them (:mod:`lightcurve.filters.gating`);
 * every other bad value (wrong number of fields, unparsable time or number, altitude out of
-  [-90, 90] / below 0 with a height, azimuth not finite, negative sigma/range, a height below
-  the site, an unknown site) raises :class:`~lightcurve.errors.InputError` naming the file, the
-  line number and the column.
+  [-90, 90] / below 0 with a height, azimuth not finite, negative sigma/range, a phase angle
+  outside [0, 180], an exposure end before its start, a height below the site, an unknown
+  site, an object without element set) raises :class:`~lightcurve.errors.InputError` naming
+  the file, the line number and the column.
+
+Hardening: the file is read through :func:`lightcurve.io.safe_open.read_text` (regular
+files only, at most :data:`MAX_CSV_BYTES`), at most :data:`MAX_ROWS` data rows, fields longer
+than the csv module's limit are refused with the line number.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from .lightcurve_h5 import Lightcurve
+from .lightcurve_h5 import MAG_RANGE, Lightcurve
+from .safe_open import CSV_MAX_BYTES, read_text
 from .tomlio import Section
 
-__all__ = ["RecordingSpec", "recording_spec_from_section", "read_recording", "TIME_FORMATS"]
+__all__ = ["RecordingSpec", "recording_spec_from_section", "read_recording", "read_recordings",
+           "TIME_FORMATS", "MAX_CSV_BYTES", "MAX_ROWS"]
 
 #: Accepted ``time_format`` values: ISO 8601 UTC text, Unix seconds (UTC), MJD and JD (UTC).
 TIME_FORMATS = ("iso", "unix_s", "mjd_utc", "jd_utc")
+#: largest recording read (bytes)
+MAX_CSV_BYTES = CSV_MAX_BYTES
+#: most data rows in one recording
+MAX_ROWS = 2_000_000
 _UNITS = {"m": 1.0, "km": 1000.0}
 _UNIX0 = datetime(1970, 1, 1, tzinfo=timezone.utc)
 _MJD0 = datetime(1858, 11, 17, tzinfo=timezone.utc)
 _JD_MJD = 2400000.5
+_STAMPS = ("mid", "start", "end")
 
 
 @dataclass
 class RecordingSpec:
-    """How to read one CSV layout (the scenario's ``[recording]`` table).
+    """How to read one CSV layout (the ``[recording]`` table; docs/formats.md).
 
     Column references are header names (str) or 0-based indices (int); ``None`` = absent.
 
@@ -72,29 +117,34 @@ class RecordingSpec:
     ----------
     time_column, mag_column : str | int
         Measurement time (format ``time_format``) and apparent magnitude.
-    sigma_column : str | int | None
-        1σ magnitude noise; when absent ``default_sigma_mag`` is used.
-    default_sigma_mag : float | None
-        σ (mag) for every row when there is no sigma column (> 0).
-    site_column : str | int | None
-        Site id per row (observatories/ catalog); or ``site`` fixes one site for all rows.
-    site : str | None
-        Fixed site id.
-    alt_column, az_column : str | int | None
+    sigma_column / default_sigma_mag
+        1σ magnitude noise per row, or one σ (mag, > 0) for every row.
+    site_column / site
+        Site id per row, or one fixed site id for all rows.
+    object_column / object
+        Object id per row (NORAD number or name: how element sets are matched), or one fixed id.
+    camera_column
+        Camera id per row (stored as ``<site>/<camera>``).
+    band_column / band / sun_mag
+        Photometric band per row, or one band; or the Sun's apparent magnitude in the band
+        directly (mag at 1 au).
+    exposure_start_column, exposure_end_column
+        Exposure start and end (same ``time_format``): ``t`` = their midpoint.
+    exposure_column, time_stamp
+        Exposure duration (s) and what the time column marks: "mid" (default), "start", "end".
+    alt_column, az_column
         Geometric topocentric altitude and azimuth (north through east), degrees.
-    range_column / height_column : str | int | None
-        Slant range site→object, or object height above the WGS84 ellipsoid; with
+    range_column / height_column
+        Slant range site→object, or object height above the WGS84 ellipsoid, with
         ``range_unit`` / ``height_unit`` ("m" or "km"). At most one of the two.
-    comment : str
-        Comment character (text after it on a line is ignored); "" for none.
-    delimiter : str
-        Field separator (one character).
-    header : bool
-        Whether the first non-comment line holds column names (needed for named columns).
-    time_format : str
-        One of :data:`TIME_FORMATS`.
-    epoch_utc : str | None
-        Epoch that ``t`` counts from; default the scenario's epoch, else the first time.
+    phase_column, phase_tolerance_deg
+        Solar phase angle (deg, [0, 180]) and the largest accepted difference from the phase
+        angle recomputed from the orbit (range + phase recordings; deg).
+    comment, delimiter, header, time_format, epoch_utc
+        Comment character ("" for none), one-character field separator, whether the first
+        non-comment line holds column names (needed for named columns), one of
+        :data:`TIME_FORMATS`, and the epoch ``t`` counts from (default: the model scenario's,
+        else the first time).
     """
 
     time_column: object = "utc"
@@ -103,10 +153,22 @@ class RecordingSpec:
     default_sigma_mag: float | None = None
     site_column: object = "site"
     site: str | None = None
+    object_column: object = "object"
+    object: str | None = None
+    camera_column: object = "camera"
+    band_column: object = "band"
+    band: str | None = None
+    sun_mag: float | None = None
+    exposure_start_column: object = "exposure_start"
+    exposure_end_column: object = "exposure_end"
+    exposure_column: object = "exposure_s"
+    time_stamp: str = "mid"
     alt_column: object = "alt_deg"
     az_column: object = "az_deg"
     range_column: object = "range_m"
     height_column: object = "height_m"
+    phase_column: object = "phase_deg"
+    phase_tolerance_deg: float = 1.0
     range_unit: str = "m"
     height_unit: str = "m"
     comment: str = "#"
@@ -118,18 +180,22 @@ class RecordingSpec:
     defaults: bool = True
 
 
-_COLUMN_KEYS = ("time_column", "mag_column", "sigma_column", "site_column", "alt_column",
-                "az_column", "range_column", "height_column")
+_COLUMN_KEYS = ("time_column", "mag_column", "sigma_column", "site_column", "object_column",
+                "camera_column", "band_column", "exposure_start_column", "exposure_end_column",
+                "exposure_column", "alt_column", "az_column", "range_column", "height_column",
+                "phase_column")
+#: short names used internally and in messages for each column key
+_SHORT = {k: k[:-len("_column")] for k in _COLUMN_KEYS}
 
 
 def recording_spec_from_section(sec) -> RecordingSpec:
     """Validate a ``[recording]`` table (a :class:`Section` or dict) into a :class:`RecordingSpec`.
 
-    Keys: ``time_column`` (default "utc"), ``mag_column`` ("mag"), ``sigma_column`` or
-    ``default_sigma_mag``, ``site_column`` or ``site``, ``alt_column``, ``az_column``,
-    ``range_column`` or ``height_column`` (columns absent unless given), ``range_unit`` /
-    ``height_unit`` ("m" | "km"), ``comment`` ("#"), ``delimiter`` (","), ``header`` (true),
-    ``time_format`` ("iso" | "unix_s" | "mjd_utc" | "jd_utc"), ``epoch_utc``.
+    Keys: every ``*_column`` of :class:`RecordingSpec` (absent unless given, except
+    ``time_column = "utc"`` and ``mag_column = "mag"``), ``default_sigma_mag``, ``site``,
+    ``object``, ``band``, ``sun_mag``, ``time_stamp``, ``phase_tolerance_deg``, ``range_unit``
+    / ``height_unit`` ("m" | "km"), ``comment`` ("#"), ``delimiter`` (","), ``header`` (true),
+    ``time_format``, ``epoch_utc``.
     """
     if not isinstance(sec, Section):
         sec = Section(sec, name="recording")
@@ -141,20 +207,21 @@ def recording_spec_from_section(sec) -> RecordingSpec:
         if isinstance(v, bool) or not isinstance(v, (str, int)) or (isinstance(v, int) and v < 0) \
                 or (isinstance(v, str) and not v.strip()):
             raise InputError("expected a column name (text) or a 0-based column index", file=sec.file,
-                             field=sec._field(key), value=v)
+                             field=sec.field_name(key), value=v)
         return v.strip() if isinstance(v, str) else v
 
+    cols = {k: col(k, {"time_column": "utc", "mag_column": "mag"}.get(k)) for k in _COLUMN_KEYS}
+    if cols["exposure_start_column"] is not None and "time_column" not in sec.data:
+        cols["time_column"] = None  # the exposure midpoint is the time
     spec = RecordingSpec(
-        time_column=col("time_column", "utc"),
-        mag_column=col("mag_column", "mag"),
-        sigma_column=col("sigma_column", None),
+        **cols,
         default_sigma_mag=sec.float("default_sigma_mag", None, min=0.0, min_open=True, max=10.0),
-        site_column=col("site_column", None),
         site=sec.str("site", None),
-        alt_column=col("alt_column", None),
-        az_column=col("az_column", None),
-        range_column=col("range_column", None),
-        height_column=col("height_column", None),
+        object=sec.str("object", None),
+        band=sec.str("band", None),
+        sun_mag=sec.float("sun_mag", None, min=-30.0, max=-20.0),
+        time_stamp=sec.str("time_stamp", "mid", choices=_STAMPS),
+        phase_tolerance_deg=sec.float("phase_tolerance_deg", 1.0, min=0.0, min_open=True, max=180.0),
         range_unit=sec.str("range_unit", "m", choices=tuple(_UNITS)),
         height_unit=sec.str("height_unit", "m", choices=tuple(_UNITS)),
         comment=sec.str("comment", "#"),
@@ -167,20 +234,29 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     sec.check_unknown()
 
     def err(key, msg, value=None, allowed=None):
-        return InputError(msg, file=sec.file, field=sec._field(key), value=value, allowed=allowed)
+        return InputError(msg, file=sec.file, field=sec.field_name(key), value=value, allowed=allowed)
 
-    if spec.time_column is None or spec.mag_column is None:
-        raise err("time_column", "time_column and mag_column are required")
-    if spec.sigma_column is not None and spec.default_sigma_mag is not None:
-        raise err("default_sigma_mag", "give sigma_column or default_sigma_mag, not both")
-    if spec.site_column is not None and spec.site is not None:
-        raise err("site", "give site_column or a fixed site, not both")
-    if spec.range_column is not None and spec.height_column is not None:
-        raise err("height_column", "give range_column or height_column, not both")
+    pairs = (("sigma_column", "default_sigma_mag"), ("site_column", "site"),
+             ("object_column", "object"), ("band_column", "band"), ("band", "sun_mag"),
+             ("band_column", "sun_mag"), ("range_column", "height_column"),
+             ("exposure_column", "exposure_start_column"))
+    for a, b in pairs:
+        if getattr(spec, a) is not None and getattr(spec, b) is not None:
+            raise err(b, f"give {a} or {b}, not both")
+    if spec.mag_column is None:
+        raise err("mag_column", "mag_column is required")
+    if (spec.exposure_start_column is None) != (spec.exposure_end_column is None):
+        raise err("exposure_end_column", "give both exposure_start_column and exposure_end_column")
+    if spec.time_column is None and spec.exposure_start_column is None:
+        raise err("time_column", "time_column is required (or exposure_start/end columns)")
+    if spec.time_stamp != "mid" and spec.exposure_column is None:
+        raise err("time_stamp", "time_stamp start/end needs an exposure_column (duration, s)")
     if (spec.alt_column is None) != (spec.az_column is None):
         raise err("alt_column", "give both alt_column and az_column, or neither")
-    if (spec.range_column is not None or spec.height_column is not None) and spec.alt_column is None:
-        raise err("alt_column", "range/height columns need alt_column and az_column")
+    if spec.height_column is not None and spec.alt_column is None:
+        raise err("alt_column", "a height column needs alt_column and az_column")
+    if spec.phase_column is not None and (spec.alt_column is not None or spec.range_column is None):
+        raise err("phase_column", "a phase-angle column goes with a range column and no alt/az")
     if len(spec.delimiter) != 1 or spec.delimiter in "\r\n\"":
         raise err("delimiter", "expected one character (not a quote or newline)", spec.delimiter)
     if len(spec.comment) > 1 or (spec.comment and spec.comment == spec.delimiter):
@@ -190,6 +266,10 @@ def recording_spec_from_section(sec) -> RecordingSpec:
         named = [k for k in _COLUMN_KEYS if isinstance(getattr(spec, k), str)]
         if named:
             raise err(named[0], "header = false: columns must be 0-based indices", getattr(spec, named[0]))
+    if spec.band is not None:
+        from ..photometry.bands import sun_magnitude
+
+        sun_magnitude(spec.band, file=sec.file, field=sec._field("band"))
     if spec.epoch_utc is not None:
         from ..geometry.time import parse_epoch
 
@@ -200,11 +280,21 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     return spec
 
 
+def _as_spec(spec) -> RecordingSpec:
+    if spec is None:
+        return RecordingSpec()
+    if isinstance(spec, (dict, Section)):
+        return recording_spec_from_section(spec)
+    if isinstance(spec, RecordingSpec):
+        return spec
+    raise TypeError("expected a Scenario, RecordingSpec, Section, dict or None")
+
+
+# ----------------------------------------------------------------------------------------
+# step 1: text → rows
 # ----------------------------------------------------------------------------------------
 def _read_rows(path: Path, spec: RecordingSpec):
     """(header or None, list of (line_no, fields)) with comments and blank lines removed."""
-    from .safe_open import CSV_MAX_BYTES, read_text
-
     # a regular file of at most CSV_MAX_BYTES (no FIFO, device or endless file)
     text = read_text(path, max_bytes=CSV_MAX_BYTES, what="CSV recording", encoding="utf-8-sig")
     header = None
@@ -223,28 +313,82 @@ def _read_rows(path: Path, spec: RecordingSpec):
             header = (no, fields)
             continue
         rows.append((no, fields))
+        if len(rows) > MAX_ROWS:
+            raise InputError("too many data rows", file=path, value=f"> {MAX_ROWS}",
+                             allowed=f"<= {MAX_ROWS} rows per file (split the recording)")
     if spec.header and header is None:
         raise InputError("no header line (and no data)", file=path)
     return header, rows
 
 
-def _resolve(path, header, spec: RecordingSpec, key: str, required: bool):
-    """Column index of ``spec.<key>`` (None if absent and optional)."""
-    ref = getattr(spec, key)
-    if ref is None:
-        return None
-    if isinstance(ref, int):
-        return ref
+# ----------------------------------------------------------------------------------------
+# step 2: which column holds what
+# ----------------------------------------------------------------------------------------
+def _resolve_columns(path, header, spec: RecordingSpec):
+    """``(ci, colname, spec)``: column index per short key (None = absent), display names, and
+    the spec (the default layout switches to ``jd`` times when the header has ``jd`` and no
+    ``utc``)."""
     names = header[1] if header else []
-    if ref in names:
-        return names.index(ref)
-    if required or not spec.defaults:
-        raise InputError(f"column {ref!r} not found in the header (line {header[0] if header else '?'})",
-                         file=path, field=f"recording.{key}", value=ref,
-                         allowed=", ".join(names) or "(no header)")
-    return None
+    if spec.defaults and "utc" not in names and "jd" in names:
+        from dataclasses import replace
+
+        spec = replace(spec, time_column="jd", time_format="jd_utc")
+    if spec.defaults and spec.time_column == "utc" and "utc" not in names \
+            and "exposure_start" in names:
+        from dataclasses import replace
+
+        spec = replace(spec, time_column=None)
+    ci = {}
+    for key in _COLUMN_KEYS:
+        ref = getattr(spec, key)
+        short = _SHORT[key]
+        if ref is None:
+            ci[short] = None
+        elif isinstance(ref, int):
+            ci[short] = ref
+        elif ref in names:
+            ci[short] = names.index(ref)
+        elif key in ("time_column", "mag_column") or not spec.defaults:
+            raise InputError(f"column {ref!r} not found in the header (line {header[0] if header else '?'})",
+                             file=path, field=f"recording.{key}", value=ref,
+                             allowed=", ".join(names) or "(no header)")
+        else:
+            ci[short] = None
+    if header is not None:
+        for k, v in ci.items():
+            if v is not None and v >= len(names):
+                raise InputError(f"column index {v} beyond the {len(names)} header columns",
+                                 file=path, field=f"recording.{k}_column", value=v)
+    colname = {k: (names[v] if header and v is not None else (f"column {v}" if v is not None else None))
+               for k, v in ci.items()}
+    if spec.defaults:  # the default layout: alternatives and pairs checked on the header
+        for a, b in (("range", "height"), ("exposure", "exposure_start")):
+            if ci[a] is not None and ci[b] is not None:
+                raise InputError(f"both {colname[a]} and {colname[b]} columns present; keep one",
+                                 file=path, field=f"{colname[a]}/{colname[b]}")
+        for a, b in (("alt", "az"), ("exposure_start", "exposure_end")):
+            if (ci[a] is None) != (ci[b] is None):
+                raise InputError(f"{getattr(spec, a + '_column')} and {getattr(spec, b + '_column')} "
+                                 "columns must both be present or both absent", file=path,
+                                 field=f"{getattr(spec, a + '_column')}/{getattr(spec, b + '_column')}")
+        if ci["alt"] is None:
+            ci["height"] = None
+        if ci["alt"] is not None:
+            ci["phase"] = None
+        if ci["range"] is None:
+            ci["phase"] = None
+    if ci["alt"] is not None and ci["range"] is None and ci["height"] is None:
+        raise InputError("alt/az columns need a range or a height column", file=path,
+                         field="range_m/height_m")
+    if ci["sigma"] is None and spec.default_sigma_mag is None:
+        raise InputError("no magnitude-sigma column; set default_sigma_mag in [recording]", file=path,
+                         field=str(spec.sigma_column or "mag_sigma"))
+    return ci, colname, spec
 
 
+# ----------------------------------------------------------------------------------------
+# step 3: fields → values
+# ----------------------------------------------------------------------------------------
 def _parse_time(text: str, fmt: str) -> datetime:
     if fmt == "iso":
         s = text.strip()
@@ -262,118 +406,36 @@ def _parse_time(text: str, fmt: str) -> datetime:
     return _MJD0 + timedelta(days=x)
 
 
-def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=None,
-                   unlit=None) -> Lightcurve:
-    """Read a CSV recording into a :class:`Lightcurve` (no truth).
+@dataclass
+class _Rows:
+    """Parsed rows (one entry per kept row, file order)."""
 
-    Parameters
-    ----------
-    csv_path : path-like
-        The CSV file.
-    scenario_or_recording_section : Scenario, RecordingSpec, Section, dict or None
-        A :class:`~lightcurve.studies.scenario.Scenario` (its ``recording`` spec, its epoch, its
-        orbit for geometry when the file has no topocentric columns, and its site when the
-        file names none), a ``[recording]`` table, a :class:`RecordingSpec`, or None for the
-        default layout (docs/formats.md).
-    site_dirs : optional
-        Extra observatory catalog folders.
-    unlit : {"skip", "keep"} or None
-        Rows with the object in the Earth's full shadow (module docstring): skipped and counted
-        in ``attrs["skipped_unlit"]``, or kept, counted in ``attrs["n_unlit"]`` and warned.
-        None: "keep" for a scenario with ``measurement.ignore_eclipse = true``, else "skip".
+    times: list = field(default_factory=list)       # datetime (UTC), mid-exposure
+    mag: list = field(default_factory=list)
+    sigma: list = field(default_factory=list)
+    site: list = field(default_factory=list)        # site id text
+    obj: list = field(default_factory=list)         # object id text
+    camera: list = field(default_factory=list)      # camera id text ('' = none)
+    band: list = field(default_factory=list)        # band text ('' = none)
+    exposure: list = field(default_factory=list)    # s, NaN = unknown
+    alt: list = field(default_factory=list)
+    az: list = field(default_factory=list)
+    dist: list = field(default_factory=list)        # range or height, m
+    phase: list = field(default_factory=list)       # deg
+    line: list = field(default_factory=list)
+    skipped_nan: int = 0
+    skipped_below: int = 0
+    below_keys: list = field(default_factory=list)  # (object, band) of each row skipped below
 
-    Returns
-    -------
-    Lightcurve
-        ``t`` in s since ``epoch_utc`` (the spec's, else the scenario's, else the first time),
-        sorted; ``mag``, ``mag_sigma``; GCRS geometry (m); ``elevation_rad`` and
-        ``lit_fraction``; ``attrs`` with ``source = "recording"``, ``file``, ``n_rows``,
-        ``skipped_nan_mag``, ``sorted_by_time``, ``n_out_of_order``, ``geometry_source``
-        (``"topocentric"`` or ``"orbit"``), ``skipped_below_horizon``, ``unlit_policy``,
-        ``skipped_unlit`` and ``n_unlit`` (unlit rows kept).
 
-    Raises
-    ------
-    InputError
-        Naming the file, line and column of every bad value (see the module docstring).
-    """
-    from ..geometry.sites import get_site
-
-    path = Path(csv_path)
-    if unlit not in (None, "skip", "keep"):
-        raise InputError("unknown policy for rows in the Earth's shadow", file=path, field="unlit",
-                         value=unlit, allowed="skip, keep")
-    scenario = None
-    spec = scenario_or_recording_section
-    if spec is not None and hasattr(spec, "attitude") and hasattr(spec, "measurement"):
-        scenario = spec
-        spec = getattr(scenario, "recording", None)
-    if spec is None:
-        spec = RecordingSpec()
-    elif isinstance(spec, (dict, Section)):
-        spec = recording_spec_from_section(spec)
-    elif not isinstance(spec, RecordingSpec):
-        raise TypeError("read_recording: expected a Scenario, RecordingSpec, Section, dict or None")
-
-    header, rows = _read_rows(path, spec)
-    ci = {
-        "time": _resolve(path, header, spec, "time_column", True),
-        "mag": _resolve(path, header, spec, "mag_column", True),
-        "sigma": _resolve(path, header, spec, "sigma_column", False),
-        "site": _resolve(path, header, spec, "site_column", False),
-        "alt": _resolve(path, header, spec, "alt_column", False),
-        "az": _resolve(path, header, spec, "az_column", False),
-        "range": _resolve(path, header, spec, "range_column", False),
-        "height": _resolve(path, header, spec, "height_column", False),
-    }
-    if spec.defaults:
-        # default layout: range_m and height_m are alternatives; alt/az go together
-        if ci["range"] is not None and ci["height"] is not None:
-            raise InputError("both range_m and height_m columns present; keep one", file=path,
-                             field="range_m/height_m")
-        if (ci["alt"] is None) != (ci["az"] is None):
-            raise InputError("alt_deg and az_deg columns must both be present or both absent",
-                             file=path, field="alt_deg/az_deg")
-        if ci["alt"] is None:
-            ci["range"] = ci["height"] = None
-    colname = {k: (header[1][v] if header and v is not None and v < len(header[1]) else
-                   (f"column {v}" if v is not None else None)) for k, v in ci.items()}
-    if header is not None:
-        for k, v in ci.items():
-            if v is not None and v >= len(header[1]):
-                raise InputError(f"column index {v} beyond the {len(header[1])} header columns",
-                                 file=path, field=f"recording.{k}", value=v)
-    topo = ci["alt"] is not None and (ci["range"] is not None or ci["height"] is not None)
-    if ci["alt"] is not None and not topo:
-        raise InputError("alt/az columns need a range or a height column", file=path,
-                         field="range_m/height_m")
-    if ci["sigma"] is None and spec.default_sigma_mag is None:
-        raise InputError("no magnitude-sigma column; set default_sigma_mag in [recording]", file=path,
-                         field=str(spec.sigma_column or "mag_sigma"))
-
-    # fixed site / per-row site
-    fixed_site = None
-    if ci["site"] is None:
-        sid = spec.site
-        if sid is None and scenario is not None and len(scenario.sites) == 1:
-            fixed_site = scenario.sites[0].site
-        elif sid is None:
-            raise InputError("no site column; set site = \"<id>\" in [recording]", file=path,
-                             field=str(spec.site_column or "site"))
-        else:
-            try:
-                fixed_site = get_site(sid, dirs=site_dirs)
-            except InputError as exc:
-                raise InputError(exc.bare_message, file=path, field="recording.site", value=sid,
-                                 allowed=exc.allowed) from None
-
+def _parse_rows(path, rows, header, ci, colname, spec: RecordingSpec, default_site) -> _Rows:
+    """Values of every row (module docstring for the rules); InputError names line and column."""
     ncols = max(v for v in ci.values() if v is not None) + 1
     nexp = len(header[1]) if header else None
-    times, mags, sigmas, site_ids, alts, azs, dists, lines = [], [], [], [], [], [], [], []
-    skipped_nan = 0
-    skipped_below = 0
-    dscale = _UNITS[spec.range_unit] if ci["range"] is not None else _UNITS[spec.height_unit]
-
+    out = _Rows()
+    dkey = "range" if ci["range"] is not None else "height"
+    dscale = _UNITS[spec.range_unit] if dkey == "range" else _UNITS[spec.height_unit]
+    topo = ci["alt"] is not None
     for no, f in rows:
         if nexp is not None and len(f) != nexp:
             raise InputError(f"line {no}: expected {nexp} fields, got {len(f)}", file=path,
@@ -396,209 +458,282 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
                 raise bad(key, "not a finite number")
             return x
 
+        def when(key):
+            try:
+                return _parse_time(f[ci[key]], spec.time_format)
+            except (ValueError, OverflowError):
+                raise bad(key, f"not a {spec.time_format} UTC time",
+                          "e.g. 2022-01-25T13:28:39" if spec.time_format == "iso" else "a number") from None
+
+        def text(key, fixed, default=""):
+            if ci[key] is None:
+                return fixed if fixed is not None else default
+            v = f[ci[key]]
+            if not v:
+                raise bad(key, f"empty {key} id")
+            return v
+
         ms = f[ci["mag"]]
         if ms == "" or ms.lower() == "nan":
-            skipped_nan += 1
+            out.skipped_nan += 1
             continue
         try:
             m = float(ms)
         except ValueError:
             raise bad("mag", "not a number") from None
-        if not math.isfinite(m) or not (-30.0 < m < 40.0):
-            raise bad("mag", "magnitude out of range", "(-30, 40), or empty/nan to skip the row")
-        try:
-            dt = _parse_time(f[ci["time"]], spec.time_format)
-        except (ValueError, OverflowError):
-            raise bad("time", f"not a {spec.time_format} UTC time",
-                      "e.g. 2022-01-25T13:28:39" if spec.time_format == "iso" else "a number") from None
+        if not math.isfinite(m) or not (MAG_RANGE[0] < m < MAG_RANGE[1]):
+            raise bad("mag", "magnitude out of range",
+                      f"({MAG_RANGE[0]:g}, {MAG_RANGE[1]:g}), or empty/nan to skip the row")
+        expo = float("nan")
+        if ci["exposure_start"] is not None:
+            t0, t1 = when("exposure_start"), when("exposure_end")
+            if t1 < t0:
+                raise bad("exposure_end", "exposure ends before it starts", "end >= start")
+            expo = (t1 - t0).total_seconds()
+            dt = t0 + (t1 - t0) / 2
+            if ci["time"] is not None:
+                stamp = when("time")
+                if not (t0 - timedelta(milliseconds=1) <= stamp <= t1 + timedelta(milliseconds=1)):
+                    raise bad("time", "time stamp outside its exposure", "exposure_start <= t <= exposure_end")
+        else:
+            dt = when("time")
+            if ci["exposure"] is not None:
+                expo = num("exposure")
+                if not 0.0 <= expo <= 3600.0:
+                    raise bad("exposure", "exposure time out of range", "[0, 3600] s")
+                if spec.time_stamp == "start":
+                    dt = dt + timedelta(seconds=expo / 2)
+                elif spec.time_stamp == "end":
+                    dt = dt - timedelta(seconds=expo / 2)
         if ci["sigma"] is not None:
             s = num("sigma")
             if s <= 0:
                 raise bad("sigma", "sigma must be positive", "> 0")
         else:
             s = spec.default_sigma_mag
-        if ci["site"] is not None:
-            sid = f[ci["site"]]
-            if not sid:
-                raise bad("site", "empty site id")
-            site_ids.append(sid)
+        site = text("site", spec.site if spec.site is not None else default_site)
+        if not site:
+            raise InputError("no site column; set site = \"<id>\" in [recording]", file=path,
+                             field=str(spec.site_column or "site"))
+        obj = text("object", spec.object, "object")
+        cam = text("camera", None, "")
+        band = text("band", spec.band, "")
         if topo:
-            a = num("alt")
-            z = num("az")
+            a, z = num("alt"), num("az")
             if not -90.0 <= a <= 90.0:
                 raise bad("alt", "altitude out of range", "[-90, 90] deg")
-            key = "range" if ci["range"] is not None else "height"
-            d = num(key) * dscale
-            if key == "range" and d < 0:
-                raise bad(key, "negative range", ">= 0")
-            if key == "height" and a < 0:
+            d = num(dkey) * dscale
+            if dkey == "range" and d < 0:
+                raise bad(dkey, "negative range", ">= 0")
+            if dkey == "height" and a < 0:
                 raise bad("alt", "altitude below the horizon: no line of sight reaches a height",
                           "[0, 90] deg with a height column")
             if a < 0:  # below the geometric horizon: not observable; skipped and counted
-                skipped_below += 1
-                if ci["site"] is not None:
-                    site_ids.pop()
+                out.skipped_below += 1
+                out.below_keys.append((obj, band))
                 continue
-            alts.append(a)
-            azs.append(z)
-            dists.append(d)
-        times.append(dt)
-        mags.append(m)
-        sigmas.append(s)
-        lines.append(no)
+            out.alt.append(a)
+            out.az.append(z)
+            out.dist.append(d)
+        elif ci["range"] is not None:
+            d = num("range") * dscale
+            if d <= 0:
+                raise bad("range", "range must be positive", "> 0")
+            out.dist.append(d)
+            if ci["phase"] is not None:
+                ph = num("phase")
+                if not 0.0 <= ph <= 180.0:
+                    raise bad("phase", "phase angle out of range", "[0, 180] deg")
+                out.phase.append(ph)
+        out.times.append(dt)
+        out.mag.append(m)
+        out.sigma.append(s)
+        out.site.append(site)
+        out.obj.append(obj)
+        out.camera.append(cam)
+        out.band.append(band)
+        out.exposure.append(expo)
+        out.line.append(no)
+    return out
 
-    n = len(times)
-    if n == 0:
-        raise InputError(f"no measurement rows ({skipped_nan} skipped for a missing magnitude, "
-                         f"{skipped_below} below the horizon)", file=path)
 
-    # sites
-    if fixed_site is not None:
-        sites = [fixed_site]
-        sidx = np.zeros(n, dtype=np.int64)
-    else:
-        ids = list(dict.fromkeys(site_ids))
-        sites = []
-        for sid in ids:
-            try:
-                sites.append(get_site(sid, dirs=site_dirs))
-            except InputError as exc:
-                k = site_ids.index(sid)
-                raise InputError(f"line {lines[k]}, column {colname['site']!r}: {exc.bare_message}",
-                                 file=path, field=f"line {lines[k]}, column {colname['site']}",
-                                 value=sid, allowed=exc.allowed) from None
-        pos = {sid: i for i, sid in enumerate(ids)}
-        sidx = np.array([pos[s] for s in site_ids], dtype=np.int64)
+# ----------------------------------------------------------------------------------------
+# steps per group
+# ----------------------------------------------------------------------------------------
+def _resolve_sites(path, ids, lines, colname, scenario, site_dirs):
+    """Site objects for the ids (scenario [[sites]] first, then the folders and catalogue)."""
+    from ..geometry.sites import get_site
 
-    # sort by time (stable)
-    ts = np.array([d.timestamp() for d in times])
+    known = {s.site.id: s.site for s in getattr(scenario, "sites", [])} if scenario is not None else {}
+    out = []
+    for sid in ids:
+        if sid in known:
+            out.append(known[sid])
+            continue
+        try:
+            out.append(get_site(sid, dirs=site_dirs))
+        except InputError as exc:
+            k = lines[sid]
+            where = f"line {k}, column {colname['site']!r}: " if colname.get("site") else ""
+            allowed = exc.allowed
+            if known:
+                allowed = f"the scenario's sites {', '.join(sorted(known))}; " + (allowed or "")
+            raise InputError(f"{where}{exc.bare_message}", file=path,
+                             field=f"line {k}, column {colname['site']}" if colname.get("site")
+                             else "recording.site", value=sid, allowed=allowed) from None
+    return out
+
+
+def _time_col(colname):
+    return colname.get("time") or colname.get("exposure_start")
+
+
+def _sort_and_dedupe(path, g: dict, colname, topo):
+    """Stable time order; exact copies dropped; conflicting copies refused. Returns
+    ``(order, n_out_of_order, was_sorted, n_duplicates)``."""
+    ts = np.array([d.timestamp() for d in g["times"]])
+    n = ts.size
     order = np.argsort(ts, kind="stable")
-    # rows earlier than some row above them in the file
     n_out = int(np.sum(ts[1:] < np.maximum.accumulate(ts)[:-1])) if n > 1 else 0
     was_sorted = bool(np.all(order == np.arange(n)))
-    # the same site twice at one instant: an identical copy is dropped (counted in
-    # attrs["skipped_duplicate"]); two different values are an error naming both lines
-    skipped_dup = 0
+    skipped = 0
     if n > 1:
-        by = np.lexsort((sidx, ts))
-        rep = (np.diff(ts[by]) == 0) & (np.diff(sidx[by]) == 0)
+        sidx, cam = g["site_index"], g["camera_index"]
+        by = np.lexsort((cam, sidx, ts))
+        rep = (np.diff(ts[by]) == 0) & (np.diff(sidx[by]) == 0) & (np.diff(cam[by]) == 0)
         if np.any(rep):
-            vals = np.column_stack([mags, sigmas] + ([alts, azs, dists] if topo else []))
+            cols = [g["mag"], g["sigma"], g["exposure"]] + ([g["alt"], g["az"], g["dist"]] if topo else [])
+            vals = np.column_stack(cols)
             drop = np.zeros(n, bool)
-            for j in np.flatnonzero(rep):  # consecutive pairs: a run of copies chains up
+            for j in np.flatnonzero(rep):
                 a_, b_ = int(by[j]), int(by[j + 1])
-                if np.array_equal(vals[a_], vals[b_]):
+                if np.array_equal(vals[a_], vals[b_], equal_nan=True):
                     drop[b_] = True
                 else:
-                    raise InputError(f"lines {lines[a_]} and {lines[b_]}: two different measurements "
-                                     "at the same time from the same site", file=path,
-                                     field=f"line {lines[b_]}, column {colname['time']}",
-                                     value=str(times[b_]),
-                                     allowed="one measurement per (time, site); identical copies "
-                                     "are skipped")
-            skipped_dup = int(drop.sum())
+                    raise InputError(f"lines {g['line'][a_]} and {g['line'][b_]}: two different "
+                                     "measurements of one object at the same time from the same "
+                                     "camera of the same site", file=path,
+                                     field=f"line {g['line'][b_]}, column {_time_col(colname)}",
+                                     value=str(g["times"][b_]),
+                                     allowed="one measurement per (time, object, site, camera); "
+                                     "identical copies are skipped")
+            skipped = int(drop.sum())
             order = order[~drop[order]]
-            n = order.size
-    times = [times[k] for k in order]
-    mag = np.asarray(mags, float)[order]
-    sig = np.asarray(sigmas, float)[order]
-    sidx = sidx[order]
-    lines_s = np.asarray(lines)[order]
+    return order, n_out, was_sorted, skipped
 
-    from ..geometry.time import parse_epoch
 
-    epoch = spec.epoch_utc or (scenario.epoch_utc if scenario is not None else None)
-    if epoch is None:
-        epoch = times[0].strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-    try:
-        ep = parse_epoch(epoch)
-    except InputError as exc:
-        raise InputError(exc.bare_message, file=path, field="epoch_utc", value=epoch) from None
-    t = np.array([(d - ep).total_seconds() for d in times])
-    # validate the time range against the ephemeris (names the first bad line)
+def _check_time_range(path, times, lines, colname):
     from ..geometry.time import DE421_END_UTC, DE421_START_UTC
 
-    for k, d in enumerate(times):
+    for d, no in zip(times, lines):
         if not DE421_START_UTC <= d <= DE421_END_UTC:
-            raise InputError(f"line {lines_s[k]}: time outside the DE421 ephemeris range", file=path,
-                             field=f"line {lines_s[k]}, column {colname['time']}", value=str(d),
+            raise InputError(f"line {no}: time outside the DE421 ephemeris range", file=path,
+                             field=f"line {no}, column {_time_col(colname)}", value=str(d),
                              allowed="1899-07-30 to 2053-10-08 UTC")
 
-    from ..geometry.observation import compute_geometry
+
+def _topocentric_positions(path, epoch, t, g, sites, colname, height):
+    from ..geometry.eclipse import R_EARTH_SHADOW_M
     from ..geometry.orbits import positions_from_topocentric
     from ..geometry.time import skyfield_times
 
-    if topo:
-        alt = np.asarray(alts)[order]
-        az = np.asarray(azs)[order]
-        dist = np.asarray(dists)[order]
-        r_obj = np.empty((n, 3))
-        for k, site in enumerate(sites):
-            m_k = sidx == k
-            if ci["height"] is not None:
-                low = m_k & (dist <= site.height_m)
-                if np.any(low):
-                    j = int(np.argmax(low))
-                    raise InputError(f"line {lines_s[j]}, column {colname['height']!r}: height not above "
-                                     f"the site ({site.height_m:.0f} m)", file=path,
-                                     field=f"line {lines_s[j]}, column {colname['height']}",
-                                     value=float(dist[j]), allowed=f"> {site.height_m} m")
-            tk = skyfield_times(epoch, t[m_k])
-            try:
-                r_obj[m_k] = positions_from_topocentric(
-                    site, tk, alt[m_k], az[m_k],
-                    range_m=dist[m_k] if ci["range"] is not None else None,
-                    height_m=dist[m_k] if ci["height"] is not None else None)
-            except InputError as exc:
-                raise InputError(exc.bare_message, file=path, field=exc.field, value=exc.value,
-                                 allowed=exc.allowed) from None
-        from ..geometry.eclipse import R_EARTH_SHADOW_M
+    n = t.size
+    r_obj = np.empty((n, 3))
+    sidx, dist, lines = g["site_index"], g["dist"], g["line"]
+    key = "height" if height else "range"
+    for k, site in enumerate(sites):
+        m_k = sidx == k
+        if not np.any(m_k):
+            continue
+        if height:
+            low = m_k & (dist <= site.height_m)
+            if np.any(low):
+                j = int(np.argmax(low))
+                raise InputError(f"line {lines[j]}, column {colname['height']!r}: height not above "
+                                 f"the site ({site.height_m:.0f} m)", file=path,
+                                 field=f"line {lines[j]}, column {colname['height']}",
+                                 value=float(dist[j]), allowed=f"> {site.height_m} m")
+        tk = skyfield_times(epoch, t[m_k])
+        try:
+            r_obj[m_k] = positions_from_topocentric(
+                site, tk, g["alt"][m_k], g["az"][m_k],
+                range_m=None if height else dist[m_k], height_m=dist[m_k] if height else None)
+        except InputError as exc:
+            raise InputError(exc.bare_message, file=path, field=exc.field, value=exc.value,
+                             allowed=exc.allowed) from None
+    inside = np.linalg.norm(r_obj, axis=1) <= R_EARTH_SHADOW_M
+    if np.any(inside):
+        j = int(np.argmax(inside))
+        raise InputError(f"line {lines[j]}: the line of sight ends inside the Earth (range "
+                         "too short for this altitude?)", file=path,
+                         field=f"line {lines[j]}, column {colname[key]}", value=float(dist[j]),
+                         allowed=f"a position above the Earth's equatorial radius "
+                         f"({R_EARTH_SHADOW_M:.0f} m from its centre)")
+    return r_obj
 
-        inside = np.linalg.norm(r_obj, axis=1) <= R_EARTH_SHADOW_M
-        if np.any(inside):
-            j = int(np.argmax(inside))
-            key = "range" if ci["range"] is not None else "height"
-            raise InputError(f"line {lines_s[j]}: the line of sight ends inside the Earth (range "
-                             "too short for this altitude?)", file=path,
-                             field=f"line {lines_s[j]}, column {colname[key]}", value=float(dist[j]),
-                             allowed=f"a position above the Earth's equatorial radius "
-                             f"({R_EARTH_SHADOW_M:.0f} m from its centre)")
-        geometry_source = "topocentric"
-    else:
-        orbit = getattr(scenario, "orbit", None) if scenario is not None else None
-        if orbit is None:
-            raise InputError("no topocentric columns (alt/az + range or height) and no scenario "
-                             "[orbit] to compute the object's position", file=path,
-                             field="alt_deg/az_deg")
-        tu, inv = np.unique(t, return_inverse=True)
-        r_u, _ = orbit.positions(epoch, tu)
-        r_obj = r_u[inv]
-        geometry_source = "orbit"
 
-    geo = compute_geometry(epoch, t, sidx, sites, r_obj)
-    lla = np.array([[s.lat_deg, s.lon_deg, s.height_m] for s in sites])
-    try:
-        lc = Lightcurve(
-            epoch_utc=str(epoch), t=t, mag=mag, mag_sigma=sig, site=sidx,
-            site_names=[s.id for s in sites], site_lla_deg_m=lla,
-            r_obj_eci_m=geo.r_obj_eci_m, r_site_eci_m=geo.r_site_eci_m, r_sun_eci_m=geo.r_sun_eci_m,
-            lit_fraction=geo.lit_fraction, elevation_rad=geo.elevation_rad,
-            scenario_toml=getattr(scenario, "text", "") if scenario is not None else "",
-            attrs={"source": "recording", "file": str(path), "n_rows": len(rows),
-                   "skipped_nan_mag": int(skipped_nan), "sorted_by_time": int(not was_sorted),
-                   "n_out_of_order": n_out, "geometry_source": geometry_source,
-                   "time_format": spec.time_format, "skipped_duplicate": skipped_dup},
-        )
-    except InputError as exc:  # name the CSV file
-        raise InputError(exc.bare_message, file=path, field=exc.field, value=exc.value,
-                         allowed=exc.allowed) from None
-    # rows the model cannot have produced. Below the site's geometric horizon there is no line
-    # of sight: skipped and counted. In the Earth's full shadow the object reflects no sunlight:
-    # skipped and counted by default; kept on request (diagnosis, ignore_eclipse scenarios),
-    # counted in attrs["n_unlit"] and announced with a warning -- never silently used.
-    if unlit is None:
-        ms = getattr(scenario, "measurement", None)
-        unlit = "keep" if bool(getattr(ms, "ignore_eclipse", False)) else "skip"
+def _orbit_source(path, object_id, scenario, element_sets, times):
+    """``(positions(epoch, t) -> (r, v), label, attrs)`` of the object's orbit, or None."""
+    if element_sets:
+        from ..geometry.tle import check_element_age, find_element_set
+
+        es = find_element_set(element_sets, object_id, file=path)
+        age = check_element_age(es, times, stacklevel=5)
+        return es.positions, "elements", {
+            "element_set": es.label, "element_set_source": es.source,
+            "element_epoch_utc": es.epoch_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+            "element_age_days_max": age}
+    orbit = getattr(scenario, "orbit", None) if scenario is not None else None
+    if orbit is None:
+        return None
+    return orbit.positions, "orbit", {}
+
+
+def _orbit_positions(positions, epoch, t):
+    tu, inv = np.unique(t, return_inverse=True)
+    r_u, v_u = positions(epoch, tu)
+    return r_u[inv], v_u[inv]
+
+
+def _range_phase_positions(path, epoch, t, g, sites, r_orbit, colname, spec):
+    """The recorded range placed along the orbit's line of sight; the recorded phase angle
+    checked against the recomputed one. Returns ``(r_obj, attrs)``."""
+    from ..geometry.sites import site_position_gcrs
+
+    n = t.size
+    r_site = np.empty((n, 3))
+    for k, site in enumerate(sites):
+        m_k = g["site_index"] == k
+        if np.any(m_k):
+            r_site[m_k] = site_position_gcrs(site, epoch, t[m_k])
+    los = r_orbit - r_site
+    rng_orbit = np.linalg.norm(los, axis=1)
+    r_obj = r_site + los / rng_orbit[:, None] * g["dist"][:, None]
+    attrs = {"max_range_residual_m": float(np.max(np.abs(rng_orbit - g["dist"])))}
+    if g["phase"] is not None:
+        from ..geometry.time import sun_position_gcrs
+
+        r_sun = sun_position_gcrs(epoch, t)
+        a = r_sun - r_obj
+        b = r_site - r_obj
+        c = np.sum(a * b, axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+        ph = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+        res = np.abs(ph - g["phase"])
+        attrs["max_phase_residual_deg"] = float(res.max())
+        if np.any(res > spec.phase_tolerance_deg):
+            j = int(np.argmax(res))
+            raise InputError(f"line {g['line'][j]}, column {colname['phase']!r}: the recorded phase "
+                             f"angle differs by {res[j]:.2f} deg from the one of the object's orbit "
+                             "(wrong element set, object or time?)", file=path,
+                             field=f"line {g['line'][j]}, column {colname['phase']}",
+                             value=float(g["phase"][j]),
+                             allowed=f"within {spec.phase_tolerance_deg:g} deg of {ph[j]:.2f} deg "
+                             "(phase_tolerance_deg)")
+    return r_obj, attrs
+
+
+def _screen(path, lc: Lightcurve, skipped_below, unlit) -> Lightcurve:
+    """Drop rows below the horizon and (by default) in the Earth's full shadow; count them."""
     below = ~(lc.elevation_rad >= 0.0)
     dark = ~(lc.lit_fraction > 0.0) & ~below
     drop = below | dark if unlit == "skip" else below
@@ -615,11 +750,242 @@ def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=No
     if np.any(drop):
         lc = lc.subset(~drop)
     if unlit == "keep" and np.any(dark):
-        import warnings
-
         from ..geometry.visibility import UnlitPassWarning
 
         warnings.warn(f"{path}: the object is in the Earth's shadow at {int(dark.sum())} of "
                       f"{dark.size} measurement epochs (kept; counted in attrs['n_unlit'])",
-                      UnlitPassWarning, stacklevel=2)
+                      UnlitPassWarning, stacklevel=4)
     return lc
+
+
+def _group_lightcurve(path, rows: _Rows, idx, *, ci, colname, spec, scenario, site_dirs,
+                      element_sets, epoch, unlit, n_rows, shape) -> Lightcurve:
+    """One (object, band) group of rows → a screened :class:`Lightcurve`."""
+    from ..geometry.observation import compute_geometry
+
+    lines = [rows.line[k] for k in idx]
+    site_ids = [rows.site[k] for k in idx]
+    ids = list(dict.fromkeys(site_ids))
+    first_line = {sid: lines[site_ids.index(sid)] for sid in ids}
+    sites = _resolve_sites(path, ids, first_line, colname, scenario, site_dirs)
+    pos = {sid: i for i, sid in enumerate(ids)}
+    cams = [rows.camera[k] for k in idx]
+    has_cam = any(cams)
+    cam_keys = [f"{s}/{c}" if c else s for s, c in zip(site_ids, cams)]
+    cam_names = list(dict.fromkeys(cam_keys))
+    cpos = {c: i for i, c in enumerate(cam_names)}
+    topo = ci["alt"] is not None
+    g = {"times": [rows.times[k] for k in idx], "line": np.asarray(lines),
+         "mag": np.asarray([rows.mag[k] for k in idx], float),
+         "sigma": np.asarray([rows.sigma[k] for k in idx], float),
+         "exposure": np.asarray([rows.exposure[k] for k in idx], float),
+         "site_index": np.asarray([pos[s] for s in site_ids], np.int64),
+         "camera_index": np.asarray([cpos[c] for c in cam_keys], np.int64)}
+    if rows.dist:
+        g["dist"] = np.asarray([rows.dist[k] for k in idx], float)
+    if topo:
+        g["alt"] = np.asarray([rows.alt[k] for k in idx], float)
+        g["az"] = np.asarray([rows.az[k] for k in idx], float)
+    g["phase"] = np.asarray([rows.phase[k] for k in idx], float) if rows.phase else None
+    order, n_out, was_sorted, n_dup = _sort_and_dedupe(path, g, colname, topo)
+    for k in list(g):
+        if isinstance(g[k], np.ndarray):
+            g[k] = g[k][order]
+    g["times"] = [g["times"][k] for k in order]
+    _check_time_range(path, g["times"], g["line"], colname)
+
+    from ..geometry.time import parse_epoch
+
+    try:
+        ep = parse_epoch(epoch)
+    except InputError as exc:
+        raise InputError(exc.bare_message, file=path, field="epoch_utc", value=epoch) from None
+    t = np.array([(d - ep).total_seconds() for d in g["times"]])
+    obj, band = rows.obj[idx[0]], rows.band[idx[0]]
+    extra = {}
+    v_obj = None
+    if topo:
+        r_obj = _topocentric_positions(path, epoch, t, g, sites, colname, ci["height"] is not None)
+        source = "topocentric"
+    else:
+        src = _orbit_source(path, obj, scenario, element_sets, g["times"])
+        if src is None:
+            what = "a range + phase-angle" if ci["range"] is not None else "no topocentric (alt/az)"
+            raise InputError(f"{what} recording needs the object's orbit for the line of sight: "
+                             "give its element set (TLE/OMM file) or a model scenario with an "
+                             "[orbit]", file=path, field="object", value=obj)
+        positions, source, extra = src
+        r_orbit, v_obj = _orbit_positions(positions, epoch, t)
+        if ci["range"] is not None:
+            r_obj, more = _range_phase_positions(path, epoch, t, g, sites, r_orbit, colname, spec)
+            extra.update(more)
+            source = f"range_phase+{source}"
+        else:
+            r_obj = r_orbit
+    geo = compute_geometry(epoch, t, g["site_index"], sites, r_obj, v_obj)
+    lla = np.array([[s.lat_deg, s.lon_deg, s.height_m] for s in sites])
+    attrs = {"source": "recording", "file": str(path), "n_rows": n_rows, "object_id": obj,
+             "n_rows_object": len(idx), "skipped_nan_mag": int(rows.skipped_nan),
+             "sorted_by_time": int(not was_sorted), "n_out_of_order": n_out,
+             "geometry_source": source, "time_format": spec.time_format,
+             "skipped_duplicate": n_dup}
+    attrs.update(extra)
+    if band:
+        from ..photometry.bands import sun_magnitude
+
+        attrs["band"] = band
+        attrs["sun_mag"] = sun_magnitude(band, file=path, field=f"column {colname.get('band') or 'band'}")
+    elif spec.sun_mag is not None:
+        attrs["band"] = "custom"
+        attrs["sun_mag"] = float(spec.sun_mag)
+    elif scenario is not None:
+        attrs["sun_mag"] = float(scenario.measurement.sun_mag)
+        attrs["ignore_eclipse"] = int(scenario.measurement.ignore_eclipse)
+    if shape is not None or (scenario is not None and getattr(scenario, "shape", None) is not None):
+        attrs["shape"] = getattr(shape if shape is not None else scenario.shape, "name", "")
+    expo = g["exposure"] if np.any(np.isfinite(g["exposure"])) else None
+    try:
+        lc = Lightcurve(
+            epoch_utc=str(epoch), t=t, mag=g["mag"], mag_sigma=g["sigma"], site=g["site_index"],
+            site_names=[s.id for s in sites], site_lla_deg_m=lla,
+            r_obj_eci_m=geo.r_obj_eci_m, r_site_eci_m=geo.r_site_eci_m, r_sun_eci_m=geo.r_sun_eci_m,
+            lit_fraction=geo.lit_fraction, elevation_rad=geo.elevation_rad,
+            scenario_toml=getattr(scenario, "text", "") if scenario is not None else "",
+            attrs=attrs, exposure_s=expo,
+            camera=g["camera_index"] if has_cam else None,
+            camera_names=cam_names if has_cam else None,
+            shape=shape if shape is not None else getattr(scenario, "shape", None),
+        )
+    except InputError as exc:  # name the CSV file
+        raise InputError(exc.bare_message, file=path, field=exc.field, value=exc.value,
+                         allowed=exc.allowed) from None
+    return _screen(path, lc, rows.below_keys.count((obj, band)), unlit)
+
+
+# ----------------------------------------------------------------------------------------
+# public readers
+# ----------------------------------------------------------------------------------------
+def _split_model(model):
+    """(scenario or None, spec source) from read_recording's second argument."""
+    if model is not None and hasattr(model, "attitude") and hasattr(model, "measurement"):
+        return model, getattr(model, "recording", None)
+    return None, model
+
+
+def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=None,
+                    unlit=None, element_sets=None, scenarios=None, shape=None,
+                    objects=None, recording=None) -> dict:
+    """Read a CSV recording into one :class:`Lightcurve` (no truth) per (object, band).
+
+    Parameters
+    ----------
+    csv_path : path-like
+        The CSV file.
+    scenario_or_recording_section : Scenario, RecordingSpec, Section, dict or None
+        The model scenario (its ``recording`` spec, its epoch, its ``[[sites]]``, its orbit
+        for geometry when the file has no topocentric columns and no element set is given,
+        its shape), or only a ``[recording]`` column mapping, or None for the default layout.
+    site_dirs : optional
+        Extra observatory catalog folders.
+    unlit : {"skip", "keep"} or None
+        Rows with the object in the Earth's full shadow (module docstring). None: "keep"
+        for a scenario with ``measurement.ignore_eclipse = true``, else "skip".
+    element_sets : list of :class:`~lightcurve.geometry.tle.ElementSet`, optional
+        TLE/OMM element sets; an object's set (by NORAD number or name) gives its orbit.
+    scenarios : mapping object id -> Scenario, optional
+        Per-object model scenarios (their epoch must match the default's when both exist);
+        objects not listed use ``scenario_or_recording_section``.
+    shape : Shape, optional
+        The shape stored in every output (instead of the scenario's).
+    objects : iterable of str, optional
+        Only these object ids.
+    recording : RecordingSpec, Section or dict, optional
+        A column mapping replacing the scenario's ``[recording]``.
+
+    Returns
+    -------
+    dict
+        ``(object_id, band) -> Lightcurve`` in order of first appearance (band ``""`` when the
+        recording gives none). Each has ``t`` in s since ``epoch_utc`` (the spec's, else the
+        scenario's, else the first time in the file), sorted; GCRS geometry (m);
+        ``elevation_rad``, ``lit_fraction``; ``camera``/``camera_names`` and ``exposure_s``
+        when given; the model scenario's text and shape; ``attrs`` as in the module docstring
+        (``source = "recording"``, ``file``, ``object_id``, ``geometry_source``, ``band``,
+        ``sun_mag``, counts).
+
+    Raises
+    ------
+    InputError
+        Naming the file, line and column of every bad value (see the module docstring).
+    """
+    path = Path(csv_path)
+    if unlit not in (None, "skip", "keep"):
+        raise InputError("unknown policy for rows in the Earth's shadow", file=path, field="unlit",
+                         value=unlit, allowed="skip, keep")
+    scenario, spec = _split_model(scenario_or_recording_section)
+    scenarios = dict(scenarios or {})
+    if recording is None and spec is None:  # the per-object scenarios' common [recording]
+        specs = [sc.recording for sc in scenarios.values() if getattr(sc, "recording", None)]
+        if any(x != specs[0] for x in specs[1:]):
+            raise InputError("the per-object scenarios map the columns differently; give one "
+                             "[recording] mapping (lightcurve import --columns MAP.toml)",
+                             file=path, field="recording")
+        spec = specs[0] if specs else None
+    spec = _as_spec(recording if recording is not None else spec)
+    header, raw = _read_rows(path, spec)
+    ci, colname, spec = _resolve_columns(path, header, spec)
+    default_site = None
+    if ci["site"] is None and spec.site is None and scenario is not None and len(scenario.sites) == 1:
+        default_site = scenario.sites[0].site.id
+    rows = _parse_rows(path, raw, header, ci, colname, spec, default_site)
+    if not rows.times:
+        raise InputError(f"no measurement rows ({rows.skipped_nan} skipped for a missing magnitude, "
+                         f"{rows.skipped_below} below the horizon)", file=path)
+    groups: dict = {}
+    for k, key in enumerate(zip(rows.obj, rows.band)):
+        groups.setdefault(key, []).append(k)
+    if objects is not None:
+        want = {str(o) for o in objects}
+        missing = want - set(rows.obj)
+        if missing:
+            raise InputError("object not in the recording", file=path, field="object",
+                             value=min(missing), allowed=", ".join(dict.fromkeys(rows.obj)))
+        groups = {k: v for k, v in groups.items() if k[0] in want}
+    base_epoch = spec.epoch_utc or (scenario.epoch_utc if scenario is not None else None)
+    if base_epoch is None:
+        for sc in scenarios.values():
+            base_epoch = sc.epoch_utc
+            break
+    if base_epoch is None:
+        base_epoch = min(rows.times).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    out = {}
+    for (obj, band), idx in groups.items():
+        sc = scenarios.get(obj, scenario)
+        epoch = spec.epoch_utc or (sc.epoch_utc if sc is not None else base_epoch)
+        pol = unlit
+        if pol is None:
+            pol = "keep" if bool(getattr(getattr(sc, "measurement", None), "ignore_eclipse", False)) \
+                else "skip"
+        lc = _group_lightcurve(path, rows, np.asarray(idx), ci=ci, colname=colname, spec=spec,
+                               scenario=sc, site_dirs=site_dirs, element_sets=element_sets,
+                               epoch=epoch, unlit=pol, n_rows=len(raw), shape=shape)
+        out[(obj, band)] = lc
+    return out
+
+
+def read_recording(csv_path, scenario_or_recording_section=None, *, site_dirs=None,
+                   unlit=None, element_sets=None, shape=None) -> Lightcurve:
+    """Read a CSV recording of ONE object in one band into a :class:`Lightcurve` (no truth).
+
+    Arguments as :func:`read_recordings`. A recording with several objects or bands raises an
+    :class:`InputError` naming them (read it with :func:`read_recordings` or
+    ``lightcurve import``, which writes one file per object and band).
+    """
+    out = read_recordings(csv_path, scenario_or_recording_section, site_dirs=site_dirs,
+                          unlit=unlit, element_sets=element_sets, shape=shape)
+    if len(out) > 1:
+        names = ", ".join(f"{o}{' (' + b + ')' if b else ''}" for o, b in out)
+        raise InputError(f"the recording holds {len(out)} objects/bands ({names}): import it with "
+                         "'lightcurve import' (one file per object and band)", file=csv_path,
+                         field="object/band")
+    return next(iter(out.values()))

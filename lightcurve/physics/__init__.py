@@ -1,4 +1,4 @@
-"""Physics effects: optional physics that changes what is measured (DESIGN.md, issue 10).
+"""Physics effects: optional physics that changes what is measured (DESIGN.md).
 
 One registry serves simulation (the scenario's ``[effects]`` table switches effects on in
 ``lightcurve simulate``) and diagnosis (effects are proposed, scored by their signature and

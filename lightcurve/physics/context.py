@@ -48,6 +48,10 @@ MU_EARTH_M3_S2 = 3.986004418e14
 """Earth gravitational parameter (WGS84/EGM96), m³/s²."""
 
 
+#: unscaled CSS albedo signals by geometry/grid/sensor hash (:meth:`CSSContext.albedo_signal`)
+_ALBEDO_CACHE: dict = {}
+
+
 def rotate_z(v, angle_rad):
     """Rotate vectors (N,3) actively about +z by ``angle_rad`` (N,) (right-handed)."""
     v = np.asarray(v, float)
@@ -121,6 +125,15 @@ class GeometryState:
     o_unit: np.ndarray
     range_obs: np.ndarray
     range_sun: np.ndarray
+    _memo: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def body_directions(self):
+        """(s_body, o_body), each (N,1,3): the unit directions in body axes (computed once)."""
+        if "body" not in self._memo:
+            from ..photometry.magnitude import body_directions
+
+            self._memo["body"] = body_directions(self.q, self.s_unit, self.o_unit)
+        return self._memo["body"]
 
 
 @dataclass
@@ -134,7 +147,10 @@ class ModelContext:
     ``r_site_eci_m``, ``r_sun_eci_m`` (N,3) GCRS; ``elevation_rad`` (N,) object elevation at
     the site; ``sun_mag`` (Sun's apparent magnitude at 1 au); ``ignore_eclipse`` (treat the
     object as sunlit); ``attitude_fn(t) -> (N,4)`` and ``orbit_fn(t) -> (r, v)`` optional
-    callables at absolute times (s since epoch).
+    callables at absolute times (s since epoch); ``camera_index`` (N,) int and
+    ``camera_names`` (C) optional photometric channels (a camera or detector whose
+    calibration is its own, e.g. for per-camera zero points); without them every site is one
+    camera named after the site.
 
     Effect state (set by effects through :meth:`with_state`): ``penumbra``,
     ``shadow_height_m``, ``time_offset_s`` (N,), ``light_time``, ``exposure_s`` (N,),
@@ -159,6 +175,8 @@ class ModelContext:
     ignore_eclipse: bool = False
     attitude_fn: object = None
     orbit_fn: object = None
+    camera_index: np.ndarray | None = None
+    camera_names: list | None = None
     # -- effect state --
     penumbra: bool = False
     shadow_height_m: float = 0.0
@@ -194,6 +212,13 @@ class ModelContext:
             self.elevation_rad = np.asarray(self.elevation_rad, float).reshape(n)
         if n and (self.site_index.min() < 0 or self.site_index.max() >= max(len(self.site_names), 1)):
             raise ValueError("site_index out of range of site_names")
+        if (self.camera_index is None) != (self.camera_names is None):
+            raise ValueError("camera_index and camera_names go together")
+        if self.camera_index is not None:
+            self.camera_index = np.broadcast_to(np.asarray(self.camera_index, np.int64), (n,)).copy()
+            self.camera_names = list(self.camera_names)
+            if n and (self.camera_index.min() < 0 or self.camera_index.max() >= len(self.camera_names)):
+                raise ValueError("camera_index out of range of camera_names")
 
     # -- constructors ------------------------------------------------------------------------
     @classmethod
@@ -235,6 +260,26 @@ class ModelContext:
         return len(self.site_names)
 
     @property
+    def n_cameras(self) -> int:
+        """Number of cameras (= sites when the context has no camera column)."""
+        return self.n_sites if self.camera_names is None else len(self.camera_names)
+
+    @property
+    def camera_ids(self) -> list:
+        """Camera names (the site names when the context has no camera column)."""
+        return list(self.site_names if self.camera_names is None else self.camera_names)
+
+    @property
+    def camera_index_rows(self) -> np.ndarray:
+        """(N,) camera index of each row (the site index without a camera column)."""
+        return self.site_index if self.camera_index is None else self.camera_index
+
+    def camera_values(self, per_camera) -> np.ndarray:
+        """Per-row values (N,) from a per-camera array (C,) or a scalar."""
+        v = np.asarray(per_camera, float)
+        return np.full(len(self), float(v)) if v.ndim == 0 else v[self.camera_index_rows]
+
+    @property
     def airmass(self) -> np.ndarray:
         """Kasten & Young (1989) relative air mass at each row (NaN below the horizon)."""
         from ..geometry.visibility import airmass_kasten_young
@@ -243,8 +288,20 @@ class ModelContext:
             raise ValueError("this context has no elevation_rad (needed for the air mass)")
         return airmass_kasten_young(self.elevation_rad)
 
+    #: fields whose change leaves the geometry (:meth:`state`) unchanged
+    _GEOMETRY_NEUTRAL = frozenset({"shape", "penumbra", "shadow_height_m", "ignore_eclipse",
+                                   "flux_model", "extra_flux", "exposure_s", "exposure_nodes",
+                                   "sun_mag", "camera_index", "camera_names"})
+
     def with_state(self, **changes) -> "ModelContext":
-        """A copy with effect-state fields replaced (the cache is not shared)."""
+        """A copy with effect-state fields replaced.
+
+        Changes that leave the geometry unchanged (the shape, illumination, extra flux …)
+        share the cache of :meth:`state` results, so refits of reflection or brightness
+        parameters do not recompute positions and body-frame directions.
+        """
+        if set(changes) <= self._GEOMETRY_NEUTRAL:
+            return replace(self, _cache=self._cache, **changes)
         return replace(self, _cache={}, **changes)
 
     def site_values(self, per_site) -> np.ndarray:
@@ -279,7 +336,23 @@ class ModelContext:
         return _two_body(self.r_obj_eci_m, self.v_obj_eci_m_s, dt)
 
     def state(self, dt=0.0) -> GeometryState:
-        """Geometry and attitude for the reception times ``t + dt`` (+ clock offset, light time)."""
+        """Geometry and attitude for the reception times ``t + dt`` (+ clock offset, light time).
+
+        Results are cached per ``dt`` (the context's time-offset and light-time state are
+        fixed for its lifetime; :meth:`with_state` clears the cache when they change).
+        """
+        dta = np.asarray(dt, float)
+        key = ("state", dta.tobytes(), dta.shape)
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        st = self._state(dt)
+        if len(self._cache) > 64:
+            self._cache.clear()
+        self._cache[key] = st
+        return st
+
+    def _state(self, dt=0.0) -> GeometryState:
         n = len(self)
         dt_site = np.broadcast_to(np.asarray(dt, float), (n,)).astype(float)
         if self.time_offset_s is not None:
@@ -309,16 +382,25 @@ class ModelContext:
 
         if self.ignore_eclipse:
             return np.ones(len(self))
+        key = ("nu", bool(self.penumbra), float(self.shadow_height_m) if self.penumbra else 0.0)
+        hit = st._memo.get(key)
+        if hit is not None:
+            return hit
         if self.penumbra:
-            return lit_fraction(st.r_obj, st.r_sun, "conical",
-                                earth_radius_m=R_EARTH_SHADOW_M + self.shadow_height_m)
-        return (lit_fraction(st.r_obj, st.r_sun, "conical") > 0.0).astype(float)
+            nu = lit_fraction(st.r_obj, st.r_sun, "conical",
+                              earth_radius_m=R_EARTH_SHADOW_M + self.shadow_height_m)
+        else:
+            nu = (lit_fraction(st.r_obj, st.r_sun, "conical") > 0.0).astype(float)
+        if len(st._memo) > 32:
+            st._memo.clear()
+        st._memo[key] = nu
+        return nu
 
     def sun_flux(self, st: GeometryState) -> np.ndarray:
         """Facet-summed solar flux factor (N,) m² sr⁻¹ (ν not applied)."""
-        from ..photometry.magnitude import body_directions, flux_factor
+        from ..photometry.magnitude import flux_factor
 
-        sb, ob = body_directions(st.q, st.s_unit, st.o_unit)
+        sb, ob = st.body_directions()
         if self.flux_model is not None:
             return np.asarray(self.flux_model(self, st, sb[:, 0], ob[:, 0]), float)
         return flux_factor(self.shape, sb, ob)[:, 0]
@@ -371,7 +453,7 @@ class CSSContext:
     ``array`` (:class:`~lightcurve.css.sensors.CSSArray`, the model's sensors); ``t`` (K,) s
     since ``epoch_utc``; ``q`` (K,4) inertial→body; ``r_eci_m`` (K,3) spacecraft GCRS
     position; ``sun_eci_unit`` (K,3) unit spacecraft→Sun, GCRS; ``lit`` (K,) lit fraction.
-    Effect state: ``albedo_grid`` (:class:`~lightcurve.css.albedo.AlbedoGrid`) with
+    Effect state: ``albedo_grid`` (:class:`~lightcurve.earth.albedo.AlbedoGrid`) with
     ``albedo_scale``; ``fault`` = (sensor index, gain, start time s) or None.
     Outputs (K,S) are clipped at zero (photodiode currents), O'Keefe eq. 2.21.
     """
@@ -409,14 +491,39 @@ class CSSContext:
         return replace(self, **changes)
 
     def albedo_signal(self) -> np.ndarray:
-        """Albedo irradiance on each (true) sensor, (K,S), units of solar irradiance (eq. 2.15)."""
-        from ..css.albedo import albedo_on_sensors_nb, earth_rotation_angle
+        """Albedo irradiance on each (true) sensor, (K,S), units of solar irradiance (eq. 2.15).
+
+        The unscaled signal depends only on the geometry, the grid and the sensors' normals,
+        fields of view and horizons; it is cached (a few recent sets), so fits of the albedo
+        scale or of other effects do not repeat the Earth-grid sums.
+        """
+        K, S = len(self), self.n_sensors
+        if self.albedo_grid is None:
+            return np.zeros((K, S))
+        import hashlib
+
+        normals, cos_fov, _, hor = self.array.kernel_args(False)
+        h = hashlib.blake2b(digest_size=16)
+        for a in (self.t, self.q, self.r_eci_m, self.sun_eci_unit, normals, cos_fov, hor,
+                  self.albedo_grid.rho_area_m2, self.albedo_grid.centers_m):
+            h.update(np.ascontiguousarray(a, float).tobytes())
+        h.update(self.epoch_utc.encode())
+        key = h.hexdigest()
+        hit = _ALBEDO_CACHE.get(key)
+        if hit is None:
+            hit = self._albedo_signal_unscaled()
+            if len(_ALBEDO_CACHE) >= 16:
+                _ALBEDO_CACHE.pop(next(iter(_ALBEDO_CACHE)))
+            _ALBEDO_CACHE[key] = hit
+        return hit * self.albedo_scale
+
+    def _albedo_signal_unscaled(self) -> np.ndarray:
+        from ..css.albedo import albedo_on_sensors_nb
+        from ..earth.albedo import earth_rotation_angle
         from ..rotations import quat_rotate_inv
 
         K, S = len(self), self.n_sensors
         out = np.zeros((K, S))
-        if self.albedo_grid is None:
-            return out
         g = self.albedo_grid
         theta = earth_rotation_angle(self.epoch_utc, self.t)
         normals, cos_fov, _, hor = self.array.kernel_args(False)
@@ -429,7 +536,7 @@ class CSSContext:
             out[i] = albedo_on_sensors_nb(g.centers_m, g.normals, g.rho_area_m2, r_e, s_e,
                                           np.ascontiguousarray(n_e), cos_fov,
                                           np.ascontiguousarray(h_e))
-        return out * self.albedo_scale
+        return out
 
     def voltages(self) -> np.ndarray:
         """Noise-free outputs (K,S) of the sensors with the switched-on effects."""

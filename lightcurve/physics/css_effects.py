@@ -28,7 +28,7 @@ class CSSAlbedo(Effect):
                    "and attitude, pulling the sensed Sun direction towards the Earth.")
     kind = "css"
     group = "reflection"
-    params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0,
+    params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0, null=0.0,
                         description="multiplier of the albedo map"),)
     options = {"albedo": "builtin", "resolution_deg": 10.0}
 
@@ -53,9 +53,9 @@ class CSSMisalignment(Effect):
     kind = "css"
     group = "sensor"
     params = (ParamSpec("d_az_deg", "deg", 0.0, Prior("normal", 0.0, 2.0), min=-30.0, max=30.0,
-                        per="sensor", description="azimuth offset of each normal (eq. 2.19)"),
+                        per="sensor", null=0.0, description="azimuth offset of each normal (eq. 2.19)"),
               ParamSpec("d_el_deg", "deg", 0.0, Prior("normal", 0.0, 2.0), min=-30.0, max=30.0,
-                        per="sensor", description="elevation offset of each normal (eq. 2.19)"))
+                        per="sensor", null=0.0, description="elevation offset of each normal (eq. 2.19)"))
 
     def transform(self, ctx, params):
         arr = ctx.array
@@ -70,10 +70,14 @@ class CSSScaleFactor(Effect):
                    "Sun too weakly or too strongly, scaling each sensor's output.")
     kind = "css"
     group = "illumination"
-    params = (ParamSpec("common", "1", 1.0, Prior("uniform", 0.85, 1.05), min=0.01, max=10.0,
+    # the outputs depend on C·C_k only: the diagnosis fits these products as the individual
+    # factors (common held at 1)
+    diagnosis_hold = {"common": "only the products C·C_k are identifiable; fitted as the "
+                                "individual factors with C = 1"}
+    params = (ParamSpec("common", "1", 1.0, Prior("uniform", 0.85, 1.05), min=0.01, max=10.0, null=1.0,
                         description="common scale factor C"),
               ParamSpec("individual", "1", 1.0, Prior("normal", 1.0, 0.05), min=0.01, max=10.0,
-                        per="sensor", description="individual scale factors C_k"))
+                        per="sensor", null=1.0, description="individual scale factors C_k"))
 
     def transform(self, ctx, params):
         arr = ctx.array
@@ -91,7 +95,7 @@ class CSSFault(Effect):
     group = "sensor"
     params = (ParamSpec("sensor", "index", 0.0, Prior("int_uniform", 0.0, -1.0), min=0.0,
                         max=1e6, integer=True, description="index of the failed sensor"),
-              ParamSpec("gain", "1", 0.0, Prior("uniform", 0.0, 0.5), min=0.0, max=10.0,
+              ParamSpec("gain", "1", 0.0, Prior("uniform", 0.0, 0.5), min=0.0, max=10.0, null=1.0,
                         description="output multiplier after the fault (0: dead)"),
               ParamSpec("t_start_s", "s", 0.0, Prior("uniform", 0.0, 1.0), min=0.0, max=1e9,
                         description="time of the fault, s since the epoch"))

@@ -51,11 +51,9 @@ class _ExtraFacet(Effect):
 
     @staticmethod
     def _dirs(st, params):
-        from ..rotations import quat_rotate
-
         n = facet_normal(params["az_deg"], params["el_deg"])
-        sb = quat_rotate(st.q, st.s_unit)
-        ob = quat_rotate(st.q, st.o_unit)
+        sb, ob = st.body_directions()
+        sb, ob = sb[:, 0], ob[:, 0]
         return n, sb, ob, sb @ n, ob @ n
 
 
@@ -65,7 +63,7 @@ class SpecularGlint(_ExtraFacet):
     description = ("Specular glint: a mirror-like surface the model does not have (a solar "
                    "panel or antenna) flashes brightly whenever it reflects the Sun towards "
                    "the observer.")
-    params = (ParamSpec("area_m2", "m^2", 0.2, Prior("log_uniform", 0.05, 2.0), min=0.0, max=1e3,
+    params = (ParamSpec("area_m2", "m^2", 0.2, Prior("log_uniform", 0.05, 2.0), min=0.0, max=1e3, null=0.0,
                         description="facet area times specular reflectance"),
               _AZ, _EL,
               ParamSpec("exponent", "1", 100.0, Prior("log_uniform", 20.0, 500.0), min=1.0,
@@ -84,7 +82,7 @@ class UnmodelledFacet(_ExtraFacet):
     name = "unmodelled_facet"
     description = ("Unmodelled surface: a flat diffuse surface missing from the shape model adds "
                    "light whenever it faces both the Sun and the observer.")
-    params = (ParamSpec("area_m2", "m^2", 0.5, Prior("log_uniform", 0.1, 3.0), min=0.0, max=1e4,
+    params = (ParamSpec("area_m2", "m^2", 0.5, Prior("log_uniform", 0.1, 3.0), min=0.0, max=1e4, null=0.0,
                         description="facet area times Lambert albedo"),
               _AZ, _EL)
 

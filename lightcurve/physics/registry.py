@@ -125,8 +125,15 @@ class ParamSpec:
     ``name`` (TOML key), ``unit`` (SI or mag, stated), ``default`` (value used when the
     TOML omits it), ``prior`` (:class:`Prior`, also used by :meth:`Effect.sample_params`),
     ``min``/``max`` (allowed closed range; a value outside raises InputError naming
-    ``effects.<effect>.<param>``), ``per`` (None, ``"site"`` or ``"sensor"``: one value
-    per site / per sensor), ``integer`` (whole numbers only), ``description``.
+    ``effects.<effect>.<param>``), ``per`` (None, ``"site"``, ``"camera"`` or ``"sensor"``:
+    one value per site / per camera / per sensor; a context without cameras has one camera
+    per site, named after it), ``integer`` (whole numbers only), ``description``,
+    ``null`` (the value at which the effect vanishes — an amplitude such as an area, an
+    offset or an extinction coefficient — or None when no value switches it off; the
+    diagnosis names an effect only when its amplitudes differ from ``null`` by more than
+    their uncertainty), ``fixable`` (the default is a physically meaningful reference value
+    — e.g. the geometric shadow — at which the diagnosis may hold the parameter when the
+    data do not identify it, saying so).
     """
 
     name: str
@@ -138,11 +145,20 @@ class ParamSpec:
     per: str | None = None
     integer: bool = False
     description: str = ""
+    null: float | None = None
+    fixable: bool = False
+
+    _PER = (None, "site", "camera", "sensor")
+
+    def __post_init__(self):
+        if self.per not in self._PER:
+            raise ValueError(f"ParamSpec {self.name!r}: per must be one of {self._PER}")
 
     def as_dict(self) -> dict:
         return {"name": self.name, "unit": self.unit, "default": self.default,
                 "prior": self.prior.as_dict(), "min": self.min, "max": self.max,
-                "per": self.per, "integer": self.integer, "description": self.description}
+                "per": self.per, "integer": self.integer, "description": self.description,
+                "null": self.null, "fixable": self.fixable}
 
 
 # ------------------------------------------------------------------------------------------
@@ -161,6 +177,11 @@ class Effect:
     options: dict = {}
     kind: str = "magnitude"
     group: str = "illumination"
+    #: parameters the diagnosis never fits separately, with the reason (only a combination
+    #: with other parameters is identifiable; they stay at their default)
+    diagnosis_hold: dict = {}
+    #: parameters a fit holds at the value it is given (set per instance by the diagnosis)
+    hold: frozenset = frozenset()
 
     def __init__(self, **options):
         unknown = set(options) - set(self.options)
@@ -184,7 +205,12 @@ class Effect:
         if ctx is None:
             raise ValueError(f"parameter {spec.name!r} of {self.name!r} is per {spec.per}: "
                              "a context is needed to know how many values")
-        return ctx.n_sites if spec.per == "site" else ctx.n_sensors
+        if spec.per == "site":
+            return ctx.n_sites
+        if spec.per == "camera":
+            # a size-only context without cameras: one camera per site
+            return getattr(ctx, "n_cameras", None) or ctx.n_sites
+        return ctx.n_sensors
 
     def default_params(self, ctx=None) -> dict:
         """Every parameter at its default (per-site/sensor parameters as arrays)."""
@@ -261,12 +287,16 @@ class Effect:
         return d if d.ndim == 1 else d.sum(axis=1)
 
     def signature_columns(self, ctx) -> np.ndarray:
-        """(N, P) signature columns; per-site effects give one column per site (zero off-site)."""
+        """(N, P) signature columns; per-site (per-camera) effects give one column per site
+        (camera), zero elsewhere."""
         s = np.asarray(self.signature(ctx), float)
-        if any(p.per == "site" for p in self.params):
-            cols = np.zeros((s.size, ctx.n_sites))
-            for k in range(ctx.n_sites):
-                m = ctx.site_index == k
+        pers = {p.per for p in self.params}
+        if "site" in pers or "camera" in pers:
+            idx, n = ((ctx.site_index, ctx.n_sites) if "site" in pers
+                      else (ctx.camera_index_rows, ctx.n_cameras))
+            cols = np.zeros((s.size, n))
+            for k in range(n):
+                m = idx == k
                 cols[m, k] = s[m]
             return cols
         return s[:, None]
@@ -395,8 +425,10 @@ def apply_effects(ctx, configured) -> np.ndarray:
     return y
 
 
-def _param_value(sec, spec: ParamSpec, site_names, n_sensors, effect_name):
-    """Read one parameter (scalar; per-site: scalar or {site = value}; per-sensor: list)."""
+def _param_value(sec, spec: ParamSpec, site_names, n_sensors, effect_name, camera_names=None):
+    """Read one parameter (scalar; per-site: scalar or {site = value}; per-camera: scalar or
+    {camera = value}, cameras named after their sites when the scenario has none;
+    per-sensor: list)."""
     fld = f"effects.{effect_name}.{spec.name}"
     raw = sec.raw(spec.name, None)
     if raw is None:
@@ -415,17 +447,19 @@ def _param_value(sec, spec: ParamSpec, site_names, n_sensors, effect_name):
 
     if spec.per is None:
         return num(raw, fld)
-    if spec.per == "site":
+    if spec.per in ("site", "camera"):
+        names = site_names if spec.per == "site" or camera_names is None else list(camera_names)
+        word = "site" if spec.per == "site" else "camera"
         if isinstance(raw, dict):
-            unknown = [k for k in raw if k not in site_names]
+            unknown = [k for k in raw if k not in names]
             if unknown:
-                raise InputError("unknown site id", file=sec.file, field=f"{fld}.{unknown[0]}",
-                                 value=unknown[0], allowed=", ".join(site_names))
-            vals = np.full(len(site_names), float(spec.default))
+                raise InputError(f"unknown {word} id", file=sec.file, field=f"{fld}.{unknown[0]}",
+                                 value=unknown[0], allowed=", ".join(names))
+            vals = np.full(len(names), float(spec.default))
             for k, v in raw.items():
-                vals[site_names.index(k)] = num(v, f"{fld}.{k}")
+                vals[names.index(k)] = num(v, f"{fld}.{k}")
             return vals
-        return np.full(len(site_names), num(raw, fld))
+        return np.full(len(names), num(raw, fld))
     # per sensor
     if isinstance(raw, list):
         if n_sensors is not None and len(raw) != n_sensors:
@@ -436,12 +470,14 @@ def _param_value(sec, spec: ParamSpec, site_names, n_sensors, effect_name):
     return v if n_sensors is None else np.full(n_sensors, v)
 
 
-def parse_effects(raw, file=None, site_names=(), n_sensors=None, kind: str | None = "magnitude"):
+def parse_effects(raw, file=None, site_names=(), n_sensors=None, kind: str | None = "magnitude",
+                  camera_names=None):
     """Validate a scenario's ``[effects]`` table into a list of :class:`ConfiguredEffect`.
 
     ``raw``: the parsed table ``{effect_name: {key: value}}``; ``site_names``: the scenario's
-    site ids (for per-site values ``{site_id = value}``); ``n_sensors``: for per-sensor CSS
-    parameters. A table may set ``enabled = false`` to keep its settings but switch it off.
+    site ids (for per-site values ``{site_id = value}``); ``camera_names``: camera ids for
+    per-camera values (default: one camera per site, named after it); ``n_sensors``: for
+    per-sensor CSS parameters. A table may set ``enabled = false`` to keep its settings but switch it off.
     Raises :class:`InputError` for an unknown effect (listing the available ones), an effect
     of the wrong kind, an unknown key, or a value outside its range (naming
     ``effects.<name>.<param>``).
@@ -469,7 +505,7 @@ def parse_effects(raw, file=None, site_names=(), n_sensors=None, kind: str | Non
         enabled = sec.bool("enabled", True)
         vals = {}
         for spec in cls.params:
-            v = _param_value(sec, spec, site_names, n_sensors, name)
+            v = _param_value(sec, spec, site_names, n_sensors, name, camera_names)
             if v is not None:
                 vals[spec.name] = v
         sec.check_unknown()
@@ -491,18 +527,21 @@ def _jsonable(v):
     return v
 
 
-def effects_to_json(configured, site_names=None) -> str:
+def effects_to_json(configured, site_names=None, camera_names=None) -> str:
     """JSON text ``{name: {"params": {...}, "options": {...}, "order": i}}`` for file attrs.
 
-    Per-site parameters are written as ``{site_id: value}`` when ``site_names`` is given.
+    Per-site (per-camera) parameters are written as ``{site_id: value}`` when ``site_names``
+    is given (``{camera_id: value}``; cameras default to the sites).
     """
     out = {}
+    cams = site_names if camera_names is None else list(camera_names)
     for i, c in enumerate(configured):
         params = {}
         specs = {p.name: p for p in c.effect.params}
         for k, v in c.params.items():
-            if site_names is not None and specs[k].per == "site":
-                params[k] = {s: float(x) for s, x in zip(site_names, np.broadcast_to(v, (len(site_names),)))}
+            names = site_names if specs[k].per == "site" else cams
+            if names is not None and specs[k].per in ("site", "camera"):
+                params[k] = {s: float(x) for s, x in zip(names, np.broadcast_to(v, (len(names),)))}
             else:
                 params[k] = _jsonable(v)
         out[c.name] = {"params": params, "options": {k: _jsonable(v) for k, v in c.effect.opts.items()},

@@ -62,7 +62,7 @@ class ClockOffset(Effect):
                    "the recorded brightness changes appear early or late relative to the "
                    "model.")
     params = (ParamSpec("dt_s", "s", 0.0, Prior("signed_uniform", 0.2, 2.0), min=-120.0,
-                        max=120.0, per="site",
+                        max=120.0, per="site", null=0.0,
                         description="true time minus recorded time (positive: stamps are late)"),)
     group = "timing"
 
@@ -84,7 +84,7 @@ class ExposureSmearing(Effect):
                    "fast flashes and dips of a rotating object are smoothed out and peaks look "
                    "fainter.")
     params = (ParamSpec("exposure_s", "s", 1.0, Prior("uniform", 1.0, 10.0), min=0.0, max=600.0,
-                        per="site", description="exposure time centred on the time stamp"),)
+                        per="site", null=0.0, description="exposure time centred on the time stamp"),)
     options = {"n_nodes": 12}
     group = "timing"
 

@@ -1,7 +1,8 @@
 """Self-contained HTML reports (figures embedded as base64 PNG; open offline).
 
-:func:`write_study_report` writes the Monte Carlo filter-comparison report of a study: the
-traffic-light table laid out like Bernard (2021) fig. 9.4 — rows are filter × σθ, columns are
+:func:`write_study_report` writes the Monte Carlo filter-comparison report of a study: a
+one-line verdict saying which filter is better and a ranking table
+(:mod:`lightcurve.report.verdicts`); the traffic-light table laid out like Bernard (2021) fig. 9.4 — rows are filter × σθ, columns are
 dynamics × number of sites × σω × r — each cell coloured green / yellow / red
 (:func:`lightcurve.studies.metrics.traffic_light`) and showing the six counts of runs whose
 final error left the 3σ bound ``[θx θy θz | ωx ωy ωz]``; then a table of every cell with the
@@ -24,6 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..io.atomic import atomic_write_text  # noqa: E402
+from .style import PAGE_CSS, figsize, verdict_html  # noqa: E402
 
 __all__ = ["write_study_report", "figure_to_data_uri", "fig94_table_html"]
 
@@ -38,8 +40,10 @@ _FILTER_NAME = {"mekf": "EKF (MEKF)", "ukf": "UKF", "bpf": "PF"}
 
 def figure_to_data_uri(fig) -> str:
     """PNG data URI (``data:image/png;base64,…``) of a matplotlib figure (which is closed)."""
+    from .style import DPI
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
     plt.close(fig)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
@@ -136,10 +140,11 @@ def _envelope_figures(envelopes) -> list:
         thetas = sorted({c["sigma_theta_deg"] for c, _ in sub})
         cmap = plt.get_cmap("viridis")
         colours = {th: cmap(i / max(1, len(thetas) - 1) * 0.85) for i, th in enumerate(thetas)}
-        ncol = min(2, len(panels))
+        ncol = 2 if len(panels) in (2, 4) else min(3, len(panels))
         nrow = int(np.ceil(len(panels) / ncol))
-        fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 3.4 * nrow), squeeze=False,
-                                 sharey=True, layout="constrained")
+        # full page width whatever the number of panels (a lone panel used half the page)
+        fig, axes = plt.subplots(nrow, ncol, figsize=figsize(12, (3.6 if ncol > 1 else 4.2) * nrow + 0.6),
+                                 squeeze=False, sharey=True, layout="constrained")
         for ax, (dyn, ns, refl) in zip(axes.ravel(), panels):
             for c, (t, p50, p95, _p5) in sub:
                 if (c["dynamics"], c["sites"], c.get("reflection", "none")) != (dyn, ns, refl):
@@ -149,8 +154,9 @@ def _envelope_figures(envelopes) -> list:
                 ax.semilogy(t, p95, color=col, lw=0.9, ls="--")
             ax.set_title(f"{_FILTER_NAME.get(flt, flt)} — {dyn}, {_fmt('sites', ns)}"
                          + (f", reflection {refl}" if several_refl else ""), fontsize=9)
-            ax.set_xlabel("t (s)")
+            ax.set_xlabel("time since the first measurement (s)")
             ax.grid(True, which="both", alpha=0.3)
+            ax.yaxis.set_major_formatter(_plain_log_formatter())
         for ax in axes[:, 0]:
             ax.set_ylabel("RSS attitude error (°)")
         for ax in axes.ravel()[len(panels):]:
@@ -163,13 +169,16 @@ def _envelope_figures(envelopes) -> list:
     return figs
 
 
+def _plain_log_formatter():
+    """Log-axis tick labels as plain numbers (0.1, 1, 10), never 4×10⁰."""
+    from matplotlib.ticker import FuncFormatter
+
+    return FuncFormatter(lambda v, _: f"{v:g}")
+
+
 _CSS = """
-body{font-family:sans-serif;margin:1.5em;max-width:1400px}
-table{border-collapse:collapse;margin:1em 0;font-size:12px}
-td,th{border:1px solid #999;padding:3px 5px;text-align:center}
 table.fig94 td{font-family:monospace;min-width:4.5em}
 th.corner{border:none}
-img{max-width:100%}
 """
 
 
@@ -184,29 +193,48 @@ def write_study_report(path, summary: dict, envelopes=()) -> None:
         :func:`lightcurve.studies.metrics.rss_envelope`; the dict has ``filter``, ``dynamics``,
         ``sites``, ``sigma_theta_deg``
     """
+    from .verdicts import filter_ranking, study_verdict
+
     cells = summary["cells"]
     keys = [k for k in summary.get("grid_keys", []) if k != "reflection"
             or len(_uniq(cells, "reflection")) > 1]
     ncol = {c: sum(1 for x in cells if x["color"] == c) for c in _BG}
     n_runs = sum(c["runs"] for c in cells)
     n_fail = sum(c["failures"] for c in cells)
-    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(summary['study'])}"
-             f"</title><style>{_CSS}</style></head><body>",
-             f"<h1>Study {html.escape(summary['study'])}</h1>",
+    title = f"Study {summary['study']}"
+    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
+             f"</title><style>{PAGE_CSS}{_CSS}</style></head><body>",
+             f"<h1>{html.escape(title)}</h1>",
+             verdict_html(*study_verdict(cells)),
              f"<p>{len(cells)} cells × {summary['runs_per_cell']} runs; {n_runs} runs finished, "
              f"{n_fail} failed. Colours: {ncol['green']} green, {ncol['yellow']} yellow, "
              f"{ncol['red']} red. Study seed {summary['seed']}, hash "
              f"<code>{summary['study_hash'][:16]}</code>.</p>",
+             "<h2>Which filter is better</h2>", _ranking_table_html(filter_ranking(cells)),
              "<h2>Runs outside the 3σ bound at the final epoch (layout of Bernard 2021 fig. 9.4)</h2>",
              "<p>Each box: number of runs whose final error component lies outside ±3σ of the "
              "filter's own covariance; first line attitude θx θy θz, second line rate ωx ωy ωz. "
              "Red: more than 10 runs outside for any component; yellow: 6–10 for some component, "
              "or two or more components with exactly 5; green: otherwise.</p>",
              fig94_table_html(cells),
-             "<h2>Every cell</h2>", _cells_table_html(cells, keys),
-             "<h2>RSS attitude error versus time</h2>"]
+             "<h2>RSS attitude error versus time</h2>",
+             "<p>Median (solid) and 95th percentile (dashed) over the runs of every σω and r, "
+             "per initial attitude error σθ (colour).</p>"]
     for flt, uri in _envelope_figures(list(envelopes)):
         parts.append(f"<h3>{html.escape(_FILTER_NAME.get(flt, flt))}</h3><img src='{uri}' "
                      f"alt='RSS attitude error envelopes, {html.escape(flt)}'>")
-    parts.append("</body></html>")
+    parts += ["<h2>Every cell</h2>", _cells_table_html(cells, keys), "</body></html>"]
     atomic_write_text(path, "\n".join(parts) + "\n")
+
+
+def _ranking_table_html(rank) -> str:
+    """The "which filter is better" table (:func:`lightcurve.report.verdicts.filter_ranking`)."""
+    head = ("<tr><th>filter</th><th>best in (matched cells)</th><th>green</th><th>yellow</th>"
+            "<th>red</th><th>failed runs</th><th>median final RSS attitude error (°)</th></tr>")
+    rows = "".join(
+        f"<tr><td>{html.escape(r['name'])}</td><td>{r['wins']} of {r['groups']}</td>"
+        f"<td>{r['green']}</td><td>{r['yellow']}</td><td>{r['red']}</td><td>{r['failures']}</td>"
+        f"<td>{r['median_rss_att_deg']:.4g}</td></tr>" for r in rank)
+    return (f"<table>{head}{rows}</table><p class='small'>Cells are matched on every grid key but "
+            "the filter; in each matched set the best filter has the best traffic light, then "
+            "the fewest failed runs, then the lowest median final error.</p>")

@@ -16,30 +16,59 @@ import numpy as np
 __all__ = ["model_attitude", "model_magnitudes", "fit_statistics"]
 
 
-def model_attitude(scenario, lightcurve) -> np.ndarray:
+def model_attitude(scenario, lightcurve, *, return_omega: bool = False):
     """Model attitude quaternions ``(N, 4)`` (scalar first, GCRS→body) at the lightcurve epochs.
 
     ``dynamics = "law"``: :func:`lightcurve.dynamics.laws.attitude_law` on the lightcurve's
     object and Sun positions. Otherwise the scenario's truth model without noise
     (``acs_sigma_deg = eta_sigma_deg_s2 = 0``), which needs the scenario's ``[orbit]`` for the
-    nadir frame and the uncontrolled torques.
+    nadir frame and the uncontrolled torques. The model attitude is the scenario's initial
+    attitude AT the scenario epoch (``[scenario] epoch_utc``), propagated to every recorded
+    time — whatever rows the recording has (a recording starting later, or with rows
+    dropped, sees the same attitude at the same instant). Rows before the scenario epoch:
+    the controlled (constant-rate) model is propagated backwards exactly,
+    ``q(t) = exp(ω t) ⊗ q0``; the uncontrolled model is refused there (InputError: move
+    ``epoch_utc`` to or before the first row).
+
+    ``return_omega``: also return the model body rates ``(N, 3)`` (rad/s, body axes).
     """
-    from ..dynamics.laws import attitude_law
-    from .simulate import truth_attitude
+    from ..dynamics.laws import attitude_law, law_body_rates
+    from .simulate import initial_attitude, truth_attitude
 
     at = scenario.attitude
     t = np.asarray(lightcurve.t, float)
     if at.dynamics == "law":
-        return attitude_law(at.law, lightcurve.r_obj_eci_m, lightcurve.r_sun_eci_m,
-                            lightcurve.epoch_utc, t)
+        q = attitude_law(at.law, lightcurve.r_obj_eci_m, lightcurve.r_sun_eci_m,
+                         lightcurve.epoch_utc, t)
+        return (q, law_body_rates(q, t)) if return_omega else q
     quiet = replace(scenario, attitude=replace(at, acs_sigma_deg=0.0, eta_sigma_deg_s2=0.0))
     # the scenario's t = 0 is its own epoch: shift the lightcurve's times onto it
     from ..geometry.time import parse_epoch
 
     shift = (parse_epoch(lightcurve.epoch_utc) - parse_epoch(quiet.epoch_utc)).total_seconds()
     tu, inv = np.unique(t + shift, return_inverse=True)
-    q, _ = truth_attitude(quiet, tu, np.random.default_rng(0))
-    return q[inv]
+    q = np.empty((tu.size, 4))
+    w = np.empty((tu.size, 3))
+    after = tu >= 0.0
+    if np.any(after):
+        q[after], w[after] = truth_attitude(quiet, tu[after], np.random.default_rng(0))
+    if not np.all(after):
+        if at.dynamics != "controlled":
+            from ..errors import InputError
+
+            raise InputError("recording rows before the scenario epoch: the uncontrolled model "
+                             "is propagated forward from [scenario] epoch_utc; set epoch_utc at "
+                             "or before the first row", field="scenario.epoch_utc",
+                             value=quiet.epoch_utc)
+        from ..rotations import quat_mult, rotvec_to_quat
+
+        q0, w0 = initial_attitude(quiet)
+        before = np.flatnonzero(~after)
+        for k in before:  # constant body rate: exact backwards propagation
+            q[k] = quat_mult(rotvec_to_quat(w0 * tu[k]), q0)
+            w[k] = w0
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return (q[inv], w[inv]) if return_omega else q[inv]
 
 
 def model_magnitudes(scenario, lightcurve, *, attitude=None) -> np.ndarray:

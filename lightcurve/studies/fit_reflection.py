@@ -1,4 +1,4 @@
-"""Batch Bayesian posterior of facet reflection parameters with emcee (issue 6, "fit-reflection").
+"""Batch Bayesian posterior of facet reflection parameters with emcee (`lightcurve fit-reflection`).
 
 Given a lightcurve and a *known* attitude history (the file's truth, or a filter estimate), the
 posterior of the Cook–Torrance parameters of the facets is sampled with the affine-invariant
@@ -42,7 +42,7 @@ Diagnostics
   :class:`ConvergenceError` naming the reasons (unless ``allow_unconverged=True``);
 * identifiability: ``width_ratio`` = posterior sd / prior sd in z; a parameter is called
   *identified* when the data shrink its width by at least 2× (ratio < ``identify_ratio`` = 0.5,
-  the criterion of the issue's acceptance for thesis fig. 10.11f);
+  our criterion for thesis fig. 10.11f);
 * posterior predictive lightcurve: quantile bands of the noise-free model and of model + noise
   over posterior draws, and the fraction of measurements inside the central 95 % band.
 """
@@ -56,22 +56,15 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from ..errors import InputError
-from ..core.photometry import COOK_TORRANCE, cook_torrance_xyz
+from ..core.photometry import cook_torrance_xyz
+from ..errors import ConvergenceError, InputError
+from ..photometry.perturb import perturb_reflection
 
-__all__ = ["KINDS", "ReflectionPosteriorModel", "ReflectionFit", "ConvergenceError",
-           "fit_reflection", "synthetic_reflection_case", "perturb_reflection", "reflection_sbc"]
+__all__ = ["KINDS", "ReflectionPosteriorModel", "ReflectionFit", "fit_reflection",
+           "synthetic_reflection_case", "perturb_reflection", "reflection_sbc"]
 
 KINDS = ("xi", "a", "m", "A")
 _LOGIT = ("xi", "a")
-
-
-class ConvergenceError(RuntimeError):
-    """The MCMC chain did not converge; ``.diagnostics`` holds the :class:`ChainDiagnostics`."""
-
-    def __init__(self, message, diagnostics):
-        super().__init__(message)
-        self.diagnostics = diagnostics
 
 
 # --------------------------------------------------------------------------------------------
@@ -413,20 +406,23 @@ class ReflectionFit:
         atomic_write_text(path, json.dumps(self.summary(), indent=2) + "\n")
         return path
 
-    def corner_plot(self, path, max_params=12):
+    def corner_plot(self, path, max_params=8):
         """Corner plot (matplotlib; histograms on the diagonal, sample scatter below) of at most
-        ``max_params`` parameters (identified first), truth marked when known. Returns path."""
+        ``max_params`` parameters (identified first; the title says how many of how many),
+        prior centre dotted, truth in red when known. Screen-sized (≤ 12 in). Returns path."""
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
         from ..io.atomic import atomic_path
+        from ..report.style import DPI
 
         order = list(np.flatnonzero(self.identified)) + list(np.flatnonzero(~self.identified))
         sel = order[:max_params]
         D = len(sel)
-        fig, axes = plt.subplots(D, D, figsize=(1.9 * D + 1, 1.9 * D + 1), squeeze=False)
+        side = min(1.9 * D + 1.2, 11.5)
+        fig, axes = plt.subplots(D, D, figsize=(side, side), squeeze=False)
         S = self.samples_p
         for r, i in enumerate(sel):
             for cidx, j in enumerate(sel):
@@ -450,10 +446,17 @@ class ReflectionFit:
                 if cidx == 0 and r > 0:
                     ax.set_ylabel(self.names[i], fontsize=8)
                 ax.tick_params(labelsize=6)
-        fig.suptitle("reflection-parameter posterior (red: truth, dotted: prior centre)", fontsize=9)
+        shown = (f"all {D} parameters" if D == len(self.names) else
+                 f"{D} of {len(self.names)} parameters (identified first; all of them are in "
+                 "the JSON)")
+        legend = "dotted grey: prior centre" + (", red: truth" if self.truth is not None else
+                                                "; no truth known")
+        fig.suptitle(f"reflection-parameter posterior: {shown}\n{legend}; n.i. = not "
+                     "identified by the data", fontsize=9)
+        fig.tight_layout()
         path = Path(path)
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=90, format=path.suffix.lstrip(".") or "png")
+            fig.savefig(tmp, dpi=DPI, format=path.suffix.lstrip(".") or "png")
         plt.close(fig)
         return path
 
@@ -503,13 +506,16 @@ _LEVELS = (0.005, 0.025, 0.16, 0.5, 0.84, 0.975, 0.995)
 def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets=None, kinds=KINDS,
                    prior_frac=0.1, walkers=None, seed=0, block=500, max_steps=20_000,
                    min_steps=1000, tau_factor=50.0, identify_ratio=0.5, n_predictive=200,
-                   truth=None, allow_unconverged=False, progress=None) -> ReflectionFit:
+                   truth=None, allow_unconverged=False, progress=None,
+                   library_dirs=None) -> ReflectionFit:
     """Sample the posterior of facet reflection parameters (module docstring).
 
     Parameters
     ----------
     curve : Lightcurve
-    shape : Shape, str or None — default ``curve.attrs["shape"]``.
+    shape : Shape, str or None — default the shape the file carries, else
+        ``curve.attrs["shape"]`` (:meth:`Lightcurve.resolve_shape`; ``library_dirs`` are extra
+        shape-library folders for a named shape).
     attitude : {"truth", "estimate"} — use ``curve.truth_q`` or ``estimate.q`` (an
         :class:`~lightcurve.filters.result.Estimate` at the curve's times, or its file path).
         The attitude is held fixed: an estimate's own uncertainty is *not* marginalised, so the
@@ -523,7 +529,9 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     identify_ratio : float — identified when posterior sd / prior sd (in z) is below this.
     n_predictive : int — posterior draws for the predictive bands.
     truth : (D,) physical true parameters (in ``model.names`` order) or None (default: the
-        file's ``attrs["reflection_truth"]`` when it was simulated with ``[reflection]``).
+        file's ``attrs["reflection_truth"]`` when it was simulated with ``[reflection]``; for
+        a file simulated without it and fitted with its own shape, the shape file's values,
+        which made the data).
     allow_unconverged : bool — return an unconverged posterior instead of raising.
 
     Raises
@@ -532,16 +540,15 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     InputError — bad inputs (no truth attitude, mismatched estimate, unknown facet…).
     """
     from ..estimation.mcmc import sample_until_converged
-    from ..photometry import load_shape
+    from ..memory import check_allocation
 
-    if shape is None:
-        name = (curve.attrs or {}).get("shape", "")
-        if not name:
-            raise InputError("the lightcurve names no shape (attrs['shape']); give one",
-                             field="attrs.shape")
-        shape = load_shape(str(name))
-    elif isinstance(shape, str):
-        shape = load_shape(shape)
+    if walkers is not None:  # a first, lower-bound estimate (one parameter) before any work
+        check_allocation(8 * int(walkers) * int(max_steps) * 2,
+                         f"MCMC with {int(walkers)} walkers, {int(max_steps)} steps",
+                         field="walkers", value=int(walkers))
+
+    own_shape = shape is None or shape == (curve.attrs or {}).get("shape")
+    shape = curve.resolve_shape(shape, library_dirs=library_dirs)
     if attitude == "truth":
         if not curve.has_truth:
             raise InputError("the lightcurve has no truth attitude; use --attitude estimate",
@@ -572,9 +579,18 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
         except (ValueError, KeyError, IndexError, TypeError):
             raise InputError("unreadable reflection truth in the lightcurve file",
                              field="attrs.reflection_truth") from None
+    elif truth is None and own_shape and curve.has_truth and (curve.attrs or {}).get("seed") is not None:
+        # simulated without [reflection]: the data were made with the shape file's values
+        truth = [float(v) for v in model.p_nominal]
     D = model.dim
     W = walkers if walkers is not None else max(2 * D + 2, 32)
     W = int(W) + (int(W) % 2)
+    # the stored chain (positions and log-probabilities of every walker at every step) and
+    # one ensemble evaluation (walkers x epochs x facets, a few temporaries)
+    check_allocation(8 * W * int(max_steps) * (D + 1)
+                     + 8 * 4 * W * len(curve) * max(1, int(getattr(shape, "n_facets", 1))),
+                     f"MCMC with {W} walkers, {int(max_steps)} steps, {D} parameters",
+                     field="walkers", value=W)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xEC3E]))
     z_map = model.map_estimate()
     # walkers start from the Laplace approximation at the MAP (a tiny ball would make the
@@ -630,37 +646,6 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
 # --------------------------------------------------------------------------------------------
 # Truth perturbation and synthetic cases
 # --------------------------------------------------------------------------------------------
-
-def perturb_reflection(shape, rng, frac=0.1, kinds=KINDS, facets=None):
-    """Perturbed copy of ``shape`` (Bernard §10.1): each Cook–Torrance parameter p of the chosen
-    facets ← p + N(0, (frac·p)²), redrawn (up to 100 times) until in range (ξ, a in (0,1), m, A
-    > 0). Returns (shape_copy, dict kind -> (F,) new values; NaN for ξ, a, m of facets whose
-    BRDF is not Cook–Torrance)."""
-    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-    ct = (shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0)
-    sel = np.zeros(shape.n_facets, bool)
-    sel[np.flatnonzero(ct) if facets is None else np.asarray(facets, int)] = True
-    sel &= ct
-    cols = {"xi": 0, "a": 1, "m": 2}
-    new = {k: shape.params[:, cols[k]].copy() for k in cols}
-    new["A"] = shape.areas_m2.copy()
-    for k in kinds:
-        for i in np.flatnonzero(sel):
-            p0 = new[k][i]
-            for _ in range(100):
-                p = p0 + frac * p0 * rng.standard_normal()
-                if p > 0 and (p < 1 or k not in _LOGIT):
-                    break
-            else:
-                p = p0
-            new[k][i] = p
-    ctx = ~np.isnan(shape.param_table.get("xi", np.full(shape.n_facets, np.nan)))
-    kw = {k: np.where(ctx, new[k], np.nan) for k in ("xi", "a", "m")}
-    out = shape.copy_with(areas_m2=new["A"], check=False, **kw) if np.any(ctx) \
-        else shape.copy_with(areas_m2=new["A"], check=False)
-    new.update(kw)  # NaN for facets without Cook–Torrance parameters
-    return out, new
-
 
 def synthetic_reflection_case(shape, *, seed=0, n_epochs=300, duration_s=300.0, r_percent=1.0,
                               omega_rad_s=(0.035, 0.017, 0.063), frac=0.1, kinds=KINDS,

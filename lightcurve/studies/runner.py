@@ -92,17 +92,19 @@ def limit_blas_threads() -> int:
 
 
 @functools.lru_cache(maxsize=16)
-def _scenario(text: str, file: str):
+def _scenario(text: str, file: str, library_dirs: tuple = (), site_dirs: tuple = ()):
     from .scenario import parse_scenario
 
-    return parse_scenario(text, file=file)
+    return parse_scenario(text, file=file, library_dirs=library_dirs or None,
+                          site_dirs=site_dirs or None)
 
 
 @functools.lru_cache(maxsize=32)
-def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int):
+def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
+                library_dirs: tuple = (), site_dirs: tuple = ()):
     from .simulate import simulate
 
-    sc = _scenario(text, file)
+    sc = _scenario(text, file, library_dirs, site_dirs)
     sc = replace(sc, measurement=replace(sc.measurement, r_percent=float(r_percent)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the thesis cases ignore the eclipse on purpose
@@ -127,14 +129,21 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
     """
     from ..filters import invert
 
-    t0 = time.perf_counter()
     c = task.cell
+    try:  # compile / load the kernels once per process, so that runtime_s times the filter only
+        from ..warmup import warm_up
+
+        warm_up((c.filter,), dynamics=(c.dynamics,), reflection=c.reflection == "model3")
+    except Exception:  # noqa: BLE001 - a failed warm-up only costs the timing
+        pass
+    t0 = time.perf_counter()
     res = {"run_id": task.run_id, "cell": c.as_dict(), "run": int(task.run),
            "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
            "status": "ok", "error": ""}
     try:
+        dirs = (tuple(getattr(task, "library_dirs", ())), tuple(getattr(task, "site_dirs", ())))
         lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
-                         int(task.sim_seed))
+                         int(task.sim_seed), *(dirs if any(dirs) else ()))
         opts = dict(task.options)
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
@@ -145,6 +154,7 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
             kw["acs_mode"] = opts["acs_mode"]
         if c.reflection != "none":
             kw["reflection"] = c.reflection
+        kw.update(dict(dict(opts.get("filters", ())).get(c.filter, ())))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             est = invert(lc, c.filter, seed=int(task.filter_seed),
@@ -400,9 +410,12 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
 
     cluster = None
     if address is None:
+        import logging
+
         nt = threads_per_worker(int(n_workers))
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
                                            processes=True, dashboard_address=None,
+                                           silence_logs=logging.ERROR,
                                            env={"NUMBA_NUM_THREADS": str(nt)})
         client = distributed.Client(cluster)
     else:
@@ -521,7 +534,12 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         prepare_output(out, study, force=force)
         done = finished_runs(out)
         total = len(study.cells) * n
-        n_done = sum(1 for t in study.iter_tasks(n, ids_only=True) if t in done)
+        tags = {c.tag for c in study.cells}
+        n_done = 0  # stored runs that belong to this study and run count (RunTask.run_id)
+        for r in done:
+            tag, _, num = r.rpartition("_r")
+            n_done += (tag in tags and num.isdigit() and num == f"{int(num):05d}"
+                       and int(num) < n)
         # generated lazily (a million runs never sit in memory as task objects), in the
         # order that puts runs sharing a simulated lightcurve (same dynamics, sites, r and
         # run index: common random numbers) back to back for each worker's cache

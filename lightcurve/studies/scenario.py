@@ -5,7 +5,7 @@ seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (li
 mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
 ``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
-(physics effects switched on; see the diagnosis issue), ``[reflection]`` (truth reflection
+(physics effects switched on; :mod:`lightcurve.physics`), ``[reflection]`` (truth reflection
 parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
 
@@ -16,10 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .._paths import data_dir
 from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
-__all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario"]
+__all__ = [
+    "SCENARIO_ALIASES", "resolve_scenario","Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
+           "scenario_from_lightcurve"]
 
 
 @dataclass
@@ -81,7 +84,8 @@ class MeasurementSpec:
     ``ignore_eclipse``: compute magnitudes as if the object were sunlit (thesis cases);
     ``min_elevation_deg``: lowest usable object elevation; ``require_dark_site`` with
     ``twilight_deg``: measure only when the Sun is below that altitude at the site;
-    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74).
+    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74); ``band``: a band of
+    :data:`lightcurve.photometry.bands.SUN_MAGNITUDES` setting ``sun_mag`` ('' = not given).
     """
 
     r_percent: float = 1.0
@@ -90,6 +94,7 @@ class MeasurementSpec:
     require_dark_site: bool = True
     twilight_deg: float = -12.0
     sun_mag: float = -26.74
+    band: str = ""
 
 
 @dataclass
@@ -140,24 +145,47 @@ class Scenario:
 _DYNAMICS = ("controlled", "uncontrolled", "law")
 #: most epochs a scenario may schedule (same cap as geometry.schedules.cadence_grid)
 _MAX_EPOCHS = 50_000_000
+#: memory of the simulator per scheduled epoch and site (measured 520 B on the default
+#: scenario at 1 s cadence, 2·10⁴ to 8·10⁴ epochs; rounded up)
+SIMULATE_BYTES_PER_EPOCH = 600
 _TORQUES = ("gravity_gradient", "srp", "drag")
 
 
-def load_scenario(path, library_dirs=None, site_dirs=None) -> Scenario:
-    """Load and validate a scenario TOML file; relative mesh paths resolve against its folder."""
+def load_scenario(path, library_dirs=None, site_dirs=None, *, shape=None) -> Scenario:
+    """Load and validate a scenario TOML file; relative mesh paths resolve against its folder.
+
+    ``shape``: a resolved :class:`~lightcurve.photometry.Shape` used instead of the file's
+    ``[shape]`` (whose keys are still validated), e.g. the shape a lightcurve file carries.
+    """
     path = Path(path)
     doc, text = load_toml(path, with_text=True)
-    return parse_scenario(doc, file=path, text=text,
-                          library_dirs=library_dirs, site_dirs=site_dirs)
+    return parse_scenario(doc, file=path, text=text, library_dirs=library_dirs,
+                          site_dirs=site_dirs, shape=shape)
 
 
 def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs=None,
-                   site_dirs=None, *, embedded: bool = False) -> Scenario:
+                   site_dirs=None, *, embedded: bool = False, shape=None,
+                   sites=None) -> Scenario:
     """Validate a parsed scenario document (dict) or TOML text and build a :class:`Scenario`.
 
-    ``embedded=True`` for a scenario read from inside a data file (the ``scenario`` attribute
-    of a lightcurve HDF5 file): it may name a library shape only, never a mesh or shape file
-    by path, so a received file cannot make the program read an arbitrary file.
+    Parameters
+    ----------
+    library_dirs, site_dirs : optional
+        Extra shape-library and observatory folders (searched before the bundled ones).
+    embedded : bool
+        True for a scenario read from inside a data file (the ``scenario`` attribute of a
+        lightcurve HDF5 file): it may name a library shape only, never a mesh or shape file by
+        path, so a received file cannot make the program read an arbitrary file.
+    shape : Shape, optional
+        A resolved shape used instead of loading ``[shape]`` (its keys are still validated;
+        ``areas_m2`` is then not applied: the given shape is final).
+    sites : mapping id -> Site, optional
+        Sites consulted first for ``[[sites]] name = "<id>"`` references (e.g. the sites a
+        lightcurve file carries), before ``site_dirs`` and the bundled catalogue.
+
+    Site ids (docs/formats.md "Sites"): a ``name`` without coordinates is a catalogue id;
+    an inline table's id follows :func:`lightcurve.geometry.sites.inline_site_id`. Two
+    entries with one id are an error.
     """
     from ..geometry.orbits import orbit_from_section
     from ..geometry.sites import get_site
@@ -194,7 +222,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
                              file=file, field="scenario.duration_s", value=duration,
                              allowed=f"<= {(DE421_END_UTC - epoch_dt).total_seconds():.0f} s "
                              "(DE421 ends 2053-10-08 UTC)")
-    seed = sc.int("seed", 0, min=0)
+    seed = sc.int("seed", 0, min=0, max=2**63 - 1)
     name = sc.str("name", Path(str(file)).stem)
     sc.check_unknown(extra_allowed=("description",))
 
@@ -215,13 +243,15 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         spec = sh.str("name")
     areas = sh.vector("areas_m2", None, min=0.0, min_open=True)
     sh.check_unknown()
-    try:
-        shape = load_shape(spec, library_dirs=library_dirs, library_only=embedded)
-    except InputError:
-        raise
-    except (FileNotFoundError, KeyError) as exc:
-        raise InputError(f"cannot load shape: {exc}", file=file, field="shape") from None
-    if areas is not None:  # facet areas overriding the library's (e.g. a published unit-area fit)
+    given_shape = shape is not None
+    if not given_shape:
+        try:
+            shape = load_shape(spec, library_dirs=library_dirs, library_only=embedded)
+        except InputError:
+            raise
+        except (FileNotFoundError, KeyError) as exc:
+            raise InputError(f"cannot load shape: {exc}", file=file, field="shape") from None
+    if areas is not None and not given_shape:  # facet areas overriding the library's
         if areas.size != shape.n_facets:
             raise InputError(f"expected {shape.n_facets} facet areas", file=file,
                              field="shape.areas_m2", value=areas.tolist())
@@ -240,6 +270,10 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
         inertia_kg_m2=at.matrix("inertia_kg_m2", None, shape=(3, 3)),
     )
+    if att.inertia_kg_m2 is not None:
+        from ..photometry.shapes_io import check_inertia_magnitude
+
+        check_inertia_magnitude(att.inertia_kg_m2, file, "attitude.inertia_kg_m2")
     torques = at.raw("torques", ["gravity_gradient"] if dyn == "uncontrolled" else [])
     if not isinstance(torques, list) or any(t not in _TORQUES for t in torques):
         raise InputError("unknown torque model", file=file, field="attitude.torques", value=torques,
@@ -275,29 +309,56 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         att.omega_deg_s = quat_rotate(q0, att.omega_input_deg_s)  # linear: deg/s in, deg/s out
     at.check_unknown()
 
+    from ..geometry.sites import inline_site_id, site_from_section
+
+    known = dict(sites or {})
     sites = []
-    for s in root.sections("sites"):
+    for k_site, s in enumerate(root.sections("sites")):
         if s.has("name") and isinstance(s.data.get("name"), str) and not s.has("lat_deg"):
             sid = s.str("name")
             try:
-                site = get_site(sid, dirs=site_dirs)
+                site = known[sid] if sid in known else get_site(sid, dirs=site_dirs)
             except InputError as exc:  # name the scenario file and the [[sites]] entry
+                allowed = exc.allowed
+                if known:
+                    allowed = ", ".join(sorted(known)) + ", " + (allowed or "")
                 raise InputError(exc.bare_message, file=file, field=f"{s.name}.name", value=sid,
-                                 allowed=exc.allowed) from None
+                                 allowed=allowed) from None
         else:
             inline = {k: s.raw(k) for k in ("name", "id", "lat_deg", "lon_deg", "height_m") if s.has(k)}
-            site = get_site(Section(inline, file=file, name=s.name), dirs=site_dirs)
+            site = site_from_section(Section(inline, file=file, name=s.name),
+                                     site_id=inline_site_id(inline, k_site))
+        if any(x.site.id == site.id for x in sites):
+            raise InputError("two [[sites]] entries with one id (give each inline site its own "
+                             "id or name)", file=file, field=f"{s.name}", value=site.id,
+                             allowed="distinct site ids")
         windows = s.raw("windows_s", [[0.0, duration if duration is not None else 0.0]])
         ok = isinstance(windows, list) and all(
             isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
-            and 0 <= w[0] <= w[1] for w in windows)
+            and all(np.isfinite(float(x)) for x in w) and 0 <= w[0] <= w[1] for w in windows)
         if not ok:
-            raise InputError("expected a list of [start_s, end_s] pairs with 0 <= start <= end",
-                             file=file, field=f"{s.name}.windows_s", value=windows)
+            raise InputError("expected a list of [start_s, end_s] pairs of finite seconds with "
+                             "0 <= start <= end", file=file, field=f"{s.name}.windows_s",
+                             value=windows)
         s.check_unknown(extra_allowed=("lat_deg", "lon_deg", "height_m", "id"))
+        # one place under two ids would count its measurements as independent twice over
+        for j, other in enumerate(sites):
+            if (other.site.lat_deg, other.site.lon_deg, other.site.height_m) == \
+                    (site.lat_deg, site.lon_deg, site.height_m):
+                raise InputError(f"the same place as sites[{j}] ({other.site.id}); give each "
+                                 "site once, with all its windows in windows_s", file=file,
+                                 field=s.name, value=site.id,
+                                 allowed="distinct sites (id and position)")
         sites.append(SiteSpec(site=site, windows_s=[(float(a), float(b)) for a, b in windows]))
     if not sites:
         raise InputError("a scenario needs at least one [[sites]] entry", file=file, field="sites")
+    if duration is not None:  # the simulator's arrays, per scheduled epoch and site
+        from ..memory import check_allocation
+
+        n_ep = int(duration / cadence) + 1
+        check_allocation(n_ep * len(sites) * SIMULATE_BYTES_PER_EPOCH,
+                         f"simulating {n_ep} epochs at {len(sites)} site(s)", file=file,
+                         field="scenario.cadence_s", value=cadence)
 
     me = root.section("measurement", {})
     meas = MeasurementSpec(
@@ -308,6 +369,15 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         twilight_deg=me.float("twilight_deg", -12.0, min=-90.0, max=10.0),
         sun_mag=me.float("sun_mag", -26.74, min=-30.0, max=-20.0),
     )
+    band = me.str("band", None)
+    if band is not None:  # the Sun's magnitude of that band (lightcurve.photometry.bands)
+        from ..photometry.bands import sun_magnitude
+
+        if me.has("sun_mag"):
+            raise InputError("give measurement.band or measurement.sun_mag, not both", file=file,
+                             field="measurement.band", value=band)
+        meas.sun_mag = sun_magnitude(band, file=file, field="measurement.band")
+        meas.band = band
     me.check_unknown()
 
     rec = root.section("recording", None)
@@ -345,3 +415,78 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     return Scenario(epoch_utc=epoch, duration_s=duration, cadence_s=cadence, seed=seed, orbit=orbit,
                     shape=shape, attitude=att, sites=sites, measurement=meas, effects=effects,
                     recording=rec, name=name, source=str(file), text=text or "", reflection=refl)
+
+
+def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, site_dirs=None,
+                             scenario=None, shape=None) -> Scenario:
+    """The validated scenario of a lightcurve file, resolved from what the file carries.
+
+    ``scenario``: a scenario TOML path given by the user (it overrides the file's own
+    scenario text); otherwise the scenario text stored in the file (root attribute
+    ``scenario``). Either way ``shape`` (a resolved Shape from the caller) or else the shape
+    the file carries (:attr:`Lightcurve.shape`) replaces the scenario's ``[shape]`` when present, and the file's sites (ids and WGS84 coordinates)
+    answer the scenario's ``[[sites]] name = "<id>"`` references before ``site_dirs`` and the
+    catalogue — so a received file needs neither the shape library nor the site folder it was
+    made with. ``drop``: top-level tables removed before validation (e.g. ``("effects",
+    "diagnosis")``).
+
+    Raises
+    ------
+    InputError
+        No scenario (neither given nor stored), or an invalid one (naming the file).
+    """
+    from ..geometry.sites import Site
+
+    src = str(file) if file is not None else "<lightcurve>"
+    if scenario is not None:
+        path = Path(scenario)
+        doc, text = load_toml(path, with_text=True)   # read once (regular file, size cap)
+        fname = path
+        embedded = False
+    else:
+        text = getattr(curve, "scenario_toml", "") or ""
+        if not text.strip():
+            raise InputError("the file has no embedded scenario: give --scenario MODEL.toml",
+                             file=src, field="scenario")
+        fname = f"{src}:scenario"
+        doc = loads_toml(text, file=fname)
+        embedded = True      # from inside a data file: library shapes only, no file paths
+    for key in drop:
+        doc.pop(key, None)
+    lla = np.asarray(curve.site_lla_deg_m, float).reshape(-1, 3)
+    known = {}
+    for sid, (lat, lon, h) in zip(curve.site_names, lla):
+        try:
+            known[sid] = Site(sid, sid, float(lat), float(lon), float(h), source=f"{src}")
+        except InputError:
+            continue
+    return parse_scenario(doc, file=fname, text=text, library_dirs=library_dirs,
+                          site_dirs=site_dirs, sites=known, embedded=embedded,
+                          shape=shape if shape is not None else getattr(curve, "shape", None))
+
+
+#: ``--scenario`` short names of the bundled pipelines (``lightcurve demo --scenario thesis``)
+SCENARIO_ALIASES = {
+    "default": "default.toml",
+    "thesis": "thesis/leo-ic1-fast-spin-controlled-1site.toml",
+    "thesis-2site": "thesis/leo-ic1-fast-spin-controlled-2site.toml",
+}
+
+
+def resolve_scenario(spec) -> Path:
+    """A scenario path from a user's spec (``--scenario``, :func:`lightcurve.simulate`): a file,
+    an alias (:data:`SCENARIO_ALIASES`) or a bundled pipeline name relative to ``pipelines/``
+    (``thesis/geo-ic1-…``, ``.toml`` optional)."""
+    p = Path(spec)
+    if p.is_file():
+        return p
+    base = data_dir("pipelines")
+    name = SCENARIO_ALIASES.get(str(spec), str(spec))
+    for cand in (base / name, base / f"{name}.toml"):
+        if cand.is_file() and base.resolve() in cand.resolve().parents:
+            return cand
+    if str(spec).endswith(".toml") or p.parent != Path("."):
+        return p  # a path: the loader names the missing file
+    raise InputError("scenario not found", field="--scenario", value=str(spec),
+                     allowed="a TOML file, " + ", ".join(SCENARIO_ALIASES)
+                     + ", or a name under the bundled pipelines/ (e.g. thesis/geo-ic1-fast-spin-controlled-1site)")

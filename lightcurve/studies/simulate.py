@@ -71,7 +71,12 @@ def initial_attitude(scenario: Scenario):
 
 def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v_obj_eci_m=None,
                    r_sun_eci_m=None, lit_fraction=None):
-    """Truth quaternions (N,4) and body rates (N,3, rad/s) at sorted unique times ``t_s``."""
+    """Truth quaternions (N,4) and body rates (N,3, rad/s) at sorted unique times ``t_s``.
+
+    ``t_s`` counts seconds from the scenario epoch and must be ≥ 0: the initial attitude
+    (:func:`initial_attitude`) holds AT the epoch (``t0_s = 0``) and is propagated to every
+    requested time, whatever the first requested time is.
+    """
     from ..dynamics import ControlledTruth, UncontrolledTruth
     at = scenario.attitude
     if at.dynamics == "law":  # attitude prescribed by geometry (lightcurve.dynamics.laws)
@@ -84,22 +89,24 @@ def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v
         return q, law_body_rates(q, t_s)
     q0, w0 = initial_attitude(scenario)
     if at.dynamics == "controlled":
-        model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng)
+        model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng, t0_s=0.0)
         return model.simulate(t_s)
     J = at.inertia_kg_m2 if at.inertia_kg_m2 is not None else scenario.shape.inertia_kg_m2
     model = UncontrolledTruth(q0, w0, J, torques=at.torques, eta_sigma_rad_s2=np.radians(at.eta_sigma_deg_s2),
                               rng=rng, shape=scenario.shape, orbit=scenario.orbit,
-                              epoch_utc=scenario.epoch_utc)
+                              epoch_utc=scenario.epoch_utc, t0_s=0.0)
     return model.simulate(t_s)
 
 
-def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = False):
-    """Simulate the scenario's lightcurve.
+def simulate(scenario, seed: int | None = None, return_counts: bool = False):
+    """Simulate the scenario's lightcurve (also ``lightcurve.simulate``).
 
     Parameters
     ----------
-    scenario : Scenario
-        From :func:`lightcurve.studies.scenario.load_scenario`.
+    scenario : Scenario, path or bundled name
+        A :class:`~lightcurve.studies.scenario.Scenario`, a scenario TOML file or a bundled
+        scenario name (``"default"``, ``"thesis"``, ``"thesis/<case>"``;
+        :func:`lightcurve.studies.scenario.resolve_scenario`).
     seed : int, optional
         Overrides ``scenario.seed``. The attitude noise and the measurement noise use two
         independent streams spawned from it, so the result is reproducible bit for bit.
@@ -114,13 +121,17 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     from ..geometry.schedules import build_schedule
     from ..photometry import apparent_magnitude
     from ..photometry.noise import magnitude_sigma
+    from .scenario import load_scenario, resolve_scenario
 
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(resolve_scenario(scenario))
     if scenario.orbit is None:
         raise InputError("this scenario has no [orbit] (it models a recording); add an [orbit] to "
                          "simulate", file=scenario.source, field="orbit")
     seed = scenario.seed if seed is None else int(seed)
     rng_att, rng_noise = _rngs(seed)
     meas = scenario.measurement
+    nominal_shape = scenario.shape  # the file carries the nominal (model) shape
     refl_truth = None
     refl = getattr(scenario, "reflection", None)
     if refl is not None and refl.perturb:
@@ -129,7 +140,7 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
         import json
         from dataclasses import replace
 
-        from .fit_reflection import perturb_reflection
+        from ..photometry.perturb import perturb_reflection
 
         rng_refl = np.random.default_rng(np.random.SeedSequence([int(seed), 0x2EF1EC7]))
         shape_true, vals = perturb_reflection(scenario.shape, rng_refl, frac=refl.sigma_frac,
@@ -220,7 +231,10 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
                "seed": seed, "ignore_eclipse": int(meas.ignore_eclipse), "sun_mag": meas.sun_mag,
                "dropped_below_horizon": counts.below_horizon, "dropped_site_daylight": counts.site_daylight,
                "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": n_no_reflection},
+        shape=nominal_shape,
     )
+    if getattr(meas, "band", ""):
+        lc.attrs["band"] = meas.band
     if effects_json is not None:
         lc.attrs["effects"] = effects_json
     if refl_truth is not None:

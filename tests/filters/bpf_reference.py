@@ -26,10 +26,11 @@ def _problem(case):
     lc = make_curve(**c)
     if case.get("bias_mag"):
         lc.mag = lc.mag + case["bias_mag"]
+    extra = {"reflection": "model3"} if case.get("attitude") == "truth" else {}
     return build_problem(lc, seed=case.get("problem_seed", 2),
                          sigma_theta_deg=case.get("sigma_theta_deg", 3.0),
                          acs_mode=case.get("acs_mode", "random_walk"),
-                         attitude=case.get("attitude", "estimate"))
+                         attitude=case.get("attitude", "estimate"), **extra)
 
 
 #: name → settings (curve: make_curve kwargs; kw: run_bpf keyword arguments)

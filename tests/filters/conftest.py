@@ -15,8 +15,8 @@ def curve():
 
 @pytest.fixture(scope="session")
 def default_scenario():
-    """The bundled thesis scenario (pipelines/default.toml), loaded once."""
+    """The bundled thesis LEO fast-spin scenario (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml), loaded once."""
     from lightcurve._paths import data_dir
     from lightcurve.studies.scenario import load_scenario
 
-    return load_scenario(data_dir("pipelines") / "default.toml")
+    return load_scenario(data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml")

@@ -27,10 +27,10 @@ def test_config_variants_and_validation():
     t = BPFConfig.thesis()
     # Bernard ch. 7: multinomial resampling (table 6.3), table 7.9 roughening, no progressive
     # correction, no gate, the estimate about one particle (eq. 7.100, "some i-th particle")
-    assert (t.resampling, t.rejuvenation, t.progressive, t.gate, t.reference) == (
+    assert (t.resampling, t.rejuvenation, t.progressive, t.gating, t.reference) == (
         "multinomial", "table7.9", False, False, "heaviest")
     r = BPFConfig()
-    assert (r.variant, r.resampling, r.rejuvenation, r.progressive, r.gate, r.reference) == (
+    assert (r.variant, r.resampling, r.rejuvenation, r.progressive, r.gating, r.reference) == (
         "robust", "systematic", "auto", True, True, "refined")
     # an explicit field is a named departure from the variant
     assert BPFConfig(variant="thesis", resampling="systematic").resampling == "systematic"

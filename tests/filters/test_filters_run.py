@@ -322,7 +322,8 @@ def test_ukf_cholesky_failure_restores_prior_and_flags(curve, monkeypatch):
 
 def test_bpf_from_60deg_converges_on_the_default_scenario():
     """Issue 5 / Bernard fig. 9.5c–e: from a 60° initial attitude error the particle filter
-    ends below 5° on the thesis LEO fast-spin case (pipelines/default.toml). Regression guard
+    ends below 5° on the thesis LEO fast-spin case
+    (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml). Regression guard
     for the joint kernel: applied to the wide multimodal early cloud it merged the modes and
     19 of 20 such runs ended ≈ 170° off; with the compactness rule (joint_max_spread_deg) 20
     of 20 end below 5° (median 0.64°; module docstring of filters/bpf.py). The first two
@@ -332,7 +333,7 @@ def test_bpf_from_60deg_converges_on_the_default_scenario():
     from lightcurve.studies.scenario import load_scenario
     from lightcurve.studies.simulate import simulate
 
-    sc = load_scenario(data_dir("pipelines") / "default.toml")
+    sc = load_scenario(data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml")
     for i in (0, 1):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

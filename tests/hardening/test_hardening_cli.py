@@ -188,7 +188,7 @@ def test_safe_output_path_rejects_bad_suffix():
 def test_demo_scenario_name_cannot_escape_output_folder(tmp_path, capsys):
     """A scenario named '../../escaped' writes into OUT, not two folders up."""
     text = (data_dir("pipelines") / "default.toml").read_text()
-    text = text.replace('name = "leo-fast-spin-socorro"', 'name = "../../escaped"')
+    text = text.replace('name = "cubesat-pass-socorro"', 'name = "../../escaped"')
     scen = tmp_path / "s.toml"
     scen.write_text(text)
     out = tmp_path / "a" / "b" / "out"

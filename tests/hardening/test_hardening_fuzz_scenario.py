@@ -21,7 +21,8 @@ from lightcurve._paths import data_dir
 from lightcurve.studies.scenario import load_scenario, parse_scenario
 
 PIPE = data_dir("pipelines")
-DEFAULT = tomllib.loads((PIPE / "default.toml").read_text())
+DEFAULT = tomllib.loads((PIPE / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text())
+BUNDLED_DEFAULT = tomllib.loads((PIPE / "default.toml").read_text())  # TLE orbit, lit pass
 UNCONTROLLED = tomllib.loads((PIPE / "thesis" / "leo-ic2-nadir-uncontrolled-2site.toml").read_text())
 STARLINK = tomllib.loads((PIPE / "real" / "starlink_pomenis.toml").read_text())
 
@@ -33,7 +34,8 @@ def _write(text: str | bytes, name="scen.toml") -> Path:
 
 
 @fuzz_settings(120)
-@given(st.one_of(mutated_docs(DEFAULT), mutated_docs(UNCONTROLLED), mutated_docs(STARLINK)))
+@given(st.one_of(mutated_docs(DEFAULT), mutated_docs(BUNDLED_DEFAULT), mutated_docs(UNCONTROLLED),
+                 mutated_docs(STARLINK)))
 def test_scenario_mutated(doc):
     p = _write(dumps_toml(doc))
     only_input_error("scenario TOML (load_scenario)", load_scenario, p, file=p)

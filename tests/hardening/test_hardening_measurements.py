@@ -18,7 +18,7 @@ from lightcurve.io.lightcurve_h5 import Lightcurve
 from lightcurve.studies.scenario import parse_scenario
 from lightcurve.studies.simulate import simulate
 
-DEFAULT = tomllib.loads((data_dir("pipelines") / "default.toml").read_text())
+DEFAULT = tomllib.loads((data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text())
 
 
 def _scenario(**measurement):

@@ -204,3 +204,27 @@ def test_apply_effects_order_independent_and_additive(cube):
     ref = (get_effect("clock_offset").apply(ctx, {"dt_s": 0.5})
            + np.array([0.2, -0.1])[ctx.site_index] + 0.2 * ctx.airmass)
     np.testing.assert_allclose(m1, ref, atol=1e-12)
+
+
+def test_zero_point_per_camera():
+    """Two cameras at one site (own calibrations) and a second site without a camera column:
+    the offset is per camera; without cameras one camera per site, named after it."""
+    from lightcurve.photometry import load_shape
+    from lightcurve.physics import get_effect
+
+    cube = load_shape("cube_1u")
+    ctx = make_ctx(cube, n_sites=2)
+    zp = get_effect("zero_point")
+    assert ctx.n_cameras == 2 and ctx.camera_ids == ctx.site_names
+    m0 = ctx.evaluate()
+    d = zp.apply(ctx, {"offset_mag": np.array([0.1, -0.2])}) - m0
+    np.testing.assert_allclose(d, np.where(ctx.site_index == 0, 0.1, -0.2), atol=1e-12)
+    cam = np.arange(len(ctx)) % 3                     # three cameras
+    ctx3 = ctx.with_state(camera_index=cam, camera_names=["s0/a", "s0/b", "s1/a"])
+    assert ctx3.n_cameras == 3
+    d = zp.apply(ctx3, {"offset_mag": np.array([0.1, -0.2, 0.3])}) - m0
+    np.testing.assert_allclose(d, np.array([0.1, -0.2, 0.3])[cam], atol=1e-12)
+    with pytest.raises(ValueError):
+        zp.check_params({"offset_mag": np.array([0.1, 0.2])}, ctx3)   # wrong length
+    S = zp.signature_columns(ctx3)
+    assert S.shape == (len(ctx), 3) and np.all(S.sum(axis=1) == 1)

@@ -76,7 +76,7 @@ def test_parse_effects_values_and_errors():
 def _default_text():
     from lightcurve._paths import data_dir
 
-    return (data_dir("pipelines") / "default.toml").read_text()
+    return (data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text()
 
 
 def test_scenario_rejects_bad_effects():
