@@ -9,8 +9,8 @@ rules here:
   there is none), so a job confined by ``taskset``, cgroups or a batch scheduler is respected;
 * a user's ``NUMBA_NUM_THREADS`` (set before lightcurve was imported) is an upper bound;
 * W worker processes get ``max(1, cores // W)`` numba threads each (:func:`threads_per_worker`);
-  the worker sets it at start (:func:`limit_numba_threads`) and the environment carries it to
-  processes it spawns.
+  a pool worker sets it at start (:func:`limit_numba_threads`), a Dask LocalCluster worker gets
+  it in its environment, a task on another Dask cluster sets it for its own thread.
 
 numba's threading layer is numba's choice (tbb, else omp, else workqueue; the user's
 ``NUMBA_THREADING_LAYER`` wins), with OpenMP's waiting threads made to sleep
@@ -68,13 +68,13 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 
 
 def limit_numba_threads(n: int) -> int:
-    """Use at most ``n`` numba threads in this thread from now on, and in processes started
-    later (environment). Returns the number set (never above numba's launch-time maximum)."""
+    """Use at most ``n`` numba threads in this thread from now on. Returns the number set (never
+    above numba's launch-time maximum). The environment is left alone: numba re-reads
+    NUMBA_NUM_THREADS when it compiles and refuses a value changed after its threads started."""
     import numba
 
     n = max(1, min(int(n), int(numba.config.NUMBA_NUM_THREADS)))
     numba.set_num_threads(n)
-    os.environ["NUMBA_NUM_THREADS"] = str(n)
     return n
 
 

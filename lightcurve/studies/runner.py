@@ -323,8 +323,7 @@ def process_pool(workers: int):
 
     from ..threads import threads_per_worker
 
-    nt = threads_per_worker(workers)
-    os.environ["NUMBA_NUM_THREADS"] = str(nt)   # inherited by a forkserver started now
+    nt = threads_per_worker(workers)   # set in each worker by init_worker
     # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
     # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
     if "forkserver" in mp.get_all_start_methods():
