@@ -261,7 +261,8 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     config : "mekf" | "ukf" | "bpf" or a filter configuration object
         (:class:`~lightcurve.filters.config.MEKFConfig`,
         :class:`~lightcurve.filters.config.UKFConfig`, the particle filter's ``BPFConfig``).
-        A method name takes the default settings of that filter.
+        A method name takes the default settings of that filter; ``method="ukf"`` is accepted
+        as the keyword spelling of a method name.
     problem : :class:`~lightcurve.filters.config.ProblemConfig`, optional
         Initial estimate, dynamics, reflection states, gate (default settings).
     **options :
@@ -289,6 +290,11 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     -------
     Estimate
     """
+    if "method" in options:  # the keyword spelling of the README: invert(lc, method="ukf")
+        if config != "mekf":
+            raise InputError("give the filter once: as config or as method=", field="method",
+                             value=options["method"])
+        config = options.pop("method")
     if isinstance(config, str):
         method, fconf = config, None
     elif isinstance(config, ConfigBase) and hasattr(type(config), "method"):
