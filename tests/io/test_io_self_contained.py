@@ -142,7 +142,7 @@ def test_user_library_shape_through_every_command(tmp_path, capsys):
     summ = json.loads((tmp_path / "inv" / "summary.json").read_text())["sim"]
     assert summ["inside_3sigma"]
     assert main(["diagnose", str(h5), "-o", str(tmp_path / "diag"), "-q", "--max-effects", "1",
-                 "--no-cv"]) == 0
+                 "--cv", "none"]) == 0
     assert main(["fit-reflection", str(h5), "-o", str(tmp_path / "fr"), "--params", "xi",
                  "--facets", "0", "--max-steps", "4000", "-q"]) == 0
     st = tmp_path / "study.toml"
