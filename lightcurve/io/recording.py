@@ -269,7 +269,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     if spec.band is not None:
         from ..photometry.bands import sun_magnitude
 
-        sun_magnitude(spec.band, file=sec.file, field=sec._field("band"))
+        sun_magnitude(spec.band, file=sec.file, field=sec.field_name("band"))
     if spec.epoch_utc is not None:
         from ..geometry.time import parse_epoch
 
