@@ -28,6 +28,7 @@ __all__ = [
     "albedo_on_sensors_nb", "albedo_cells_nb", "cell_irradiance_nb", "earth_rotation_angle",
     "albedo_sun_frame_nb", "expected_albedo_nb", "albedo_phi_nb", "sun_nadir_axis_nb",
     "TOMS_GRIDS", "load_toms", "draw_albedo_map", "AlbedoCells", "albedo_vectors_nb", "r3_nb",
+    "albedo_coefficient_cov_nb",
 ]
 
 
@@ -242,6 +243,26 @@ def r3_nb(theta, v):
     return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
 
 
+@numba.njit(cache=True, inline="always")
+def _cap_row_columns(lat_i, phi, lon, cos_l, nlon, lon_w0, dlon):
+    """First column and number of columns of one grid row (latitude ``lat_i``) that can lie
+    in the spherical cap of angular radius arccos(``cos_l``) centred at (``phi``, ``lon``):
+    the cap's longitude half-width at that latitude, cos Δλ = (cos λ − sin φᵢ sin φ)/(cos φᵢ
+    cos φ), widened by one column.  (0, 0) when the row misses the cap."""
+    den = np.cos(lat_i) * np.cos(phi)
+    cl = (cos_l - np.sin(lat_i) * np.sin(phi)) / den if den > 1e-12 else -2.0
+    if cl >= 1.0:
+        return 0, 0
+    if cl <= -1.0:
+        return 0, nlon
+    half = np.arccos(cl) + dlon
+    c0 = int(np.floor((lon - half - lon_w0) / dlon))
+    ncol = int(np.ceil(2.0 * half / dlon)) + 2
+    if ncol > nlon:
+        return 0, nlon
+    return c0, ncol
+
+
 @numba.njit(cache=True)
 def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
                       r_E, s_E, nE, cos_fov, hE, edge_m):
@@ -262,28 +283,12 @@ def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dl
     lon = np.arctan2(r_E[1], r_E[0])
     lo = phi - lam0 - dlat_max
     hi = phi + lam0 + dlat_max
-    # per row: the longitude half-width of the cap (angular radius λ widened by one row, for
-    # the cells' extent) at the row's latitude, cos Δλ = (cos λ − sin φᵢ sin φ)/(cos φᵢ cos φ)
     cos_l = np.cos(min(np.pi, lam0 + dlat_max + 0.01))
-    sphi, cphi = np.sin(phi), np.cos(phi)
     count = 0
     for i in range(nlat):
         if lat_c[i] < lo or lat_c[i] > hi:
             continue
-        den = np.cos(lat_c[i]) * cphi
-        cl = (cos_l - np.sin(lat_c[i]) * sphi) / den if den > 1e-12 else -2.0
-        if cl >= 1.0:
-            continue
-        if cl <= -1.0:
-            c0 = 0
-            ncol = nlon
-        else:
-            half = np.arccos(cl) + dlon
-            c0 = int(np.floor((lon - half - lon_w0) / dlon))
-            ncol = int(np.ceil(2.0 * half / dlon)) + 2
-            if ncol > nlon:
-                ncol = nlon
-                c0 = 0
+        c0, ncol = _cap_row_columns(lat_c[i], phi, lon, cos_l, nlon, lon_w0, dlon)
         for cc in range(ncol):
             jc = (c0 + cc) % nlon
             j = i * nlon + jc
@@ -305,3 +310,54 @@ def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dl
                 V[k, 1] += a * uy
                 V[k, 2] += a * uz
     return V, Aedge, count
+
+
+@numba.njit(cache=True)
+def albedo_coefficient_cov_nb(centers, cnormals, rho_area, sig_area, lat_c, nlat, nlon, lon_w0,
+                              dlon, dlat_max, r_E, s_E, nE, cos_fov, hE):
+    """Covariance (N,N) of the albedo irradiance on the sensors caused by the uncertainty of
+    the cells' albedo coefficients (O'Keefe 2015 eq. 4.27 ν_α, eq. 4.30b): with the TOMS
+    standard deviation σ_j of cell j (``sig_area`` = σ_j A_j, m²) and its irradiance per unit
+    albedo w_j = cos(sun) cos(view)/(π d²), ``Σ_j σ_j² A_j² w_j² c_ij c_kj`` over the sunlit cells
+    in view and inside both sensors' FOV (c_ij the cosine on sensor i; structure horizons
+    ``hE``).  Units of the solar irradiance squared, before the sensor scale factors."""
+    N = nE.shape[0]
+    Ra = np.zeros((N, N))
+    if nlat == 0:
+        return Ra
+    rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
+    lam0 = np.arccos(min(1.0, 6356752.0 / rn))
+    phi = np.arcsin(r_E[2] / rn)
+    lon = np.arctan2(r_E[1], r_E[0])
+    lo = phi - lam0 - dlat_max
+    hi = phi + lam0 + dlat_max
+    cos_l = np.cos(min(np.pi, lam0 + dlat_max + 0.01))
+    cvec = np.zeros(N)
+    for i in range(nlat):
+        if lat_c[i] < lo or lat_c[i] > hi:
+            continue
+        c0, ncol = _cap_row_columns(lat_c[i], phi, lon, cos_l, nlon, lon_w0, dlon)
+        for cc in range(ncol):
+            j = i * nlon + (c0 + cc) % nlon
+            if rho_area[j] <= 0.0 or sig_area[j] <= 0.0:
+                continue
+            a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_E, s_E)
+            if a == 0.0:
+                continue
+            w = a / rho_area[j] * sig_area[j]
+            anyc = False
+            for k in range(N):
+                c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
+                cvec[k] = 0.0
+                if c < cos_fov[k] or c <= 0.0:
+                    continue
+                if hE[k, 0] * ux + hE[k, 1] * uy + hE[k, 2] * uz < 0.0:
+                    continue
+                cvec[k] = w * c
+                anyc = True
+            if anyc:
+                for k in range(N):
+                    if cvec[k] != 0.0:
+                        for m in range(N):
+                            Ra[k, m] += cvec[k] * cvec[m]
+    return Ra

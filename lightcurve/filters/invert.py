@@ -21,14 +21,23 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rotations as rot
+from ..acquisition.global_init import global_initialise
 from ..errors import InputError
 from ..io.lightcurve_h5 import Lightcurve
 from ..io.tomlio import Section, loads_toml
 from ..studies.scenario import scenario_from_lightcurve
 from . import bpf as _bpf
 from ._common import FilterProblem
-from .config import (ATTITUDE_MODES, BPF_KEYWORDS, INITIAL_MODES, METHOD_NAMES, ConfigBase,
-                     ProblemConfig, filter_config_class, split_options)
+from .config import (
+    ATTITUDE_MODES,
+    BPF_KEYWORDS,
+    INITIAL_MODES,
+    METHOD_NAMES,
+    ConfigBase,
+    ProblemConfig,
+    filter_config_class,
+    split_options,
+)
 from .facet_states import FacetParameterStates
 from .gating import set_gate
 from .mekf import run_mekf
@@ -83,33 +92,6 @@ def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
     if J is not None:
         out["inertia_kg_m2"] = J
     return out
-
-
-def _check_curve(curve):
-    if not isinstance(curve, Lightcurve):
-        raise InputError("invert needs a lightcurve.io.Lightcurve", field="curve",
-                         value=type(curve).__name__)
-    n = len(curve)
-    t = np.asarray(curve.t, float)
-    for name in ("mag", "mag_sigma"):
-        v = np.asarray(getattr(curve, name))
-        if v.shape != (n,):
-            raise InputError("inconsistent shapes", field=name, value=v.shape, allowed=f"({n},)")
-    for name in ("r_obj_eci_m", "r_site_eci_m", "r_sun_eci_m"):
-        v = np.asarray(getattr(curve, name))
-        if v.shape != (n, 3):
-            raise InputError("inconsistent shapes", field=name, value=v.shape,
-                             allowed=f"({n}, 3)")
-    if n == 0 or not np.any(np.isfinite(curve.mag)):
-        raise InputError("the lightcurve has no visible (finite) magnitude to filter",
-                         field="mag", value=f"{n} rows, 0 finite")
-    if np.any(np.diff(t) < 0):
-        raise InputError("times must be non-decreasing", field="t")
-    fin = np.isfinite(curve.mag)
-    sig = np.asarray(curve.mag_sigma, float)
-    if np.any(~(sig[fin] > 0)):
-        raise InputError("mag_sigma must be > 0 where a magnitude is given", field="mag_sigma",
-                         allowed="> 0")
 
 
 def _check_curve(curve):
@@ -251,7 +233,7 @@ def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
     return initial
 
 
-def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
+def invert(curve, config="mekf", *, problem: ProblemConfig | None = None, method=None,
            **options) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
@@ -261,10 +243,12 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     config : "mekf" | "ukf" | "bpf" or a filter configuration object
         (:class:`~lightcurve.filters.config.MEKFConfig`,
         :class:`~lightcurve.filters.config.UKFConfig`, the particle filter's ``BPFConfig``).
-        A method name takes the default settings of that filter; ``method="ukf"`` is accepted
-        as the keyword spelling of a method name.
+        A method name takes the default settings of that filter.
     problem : :class:`~lightcurve.filters.config.ProblemConfig`, optional
         Initial estimate, dynamics, reflection states, gate (default settings).
+    method : "mekf" | "ukf" | "bpf", optional
+        The keyword spelling of a method name (``invert(lc, method="ukf")``), in place of
+        ``config``.
     **options :
         Any field of :class:`~lightcurve.filters.config.ProblemConfig` or of the filter's
         configuration, by name — the keyword form of the call, e.g.
@@ -290,11 +274,11 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
     -------
     Estimate
     """
-    if "method" in options:  # the keyword spelling of the README: invert(lc, method="ukf")
-        if config != "mekf":
-            raise InputError("give the filter once: as config or as method=", field="method",
-                             value=options["method"])
-        config = options.pop("method")
+    if method is not None:
+        if not (isinstance(config, str) and config == "mekf") and config != method:
+            raise InputError("give the filter either as config or as method, not both",
+                             field="method", value=method)
+        config = method
     if isinstance(config, str):
         method, fconf = config, None
     elif isinstance(config, ConfigBase) and hasattr(type(config), "method"):
@@ -324,19 +308,21 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
         check_allocation(n_p * (BPF_BYTES_PER_PARTICLE + 8 * 7 * len(tuple(bo["keep_clouds"]))),
                          f"particle filter with {n_p} particles", field="particles", value=n_p)
     if initial_mode(pcfg.initial, curve, pcfg.initial_q, pcfg.initial_omega) == "global":
-        start = ("seed", "sigma_theta_deg", "sigma_omega_deg_s", "initial_q", "initial_omega",
-                 "shape", "dynamics", "library_dirs", "site_dirs", "global_config", "initial")
-        handover = {k: v for k, v in pcfg.as_options().items() if k not in start}
-        handover.update(fconf.as_options() if fconf is not None else filt_opts)
-        handover["initial"] = "given"
-        # the global initialisation drives this filter (acquisition sits above filters):
-        # imported here, when it is asked for
-        from ..acquisition.global_init import global_initialise
+        # no first guess: the global initialisation (a layer below the filters: it gets the
+        # model and a runner of this filter, and imports nothing from here)
+        start = pcfg.replace(initial="given", initial_q=(1.0, 0.0, 0.0, 0.0),
+                             initial_omega=(0.0, 0.0, 0.0), global_config=None)
 
-        return global_initialise(curve, method, seed=pcfg.seed, config=pcfg.global_config,
-                                 shape=pcfg.shape, dynamics=pcfg.dynamics,
-                                 filter_kwargs=handover, library_dirs=pcfg.library_dirs,
-                                 site_dirs=pcfg.site_dirs).best
+        def run_from(q0, w0, sigma_theta_deg, sigma_omega_deg_s):
+            p = start.replace(initial_q=tuple(float(x) for x in q0),
+                              initial_omega=tuple(float(x) for x in w0),
+                              sigma_theta_deg=float(sigma_theta_deg),
+                              sigma_omega_deg_s=float(sigma_omega_deg_s))
+            return invert(curve, fconf if fconf is not None else method, problem=p,
+                          **({} if fconf is not None else filt_opts))
+
+        return global_initialise(curve, build_problem(curve, start), run_from, seed=pcfg.seed,
+                                 config=pcfg.global_config).best
     fp = build_problem(curve, pcfg)
     fp.meta["method"] = method
     if fconf is not None:

@@ -48,6 +48,7 @@ def test_object_and_keyword_calls_give_the_same_estimate(curve, method):
     kw = dict(seed=4, sigma_theta_deg=5.0, sigma_omega_deg_s=0.05)
     filt = {"mekf": dict(error="small_angle"), "ukf": dict(alpha=0.8, kappa=1.0)}[method]
     a = invert(curve, method, **kw, **filt)
+    np.testing.assert_array_equal(invert(curve, method=method, **kw, **filt).q, a.q)
     cfg = (MEKFConfig if method == "mekf" else UKFConfig)(**filt)
     b = invert(curve, cfg, problem=ProblemConfig(**kw))
     c = invert(curve, cfg, problem=ProblemConfig(seed=9, **{k: v for k, v in kw.items()
