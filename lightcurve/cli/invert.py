@@ -6,12 +6,10 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from ..acquisition.global_init import GlobalInitConfig
 from ..errors import InputError
-from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
-from ..studies.batch import expand_inputs, invert_files
 from ._args import (add_device, add_executors, add_model_options, add_output, add_plot,
-                    add_quiet, add_seed, add_variant, csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+                    add_quiet, add_seed, add_variant, csv_ints, csv_list, initial_omega_rad_s,
+                    initial_q, number,
                     refuse_inapplicable)
 
 __all__ = ["register", "configs_from_args"]
@@ -37,6 +35,9 @@ def _refuse_inapplicable_options(args) -> None:
 def configs_from_args(args):
     """``(ProblemConfig, filter options dict)`` from the parsed ``invert`` options — the same
     validated objects the Python API and the study TOML build."""
+    from ..acquisition.global_init import GlobalInitConfig
+    from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
+
     start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
     if args.initial_q is not None:
         start["initial_q"] = initial_q(args.initial_q)
@@ -76,6 +77,8 @@ def configs_from_args(args):
 
 
 def _cmd_invert(args) -> int:
+    from ..studies.batch import expand_inputs, invert_files
+
     _refuse_inapplicable_options(args)
     n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
     problem, filter_options = configs_from_args(args)
