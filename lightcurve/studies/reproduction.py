@@ -17,7 +17,6 @@ where each ``DIR`` is the output folder of ``lightcurve css study`` (its ``summa
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from ..io.atomic import atomic_write_text
@@ -44,10 +43,12 @@ def _f(x, fmt=".2f"):
 
 
 def _load(dirs):
+    from ..io.safe_open import read_json
+
     out = {}
     for d in dirs:
         p = Path(d) / "summary.json"
-        s = json.loads(p.read_text(encoding="utf-8"))
+        s = read_json(p, what="study summary")
         out[s.get("experiment") or Path(d).name] = s
     return out
 
