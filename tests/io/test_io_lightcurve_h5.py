@@ -12,10 +12,12 @@ def make_lc(n=20, truth=True):
     rng = np.random.default_rng(1)
     q = rng.normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
+    r_obj = rng.normal(size=(n, 3))  # random directions, 7000 km out (outside the Earth)
+    r_obj *= 7e6 / np.linalg.norm(r_obj, axis=1, keepdims=True)
     return Lightcurve(
         epoch_utc="2020-03-01T08:08:40Z", t=np.arange(n) * 5.0, mag=10 + rng.normal(size=n),
         mag_sigma=np.full(n, 0.03), site=np.zeros(n, int), site_names=["socorro"],
-        site_lla_deg_m=[[33.8173, -106.66, 1500.0]], r_obj_eci_m=rng.normal(size=(n, 3)) * 7e6,
+        site_lla_deg_m=[[33.8173, -106.66, 1500.0]], r_obj_eci_m=r_obj,
         r_site_eci_m=rng.normal(size=(n, 3)) * 6.4e6, r_sun_eci_m=rng.normal(size=(n, 3)) * 1.5e11,
         lit_fraction=np.ones(n), elevation_rad=np.full(n, 0.5),
         truth_q=q if truth else None, truth_omega_rad_s=rng.normal(size=(n, 3)) if truth else None,
