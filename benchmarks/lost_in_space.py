@@ -2,7 +2,7 @@
 
 For each case (scenario TOML) and seed: simulate the lightcurve with that seed; run
 ``analyse_period`` and check whether the true spin period lies in the stated 99 % interval of
-one of the reported candidate periods; run ``global_initialise`` (no truth used by the
+one of the reported candidate periods; run ``invert(initial="global")`` (no truth used by the
 estimator: attitude uniform over SO(3), rate from the period analysis) with the chosen filter;
 score the final RSS attitude error of the best mode, whether any reported mode ends within
 5° of the truth, and whether the result states an ambiguity.
@@ -69,7 +69,7 @@ def main(argv=None):
     import numba
 
     import lightcurve
-    from lightcurve.acquisition.global_init import GlobalInitConfig, global_initialise
+    from lightcurve.acquisition.global_init import GlobalInitConfig
     from lightcurve.acquisition.period import analyse_period
     from lightcurve.photometry import load_shape
     from lightcurve.rotations import attitude_error_angle
@@ -85,17 +85,21 @@ def main(argv=None):
             t0, c0 = time.perf_counter(), time.process_time()
             per = analyse_period(lc)
             cfg = GlobalInitConfig(particles=args.particles, moves=args.moves)
-            res = global_initialise(lc, args.method, seed=seed, config=cfg, period=per)
+            est = lightcurve.invert(lc, args.method, seed=seed, initial="global",
+                                    global_config=cfg)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            gi = est.meta["global_init"]
             tq = lc.truth_q[-1]
-            errs = [float(np.degrees(attitude_error_angle(tq, m.estimate.q[-1])))
-                    for m in res.modes]
+            errs = [float(np.degrees(attitude_error_angle(tq, np.asarray(m["final_q"]))))
+                    for m in gi["modes"]]
             row = {"seed": seed, "true_period_s": Pt, "period_s": per.period_s,
                    "period_ok": bool(per.contains(Pt)), "period_ambiguous": per.ambiguous,
                    "final_err_deg": errs[0], "mode_errs_deg": errs,
-                   "mode_weights": [m.weight for m in res.modes], "ambiguous": res.ambiguous,
-                   "truth_in_a_mode": bool(min(errs) < 5.0), "stages": res.stages,
-                   "converged": res.converged, "wall_s": wall, "cpu_s": cpu}
+                   "mode_weights": [m["weight"] for m in gi["modes"]],
+                   "ambiguous": gi["ambiguous"], "truth_in_a_mode": bool(min(errs) < 5.0),
+                   "stages": gi["stages"], "attempts": gi["attempts"],
+                   "converged": gi["converged"], "flagged": est.summary()["flagged"],
+                   "wall_s": wall, "cpu_s": cpu}
             rows.append(row)
             if args.verbose:
                 print(json.dumps(row), flush=True)

@@ -208,6 +208,7 @@ class GlobalResult:
     modes : list of GlobalMode, heaviest first (at most ``max_modes``, each ≥ min_mode_weight).
     best : the Estimate of the heaviest mode's filter run.
     ambiguous : True when ≥ ``report_weight`` of the posterior lies outside the heaviest mode.
+    n_modes_total : modes holding ≥ ``min_mode_weight`` (``modes`` lists at most ``max_modes``).
     statement : one sentence for people (what the data say about the attitude).
     period : the PeriodResult that seeded the rate prior (or None).
     stages, particles, runtime_s, window_rows : sampler facts of the kept attempt; ``converged``
@@ -226,10 +227,12 @@ class GlobalResult:
     converged: bool = True
     acceptance: list = field(default_factory=list, repr=False)
     attempts: int = 1
+    n_modes_total: int = 1
 
     def summary(self) -> dict:
         return {"ambiguous": bool(self.ambiguous), "statement": self.statement,
-                "n_modes": len(self.modes), "modes": [m.summary() for m in self.modes],
+                "n_modes": len(self.modes), "n_modes_total": int(self.n_modes_total),
+                "modes": [m.summary() for m in self.modes],
                 "stages": int(self.stages), "particles": int(self.particles),
                 "converged": bool(self.converged), "attempts": int(self.attempts),
                 "runtime_s": round(float(self.runtime_s), 3),
@@ -307,9 +310,7 @@ class _Window:
         self.model = problem.model
         self.dyn = problem.dynamics
         if self.dyn.kind == "uncontrolled" and self.dyn.substep < self.SUBSTEP_S:
-            from ..filters.models import UncontrolledDynamics
-
-            self.dyn = UncontrolledDynamics(self.dyn.J, substep_s=self.SUBSTEP_S)
+            self.dyn = type(self.dyn)(self.dyn.J, substep_s=self.SUBSTEP_S)
         self.rows = np.asarray(rows, np.int64)
         self.t = np.ascontiguousarray(self.model.t, float)
         self.t_ref = float(self.t[0])
@@ -483,59 +484,44 @@ def _modes(Q, W, ll, cfg):
     return modes, heavy
 
 
-def _hand_over(modes, curve, method, seed, cfg, shape, dynamics, filter_kwargs, library_dirs,
-               site_dirs, invert):
+def _hand_over(modes, cfg, run_filter):
     """Run the user's filter from every mode's mean with its inflated spread as 1σ."""
-    fk = dict(filter_kwargs or {})
-    fk.setdefault("initial", "given")
-    fk.setdefault("library_dirs", library_dirs)
-    fk.setdefault("site_dirs", site_dirs)
     for m in modes:
         st = max(cfg.inflate * float(m.att_sigma_deg.max()), cfg.min_sigma_theta_deg)
         sw_ = max(cfg.inflate * float(m.omega_sigma_deg_s.max()), cfg.min_sigma_omega_deg_s)
-        m.estimate = invert(curve, method, seed=seed, initial_q=m.q0,
-                            initial_omega=m.omega0_rad_s, sigma_theta_deg=min(st, 90.0),
-                            sigma_omega_deg_s=sw_, shape=shape, dynamics=dynamics, **fk)
+        m.estimate = run_filter(m.q0, m.omega0_rad_s, min(st, 90.0), sw_)
         m.estimate.meta["initial"] = "global"
 
 
-def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, shape=None,
-                      dynamics=None, progress=None, filter_kwargs=None, library_dirs=None,
-                      site_dirs=None) -> GlobalResult:
+def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period=None,
+                      progress=None) -> GlobalResult:
     """Estimate attitude and rate from a lightcurve with no initial guess (module docstring).
+
+    The user entry point is ``lightcurve.invert(curve, method, initial="global")``
+    (:func:`lightcurve.filters.invert.invert`), which builds the two filter-side arguments.
 
     Parameters
     ----------
     curve : Lightcurve — the recording; its truth, if any, is never used by the estimator
         (only to report errors afterwards).
-    method : {"mekf", "ukf", "bpf"} — the filter that takes over from every mode.
-    seed : int — seeds the sampler and the filters (reproducible).
+    problem : FilterProblem — the model (``problem.model``: magnitudes, times, geometry,
+        ``predict_q``) and dynamics (``problem.dynamics.propagate``) of the filter that will take
+        over; its initial estimate is not used.
+    run_filter : callable(q0 (4,), omega0 (3,) rad/s, sigma_theta_deg, sigma_omega_deg_s) →
+        Estimate — runs that filter over the whole lightcurve from a given start.
+    seed : int — seeds the sampler (reproducible).
     config : GlobalInitConfig or None.
     period : PeriodResult, "none" or None — the spin-period analysis seeding the rate prior
         (None: computed here; "none": the broad prior only).
-    shape, dynamics, library_dirs, site_dirs : passed to
-        :func:`lightcurve.filters.invert.build_problem` (the model).
     progress : callable(str) or None — one line per tempering stage.
-    filter_kwargs : dict — further keyword arguments of :func:`lightcurve.filters.invert.invert`
-        for the hand-over runs (e.g. ``particles`` for the BPF).
 
     Returns
     -------
     GlobalResult
     """
-    from ..filters.invert import METHODS, build_problem, invert
-
     cfg = config or GlobalInitConfig()
-    if method not in METHODS:
-        raise InputError("unknown filter method", field="method", value=method,
-                         allowed=", ".join(METHODS))
     t0 = time.perf_counter()
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x6C0B]))
-    # the problem (model + dynamics); the initial estimate it needs is a dummy here
-    problem = build_problem(curve, initial_q=[1.0, 0.0, 0.0, 0.0], initial_omega=[0.0, 0.0, 0.0],
-                            shape=shape, dynamics=dynamics, library_dirs=library_dirs,
-                            site_dirs=site_dirs)
-    shape = problem.model.shape       # resolved once: the hand-over runs use the same model
     rows = _window_rows(problem.model, cfg)
     if rows.size < 5:
         raise InputError("global initialisation needs at least 5 finite magnitudes in the "
@@ -559,8 +545,7 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
         N = int(cfg.particles) * 2 ** attempt
         Q, W, ll, stages, converged, beta, acc_hist = _smc(win, prior, N, cfg, rng, progress)
         modes, heavy = _modes(Q, W, ll, cfg)
-        _hand_over(modes, curve, method, seed, cfg, shape, dynamics, filter_kwargs,
-                   library_dirs, site_dirs, invert)
+        _hand_over(modes, cfg, run_filter)
         attempts.append((modes, heavy, N, stages, converged, beta, acc_hist))
         cons = modes[0].estimate.consistency()
         if "nis_high" not in cons["flags"] and "residuals_high" not in cons["flags"]:
@@ -594,6 +579,7 @@ def global_initialise(curve, method="ukf", *, seed=0, config=None, period=None, 
     res = GlobalResult(modes=modes, best=best.estimate, ambiguous=ambiguous,
                        statement=statement, period=period, stages=stages, particles=N,
                        runtime_s=time.perf_counter() - t0, window_rows=rows,
-                       converged=converged, acceptance=acc_hist, attempts=len(attempts))
+                       converged=converged, acceptance=acc_hist, attempts=len(attempts),
+                       n_modes_total=len(heavy))
     best.estimate.meta["global_init"] = res.summary()
     return res

@@ -54,17 +54,20 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.constants import AU_M
 from ..errors import InputError
-from ..geometry.time import AU_M
 
 __all__ = ["PeriodResult", "analyse_period", "reduced_magnitude", "pab_rate_rad_s",
-           "INDISTINGUISHABLE_DBIC"]
+           "INDISTINGUISHABLE_DBIC", "MAX_FREQUENCIES"]
 
 #: two-sided 99 % quantile of the standard normal distribution
 Z99 = 2.5758293035489004
 #: aliases within this BIC difference of the best are reported as indistinguishable (a BIC
 #: difference above 6 is "strong" evidence, Kass & Raftery 1995, JASA 90, 773, §3.2)
 INDISTINGUISHABLE_DBIC = 6.0
+#: most trial frequencies of one analysis (memory and time stay bounded: a multi-month
+#: recording asks for ~10⁹; analyse its passes one at a time)
+MAX_FREQUENCIES = 500_000
 _REF_RANGE_M = 1.0e6   # reduced magnitudes refer to 1000 km
 
 
@@ -383,6 +386,14 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
                          value=(pmin, pmax), allowed=f"e.g. [{2.5 * dt_med:.3g}, {span / 1.5:.3g}] s")
     f_lo, f_hi = 1.0 / pmax, 1.0 / pmin
     df = 1.0 / (oversample * span)
+    n_freq = (f_hi - f_lo) / df
+    if n_freq > MAX_FREQUENCIES:
+        raise InputError(
+            f"the period search would need {n_freq:.3g} trial frequencies (span {span:.4g} s, "
+            f"periods {pmin:.3g}–{pmax:.3g} s): analyse one pass at a time or narrow the range "
+            "(--min-period-s/--max-period-s)", field="period range", value=(pmin, pmax),
+            allowed=f"at most {MAX_FREQUENCIES} frequencies, i.e. (1/min − 1/max) · span · "
+            f"{oversample} ≤ {MAX_FREQUENCIES}")
     freqs = np.arange(f_lo, f_hi + 0.5 * df, df)
     if freqs.size < 3:
         raise InputError("period search range too narrow for this span", field="period range",

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 import argparse
 
-from ._args import SEED, add_executors, add_output, add_quiet, number, output_not_input
+import numpy as np
+
+from ._args import (add_executors, add_output, add_plot, add_quiet, add_seed, add_workers, number,
+                    output_not_input)
 
 __all__ = ["register"]
 
@@ -37,7 +38,7 @@ def _cmd_css_simulate(args) -> int:
     from ..css.sunline_ekf import FilterParams
     from ..css.truth import Scenario, simulate
 
-    output_not_input(args.out, args.config, args.albedo, args.filter_albedo, option="--out")
+    output_not_input(args.output, args.config, args.albedo, args.filter_albedo, option="--output")
     css = _css_sensors(args.config, args.fov_deg)
     from ..memory import check_allocation
 
@@ -83,9 +84,9 @@ def _cmd_css_simulate(args) -> int:
     if args.controlled:
         pe = np.degrees(np.arccos(np.clip(r.s_true @ r.info["pointing_axis"], -1, 1)))
         print(f"final pointing error {pe[-1]:.2f} deg")
-    if args.out:
-        write_recording(args.out, r, css, args.epoch, gyro is not None)
-        print(f"wrote {args.out}")
+    if args.output:
+        write_recording(args.output, r, css, args.epoch, gyro is not None)
+        print(f"wrote {args.output}")
     return 0
 
 
@@ -96,7 +97,7 @@ def _cmd_css_estimate(args) -> int:
     from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams, run_filter
 
-    output_not_input(args.out, args.recording, option="--out")
+    output_not_input(args.output, args.recording, option="--output")
     rec = read_recording(args.recording)
     gyro = None if args.no_gyro else rec["gyro"]
     if args.estimator in ("ekf", "eckf"):
@@ -115,13 +116,13 @@ def _cmd_css_estimate(args) -> int:
         if sel.any():
             print(f"angular error (sunlit, after {args.settle_s:g} s): median "
                   f"{np.median(err[sel]):.2f} deg, 99th percentile {np.percentile(err[sel], 99):.2f} deg")
-    if args.out:
+    if args.output:
         from ..io.atomic import atomic_path
 
-        with atomic_path(args.out, suffix=".csv") as tmp:
+        with atomic_path(args.output, suffix=".csv") as tmp:
             np.savetxt(tmp, np.column_stack([rec["t"], s_hat]), delimiter=",",
                        header="t_s,s_hat_x,s_hat_y,s_hat_z (body axes)", comments="")
-        print(f"wrote {args.out}")
+        print(f"wrote {args.output}")
     return 0
 
 
@@ -149,6 +150,12 @@ def _cmd_css_study(args) -> int:
               f"{'-' if a15 is None else format(a15 / 60, '15.2f'):>15}")
     print(f"report in {out_dir}/ (summary.json, report.html)")
     return 0
+
+
+def _output(q, text) -> None:
+    """``-o/--output FILE`` plus the deprecated hidden alias ``--out``."""
+    add_output(q, what="file", help=text)
+    q.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
 
 
 def register(sub) -> None:
@@ -191,10 +198,10 @@ def register(sub) -> None:
     s.add_argument("--filter-albedo", default="builtin",
                    help="albedo model inside the EKF/ECKF: builtin (default), none (no albedo "
                    "model, first-session filter), or a CERES CSV / TOMS .dat file")
-    s.add_argument("--seed", type=SEED, default=1, help="random seed (default 1)")
+    add_seed(s, default=1)
     s.add_argument("--settle-s", type=number(0.0), default=300.0,
                    help="ignore errors this long after entering sunlight, s (default 300)")
-    s.add_argument("-o", "--output", "--out", dest="out", help="write the run to this HDF5 file (--out: deprecated alias)")
+    _output(s, "write the run to this HDF5 file (a CSS recording: 'css estimate', 'diagnose', 'plot')")
     s.set_defaults(func=_cmd_css_simulate)
 
     e = css_sub.add_parser(
@@ -202,13 +209,15 @@ def register(sub) -> None:
         description="Run WAVG, LSMN, WLSMN, the sun-line EKF or the ECKF on a CSS recording "
         "(HDF5 written by 'css simulate'); prints the error against the truth when present.")
     e.add_argument("recording", help="HDF5 CSS recording")
-    e.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"))
+    e.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
+                   help="sun-direction estimator: sun-line EKF or ECKF, or the single-point "
+                   "WAVG, LSMN, WLSMN (default ekf)")
     e.add_argument("--no-gyro", action="store_true",
                    help="ignore the gyro: rates from successive estimates (eq. 3.67)")
     e.add_argument("--threshold", type=number(), default=0.5,
                    help="activity threshold of the single-point methods (default 0.5)")
     e.add_argument("--settle-s", type=number(0.0), default=300.0, help="skip this long before scoring, s")
-    e.add_argument("-o", "--output", "--out", dest="out", help="write the estimates to this CSV file (--out: deprecated alias)")
+    _output(e, "write the estimates to this CSV file (t_s,s_hat_x,s_hat_y,s_hat_z)")
     e.set_defaults(func=_cmd_css_estimate)
 
     st = css_sub.add_parser(
@@ -241,11 +250,13 @@ def register(sub) -> None:
     ca = css_sub.add_parser(
         "calibrate", help="on-orbit CSS calibration filters (full and reduced) on a simulated orbit",
         description="Simulate O'Keefe's §4.4 case (one orbit, tumbling, dual pyramid, scale "
-        "factors dispersed 30 %%, misalignments, albedo, gyro, star tracker) and run the full "
+        "factors dispersed 30 %, misalignments, albedo, gyro, star tracker) and run the full "
         "calibration ECKF (MRP, gyro bias, scale factors, misalignments, albedo model) and the "
         "reduced filter (albedo as a considered bias). Prints per-sensor errors and 3-sigma bounds.")
-    ca.add_argument("--filter", choices=("full", "reduced", "both"), default="both")
-    ca.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
+    ca.add_argument("--filter", choices=("full", "reduced", "both"), default="both",
+                    help="calibration filter: the full ECKF, the reduced one (albedo as a "
+                    "considered bias) or both (default both)")
+    add_seed(ca, default=0)
     ca.add_argument("--duration-s", type=number(10.0, 86400.0), default=None,
                     help="duration, s (default one 400 km orbit, 5553 s)")
     ca.add_argument("--dt-s", type=number(0.05, 10.0), default=1.0, help="step, s (default 1)")
@@ -259,7 +270,7 @@ def register(sub) -> None:
                     help="albedo of the truth: builtin, none, or a CERES CSV / TOMS .dat file")
     ca.add_argument("--albedo-filter", default=None,
                     help="albedo map of the full filter (default: the truth's map)")
-    ca.add_argument("-o", "--output", "--out", dest="out", help="write the summary to this JSON file (--out: deprecated alias)")
+    _output(ca, "write the summary to this JSON file")
     ca.set_defaults(func=_lazy("cmd_calibrate"))
 
     fa = css_sub.add_parser(
@@ -270,8 +281,8 @@ def register(sub) -> None:
         "confidently below the prior's smallest plausible value. Reports detection and false-alarm rates and times to detection.")
     fa.add_argument("--runs", type=number(1, 100000, integer=True), default=300,
                     help="runs per failure mode (default 300)")
-    fa.add_argument("--workers", type=number(1, 256, integer=True), default=1)
-    fa.add_argument("--seed", type=SEED, default=0)
+    add_workers(fa, default=1, help="local worker processes (default 1)")
+    add_seed(fa, default=0)
     fa.add_argument("--window", type=number(1, 100000, integer=True), default=50,
                     help="averaging window, valid samples (default 50)")
     fa.add_argument("--prob", type=number(0.0, 1.0, lo_open=True, hi_open=True), default=0.999999,
@@ -284,7 +295,8 @@ def register(sub) -> None:
                     "output stays at zero; catches off failures of never-calibrated sensors)")
     fa.add_argument("--star-period-s", type=number(0.0, 3600.0), default=10.0,
                     help="star-tracker period, s; 0 for none (default 10)")
-    fa.add_argument("-o", "--output", "--out", dest="out", help="write the summary to this JSON file (--out: deprecated alias)")
+    _output(fa, "write the summary to this JSON file")
+    add_quiet(fa, help="no progress bar")
     fa.set_defaults(func=_lazy("cmd_faults"))
 
     vm = css_sub.add_parser(
@@ -292,14 +304,17 @@ def register(sub) -> None:
         description="DiGregorio's comparison: MEKF with magnetometer, gyro and photodiodes, "
         "photodiodes used as a least-squares Sun vector (SMM) or as individual voltages (VMM); "
         "attitude errors grouped by the number of lit photodiodes, with a plot.")
-    vm.add_argument("--runs", type=number(1, 100000, integer=True), default=20)
-    vm.add_argument("--seed", type=SEED, default=0)
-    vm.add_argument("--duration-s", type=number(10.0, 86400.0), default=3000.0)
+    vm.add_argument("--runs", type=number(1, 100000, integer=True), default=20,
+                    help="Monte Carlo runs (default 20)")
+    add_seed(vm, default=0)
+    vm.add_argument("--duration-s", type=number(10.0, 86400.0), default=3000.0,
+                    help="duration of each run, s (default 3000)")
     vm.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=70.0,
                     help="photodiode FOV half angle, deg (cube; default 70)")
     vm.add_argument("--albedo", action="store_true", help="Earth albedo in the truth (unmodelled)")
-    vm.add_argument("--plot", help="write the figure to this PNG file")
-    vm.add_argument("-o", "--output", "--out", dest="out", help="write the summary to this JSON file (--out: deprecated alias)")
+    add_plot(vm, help="also write the figure: OUTPUT with the suffix .png (css-vmm.png without -o)")
+    _output(vm, "write the summary to this JSON file")
+    add_quiet(vm, help="no progress bar")
     vm.set_defaults(func=_lazy("cmd_vmm"))
 
     sm = css_sub.add_parser(

@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import fields
 from pathlib import Path
 
+from ..acquisition.global_init import GlobalInitConfig
+from ..errors import InputError
+from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
+from ..studies.batch import expand_inputs, invert_files
 from ._args import (add_executors, add_model_options, add_output, add_plot, add_quiet, add_seed,
-                    csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+                    add_variant, csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
                     refuse_inapplicable)
 
-__all__ = ["register"]
+__all__ = ["register", "configs_from_args"]
 
 
 #: options that only one filter uses (``--method``)
@@ -29,37 +34,46 @@ def _refuse_inapplicable_options(args) -> None:
     refuse_inapplicable(args, "gate", {"gate_false_alarm": {"auto", "reject", "inflate"}})
 
 
-def _cmd_invert(args) -> int:
-    from ..studies.batch import expand_inputs, invert_files
-
-    _refuse_inapplicable_options(args)
-    n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+def configs_from_args(args):
+    """``(ProblemConfig, filter options dict)`` from the parsed ``invert`` options — the same
+    validated objects the Python API and the study TOML build."""
     start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
     if args.initial_q is not None:
         start["initial_q"] = initial_q(args.initial_q)
     if args.initial_omega_deg_s is not None:
         start["initial_omega"] = initial_omega_rad_s(args.initial_omega_deg_s)
-    if args.shape is not None:
-        start["shape"] = args.shape
-    if args.library:
-        start["library_dirs"] = tuple(args.library)
-    if args.sites:
-        start["site_dirs"] = tuple(args.sites)
-    start["initial"] = args.initial
     if args.initial == "given" and args.initial_q is None:
-        from ..errors import InputError
-
         raise InputError("--initial given needs --initial-q (and --initial-omega-deg-s)",
                          field="--initial", value="given")
     if args.global_particles is not None:
         if args.initial not in ("global", "auto"):
-            from ..errors import InputError
-
             raise InputError("--global-particles applies to the global initialisation only",
                              field="--global-particles", allowed="--initial global or auto")
-        from ..acquisition.global_init import GlobalInitConfig
-
         start["global_config"] = GlobalInitConfig(particles=args.global_particles)
+    problem = ProblemConfig(
+        seed=args.seed, sigma_theta_deg=args.sigma_theta_deg,
+        sigma_omega_deg_s=args.sigma_omega_deg_s, acs_mode=args.acs_mode,
+        pseudo_noise=args.pseudo_noise, reflection=args.reflection,
+        attitude="truth" if args.attitude_known else "estimate",
+        reflection_frac=args.reflection_frac,
+        reflection_kinds=tuple(csv_list(args.reflection_params, "--reflection-params")),
+        reflection_facets=(None if args.reflection_facets is None else
+                           tuple(csv_ints(args.reflection_facets, "--reflection-facets"))),
+        gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
+        shape=args.shape, library_dirs=tuple(args.library) if args.library else None,
+        site_dirs=tuple(args.sites) if args.sites else None, initial=args.initial, **start)
+    cls = filter_config_class(args.method)
+    names = [f.name for f in fields(cls)] if cls is not None else list(BPF_KEYWORDS)
+    opts = {n: getattr(args, n) for n in names if hasattr(args, n)}
+    if cls is not None:
+        opts = cls(**opts).as_options()    # validated here (InputError → exit 2)
+    return problem, opts
+
+
+def _cmd_invert(args) -> int:
+    _refuse_inapplicable_options(args)
+    n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+    problem, filter_options = configs_from_args(args)
     bar = n_files > 1 and not args.quiet
 
     def report(text, kind="info"):
@@ -76,22 +90,7 @@ def _cmd_invert(args) -> int:
 
     res = invert_files(args.files, args.method, args.output, workers=args.workers,
                        scheduler=args.scheduler, dask_local=args.dask_local, progress=bar,
-                       plot=args.plot, report=report, seed=args.seed,
-                       sigma_theta_deg=args.sigma_theta_deg,
-                       sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
-                       roughening=args.roughening, resampling=args.resampling,
-                       rejuvenation=args.rejuvenation,
-                       ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
-                       pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
-                       kappa=args.kappa, reflection=args.reflection,
-                       attitude="truth" if args.attitude_known else "estimate",
-                       reflection_frac=args.reflection_frac,
-                       reflection_kinds=csv_list(args.reflection_params, "--reflection-params"),
-                       reflection_facets=(None if args.reflection_facets is None else
-                                          csv_ints(args.reflection_facets,
-                                                    "--reflection-facets")),
-                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
-                       **start)
+                       plot=args.plot, report=report, **problem.as_options(), **filter_options)
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -171,6 +170,7 @@ def register(sub) -> None:
     p.add_argument("--pseudo-noise", type=number(0.0, 1.0), default=0.0,
                    help="rate pseudo-noise PSD, (rad/s)^2/s, in [0, 1] (1 already lets the rate "
                    "wander by 1 rad/s in 1 s; default 0)")
+    add_variant(p)
     p.add_argument("--alpha", type=number(1e-4, 1.0), default=1.0,
                    help="UKF alpha in [1e-4, 1] (Bernard sec. 6: between 0 and 1; below 1e-4 "
                    "the sigma-point weights lose all precision; default 1)")

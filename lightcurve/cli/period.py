@@ -55,7 +55,7 @@ def register(sub) -> None:
         description="Find the spin period of a lightcurve: Lomb-Scargle and phase-dispersion "
         "minimisation periodograms of the distance-reduced, detrended magnitudes, a "
         "multi-harmonic least-squares fit choosing the period and the number of harmonics by "
-        "BIC, the period's 1-sigma, the aliases that also fit, and the 99 %% interval of the "
+        "BIC, the period's 1-sigma, the aliases that also fit, and the 99 % interval of the "
         "sidereal spin period including the synodic correction for the moving phase-angle "
         "bisector. With -o DIR writes DIR/STEM.period.json and a periodogram PNG. The result "
         "seeds the rate prior of 'invert --initial global'.")

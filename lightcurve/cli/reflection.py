@@ -17,7 +17,8 @@ def _cmd_fit_reflection(args) -> int:
 
     from ..io.lightcurve_h5 import read_lightcurve
     from ..io.paths import safe_output_path
-    from ..studies.fit_reflection import ConvergenceError, fit_reflection
+    from ..errors import ConvergenceError
+    from ..studies.fit_reflection import fit_reflection
 
     refuse_inapplicable(args, "attitude", {"estimate": {"estimate"}})
     if args.attitude == "estimate" and not args.estimate:

@@ -7,6 +7,8 @@ Modules: :mod:`.sensors` (eq. 2.19, 2.21), :mod:`.configurations` (tables 2.1, 2
 (eq. 2.23-2.50, table 2.3), :mod:`.allan` (eq. 2.52), :mod:`.single_point` (eq. 3.3,
 3.9-3.12, figs. 3.1-3.2), :mod:`.sunline_ekf` (eq. 3.27-3.31, §3.2.2, eq. 3.67),
 :mod:`.control` (eq. 3.64), :mod:`.truth` (§2.4), :mod:`.study`, :mod:`.recording`.
+O'Keefe's own set-up: :mod:`.okeefe2015` (every value with its section), :mod:`.experiments`
+(scenarios), :mod:`.sunline_thesis` (the thesis-variant EKF/ECKF of §3.2).
 
 Chapter 4-5 and DiGregorio: :mod:`.attitude_ekf` (MRP EKF with gyro bias, eq. 4.5-4.11,
 star-tracker update), :mod:`.calibration` (full and reduced calibration ECKF, §4.2-4.4),
@@ -21,13 +23,15 @@ from .gyro import GYRO_GRADES, GyroSpec, simulate_gyro
 from .sensors import CSSArray
 from .single_point import error_map, estimate
 from .sunline_ekf import FilterParams, run_filter
-from .truth import Dispersions, Scenario, Spacecraft, simulate
+from .truth import Dispersions, Scenario, Spacecraft, simulate, simulate_cases
+from .experiments import thesis_scenario
 from .calibration import CalibrationParams, run_calibration, simulate_calibration_case
 from .fault import AveragedNISDetector, inject_fault, run_fault_case
 
 __all__ = ["AlbedoMap", "builtin_albedo_map", "load_albedo_map", "zonal_albedo", "cube",
            "dual_pyramid", "load_configuration", "ControlParams", "GYRO_GRADES", "GyroSpec",
            "simulate_gyro", "CSSArray", "error_map", "estimate", "FilterParams", "run_filter",
-           "Dispersions", "Scenario", "Spacecraft", "simulate", "CalibrationParams",
+           "Dispersions", "Scenario", "Spacecraft", "simulate", "simulate_cases",
+           "thesis_scenario", "CalibrationParams",
            "run_calibration", "simulate_calibration_case", "AveragedNISDetector", "inject_fault",
            "run_fault_case"]

@@ -67,8 +67,8 @@ import numpy as np
 from ..estimation.kalman import joseph_update_nb
 from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
-from .albedo import (AlbedoCells, AlbedoMap, albedo_vectors_nb, builtin_albedo_map,
-                     earth_rotation_angle, r3_nb)
+from .albedo import (AlbedoCells, AlbedoMap, albedo_coefficient_cov_nb, albedo_vectors_nb,
+                     builtin_albedo_map, earth_rotation_angle, r3_nb)
 from .attitude_ekf import (mrp_dcm_nb, mrp_dcm_vec_jac_nb, mrp_propagate_nb,
                            mrp_switch_cov_nb, mtv3_nb, mv3_nb, star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
@@ -171,9 +171,96 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
 
 
 @numba.njit(cache=True)
+def _gather_rows(idx, m, H, y, h):
+    """Rows ``idx[:m]`` of the Jacobian and their innovations y − h."""
+    Hm = np.empty((m, H.shape[1]))
+    nu = np.empty(m)
+    for i in range(m):
+        Hm[i] = H[idx[i]]
+        nu[i] = y[idx[i]] - h[idx[i]]
+    return Hm, nu
+
+
+@numba.njit(cache=True)
+def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E,
+                   cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                   nu_out, s_out, u_out, cells_sig, init):
+    """O'Keefe §4.2-4.3 measurement update (see :func:`calibration_update_nb`)."""
+    N = az0.shape[0]
+    n = x.shape[0]
+    sig_v, floor_y, init_thr = prm[0], prm[18], prm[19]
+    h, H, D, A, cosd, _ = calibration_measurement_nb(
+        x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
+        lat_c, nlat, nlon, lon_w0, dlon, dlat_max, np.zeros(N))
+    Ra = np.zeros((N, N))
+    if cells_sig.shape[0] == cells_ra.shape[0] and nlat > 0 and lit > 0.0:
+        C = mrp_dcm_nb(x[0:3].copy())
+        nE = np.empty((N, 3))
+        hE = np.empty((N, 3))
+        for k in range(N):
+            a = az0[k] + x[6 + N + 2 * k]
+            e = el0[k] + x[6 + N + 2 * k + 1]
+            nb = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+            nE[k] = r3_nb(theta, mtv3_nb(C, nb))
+            hE[k] = r3_nb(theta, mtv3_nb(C, horizon_B[k]))
+        Ra = albedo_coefficient_cov_nb(cells_c, cells_n, cells_ra, cells_sig, lat_c, nlat, nlon,
+                                       lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE)
+    idx = np.empty(N, dtype=np.int64)
+    m = 0
+    for k in range(N):
+        nu_out[k] = np.nan
+        s_out[k] = np.nan
+        u_out[k] = D[k] + A[k]
+        if init.shape[0] == N and init[k] < 0.5:
+            if y[k] > init_thr:
+                init[k] = 1.0
+            else:
+                continue
+        if y[k] <= floor_y:
+            continue
+        idx[m] = k
+        m += 1
+    if m == 0:
+        return 0, np.nan, 1.0
+    Hm, nu = _gather_rows(idx, m, H, y, h)
+    R = np.zeros((m, m))
+    for i in range(m):
+        k = idx[i]
+        gk = x[6 + k]
+        for j in range(m):
+            R[i, j] = gk * x[6 + idx[j]] * Ra[k, idx[j]]
+        R[i, i] += (gk * sig_v) ** 2
+    cons = np.zeros(n, dtype=np.bool_)
+    for i in range(6 + 3 * N, n):
+        cons[i] = True
+    # per-sensor prior innovation statistics (the fault detector of §5.1)
+    for i in range(m):
+        k = idx[i]
+        v = R[i, i]
+        for a in range(n):
+            if Hm[i, a] != 0.0:
+                acc = 0.0
+                for b in range(n):
+                    acc += P[a, b] * Hm[i, b]
+                v += Hm[i, a] * acc
+        nu_out[k] = nu[i]
+        s_out[k] = v
+    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
+    if not ok:
+        return 0, np.nan, 1.0
+    for i in range(n):
+        x[i] += xn[i]
+        for j in range(n):
+            P[i, j] = Pn[i, j]
+    mrp_switch_cov_nb(x, P)
+    return m, nis, 1.0
+
+
+@numba.njit(cache=True)
 def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E,
                           s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
-                          dlat_max, nu_out, s_out, u_out):
+                          dlat_max, nu_out, s_out, u_out, cells_sig=np.zeros(0),
+                          init=np.zeros(0)):
     """CSS measurement update in place (see module docstring).
 
     prm: :meth:`CalibrationParams.as_array`.  nu_out, s_out (N,) receive every sensor's prior
@@ -184,9 +271,21 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     Sun is within the FOV-edge margin — the input of the dark-sensor test of
     :mod:`lightcurve.css.fault`, which must not depend on the estimated scale factor.
     Returns (m used, NIS of the used set (NaN if none), inflation factor).
+
+    With ``prm`` of :meth:`CalibrationParams.thesis_full` / ``thesis_reduced`` (thesis flag
+    set) the update is O'Keefe's §4.2-4.3 as written instead: no FOV-edge margin, gates or
+    inflation; ``M = diag(Ĉ)`` so ``R = Ĉ_i² σ_V²`` plus, for the full filter, the albedo
+    coefficient uncertainty ``M_α R_α M_αᵀ`` of eq. 4.30 (:func:`albedo_coefficient_cov_nb`
+    with ``cells_sig`` = σ_j A_j of the filter's TOMS grid, full N×N); a sensor is processed
+    once it has been initialised (an output above ``init_threshold`` once, §5.2; ``init`` (N,)
+    flags, updated here) and while its output is above the noise floor (§4.2).
     """
     N = az0.shape[0]
     n = x.shape[0]
+    if prm.shape[0] > 17 and prm[17] > 0.5:
+        return _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
+                              r_E, s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0,
+                              dlon, dlat_max, nu_out, s_out, u_out, cells_sig, init)
     sig, floor, kalb, thr = prm[0], prm[1], prm[2], prm[3]
     gate, infl_max, gate_s = prm[4], prm[5], prm[6]
     margin = prm[13]
@@ -237,14 +336,10 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
                     m += 1
     if m == 0:
         return 0, np.nan, 1.0
-    Hm = np.empty((m, n))
-    nu = np.empty(m)
+    Hm, nu = _gather_rows(idx, m, H, y, h)
     R = np.zeros((m, m))
     for i in range(m):
-        k = idx[i]
-        Hm[i] = H[k]
-        nu[i] = y[k] - h[k]
-        R[i, i] = Rk[k]
+        R[i, i] = Rk[idx[i]]
     cons = np.zeros(n, dtype=np.bool_)
     for i in range(6 + 3 * N, n):
         cons[i] = True
@@ -284,8 +379,11 @@ def _consider_propagate(x, P, N, dt, tau, sig_b):
 
 
 def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0, P0, prm,
-                         az0, el0, cos_fov, horizon_B, cells_args):
+                         az0, el0, cos_fov, horizon_B, cells_args, cells_sig=None):
     """Whole-recording loop: propagate with the gyro, star-tracker update, CSS update.
+
+    ``W`` holds one gyro sample per interval (K,3), or ``sub`` samples per interval
+    ((K−1)·sub, 3: propagation at the gyro rate, e.g. 10 Hz for 2 Hz CSS samples, §2.4).
 
     A Python loop over the compiled per-step kernels (≈10 µs of call overhead per sample;
     no separate whole-loop kernel to compile).  Returns X (K,n), Pdiag (K,n), P_end (n,n),
@@ -312,10 +410,14 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     s_k = np.empty(N)
     u_k = np.empty(N)
     iq = np.arange(6, 6 + 3 * N)
+    sub = 1 if W.shape[0] == K else max(1, W.shape[0] // max(K - 1, 1))
+    sig_cells = np.zeros(0) if cells_sig is None else np.ascontiguousarray(cells_sig)
+    init = np.zeros(N) if prm.shape[0] > 17 and prm[17] > 0.5 else np.zeros(0)
     for k in range(K):
         if k > 0:
             dt = t[k] - t[k - 1]
-            mrp_propagate_nb(x, P, W[k - 1], dt, arw, rrw, 0.0)
+            for j in range(sub):
+                mrp_propagate_nb(x, P, W[(k - 1) * sub + j], dt / sub, arw, rrw, 0.0)
             if qp > 0.0:
                 P[iq, iq] += qp * dt
             _consider_propagate(x, P, N, dt, tau, sig_b)
@@ -325,7 +427,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
                 NISST[k] = nis_st
         m, nis, infl = calibration_update_nb(x, P, Y[k], prm, az0, el0, cos_fov, horizon_B,
                                              sun_N[k], lit[k], theta[k], r_E[k], s_E[k],
-                                             *cells_args, nu_k, s_k, u_k)
+                                             *cells_args, nu_k, s_k, u_k, sig_cells, init)
         M[k] = m
         NIS[k] = nis
         NU[k] = nu_k
@@ -382,6 +484,38 @@ class CalibrationParams:
     sigma_bias0: float = float(np.radians(0.05))
     sigma_scale0: float = 0.3
     sigma_mis0_rad: float = float(np.radians(2.0))
+    thesis: bool = False
+    meas_floor: float = 0.0
+    init_threshold: float = 0.0
+
+    @classmethod
+    def thesis_full(cls, grid: str = "1p25x1", **kw) -> "CalibrationParams":
+        """O'Keefe §4.2 full filter (``variant = "thesis"``): σ_V = 0.05 + {0.01, 0.1, 0.4}
+        for the {1°×1.25°, 5°×5°, 10°×10°} grid (§4.4.3), noise floor 2 × 0.05 (§4.2),
+        initialisation above 0.4 (§5.2), initial 3σ 0.9 and 3° (tables 4.1-4.3), no
+        considered albedo bias (the albedo model's coefficient uncertainty enters R)."""
+        from .okeefe2015 import CALIBRATION, CSS_SIM
+
+        base = dict(thesis=True, sigma_css=CSS_SIM["noise_sigma"]
+                    + CALIBRATION["sigma_v_increase"][grid],
+                    meas_floor=CALIBRATION["noise_floor_sigmas"] * CSS_SIM["noise_sigma"],
+                    init_threshold=CALIBRATION["init_threshold"], use_albedo=True,
+                    consider_sigma=0.0, consider_tau_s=0.0, q_param=0.0,
+                    sigma_scale0=CALIBRATION["scale_sigma"],
+                    sigma_mis0_rad=float(np.radians(CALIBRATION["misalignment_sigma_deg"])))
+        base.update(kw)
+        return cls(**base)
+
+    @classmethod
+    def thesis_reduced(cls, **kw) -> "CalibrationParams":
+        """O'Keefe §4.3 reduced filter: no albedo model; the albedo irradiance a considered
+        constant bias per sensor (eq. 4.36) with σ 0.1 (the value of §3.2.3), σ_V 0.05."""
+        from .okeefe2015 import CSS_SIM, ECKF_TUNING
+
+        base = dict(sigma_css=CSS_SIM["noise_sigma"], use_albedo=False,
+                    consider_sigma=ECKF_TUNING["sigma_v_alpha"], consider_tau_s=0.0)
+        base.update(kw)
+        return cls.thesis_full(**base)
 
     @classmethod
     def reduced(cls, **kw) -> "CalibrationParams":
@@ -397,7 +531,8 @@ class CalibrationParams:
                          self.q_param, self.consider_tau_s, self.consider_sigma,
                          self.sigma_st_rad, self.fov_edge_margin,
                          self.fov_edge_sigmas, self.albedo_grid_frac,
-                         self.albedo_grid_floor], dtype=float)
+                         self.albedo_grid_floor, float(self.thesis), self.meas_floor,
+                         self.init_threshold], dtype=float)
 
     def for_gyro(self, spec) -> "CalibrationParams":
         """A copy with the ARW/RRW of a :class:`~lightcurve.css.gyro.GyroSpec`."""
@@ -476,7 +611,9 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
     css: nominal sensor set; t (K,) s; Y (K,N) outputs; gyro (K,3) rad/s; sun_N (K,3) unit
     Sun directions (ECI/GCRS); lit (K,) lit fractions; r_I_m (K,3) spacecraft positions (ECI,
     m); epoch_utc: scenario epoch (for the Earth rotation angle); albedo: "builtin" (10°
-    zonal), an :class:`AlbedoMap`, or an :class:`AlbedoCells`; q_star (K,4) star-tracker
+    zonal), an :class:`AlbedoMap`, an :class:`AlbedoCells`, or a (mean, std) pair of TOMS
+    :class:`AlbedoMap` (the std enters R in the thesis variant); gyro (K,3), or (K−1)·sub
+    samples for sub propagation steps per sample; q_star (K,4) star-tracker
     quaternions (inertial→body) with star_valid (K,) flags; q0 initial attitude (defaults to
     the first star-tracker sample).
     """
@@ -497,8 +634,15 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
     r_E = np.column_stack([c * r_I[:, 0] + s * r_I[:, 1], -s * r_I[:, 0] + c * r_I[:, 1], r_I[:, 2]])
     s_E = np.column_stack([c * sun_N[:, 0] + s * sun_N[:, 1], -s * sun_N[:, 0] + c * sun_N[:, 1],
                            sun_N[:, 2]])
+    sig_area = None
     if not params.use_albedo:
         cells = AlbedoCells.none()
+    elif isinstance(albedo, tuple):
+        from .albedo import cell_areas_m2
+
+        cells = _cells_cache(albedo[0])
+        sig_area = (cell_areas_m2(albedo[1].lat_edges_rad, albedo[1].lon_edges_rad)
+                    * albedo[1].values).reshape(-1)
     elif isinstance(albedo, AlbedoCells):
         cells = albedo
     elif isinstance(albedo, AlbedoMap):
@@ -523,9 +667,20 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
     out = run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QS, sv, x0, P0,
                                params.as_array(), np.ascontiguousarray(az0),
                                np.ascontiguousarray(el0), np.cos(css.fov_half_angle_rad),
-                               np.ascontiguousarray(css.horizon_normals), cells.args())
+                               np.ascontiguousarray(css.horizon_normals), cells.args(),
+                               sig_area)
     X, Pd, Pend, NIS, M, NU, SS, NISST, UU = out
     return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N), UU)
+
+
+_CELLS: dict = {}
+
+
+def _cells_cache(amap: AlbedoMap) -> AlbedoCells:
+    key = id(amap)
+    if key not in _CELLS:
+        _CELLS[key] = (AlbedoCells.from_map(amap), amap)
+    return _CELLS[key][0]
 
 
 def albedo_grid_error(coarse: AlbedoCells, fine: AlbedoCells, *, altitude_m=400e3,
@@ -703,3 +858,76 @@ def _dcm_batch(q):
 def params_dict(p: CalibrationParams) -> dict:
     """Parameters as a plain dict (for reports)."""
     return asdict(p)
+
+
+# ---------------------------------------------------------------------------------------
+# O'Keefe (2015) §4.4 in the thesis's own set-up (thesis variant) and tables 4.1-4.3
+# ---------------------------------------------------------------------------------------
+def simulate_thesis_calibration_case(rng, configuration="dual_pyramid", *, duration_s=None,
+                                     albedo="toms", star_period_s=10.0,
+                                     sigma_st_rad=float(np.radians(0.02))) -> CalibrationCase:
+    """§4.4: one orbit (92.5 min, §2.4) of the uncontrolled tumbling spacecraft of §2.4 with
+    individual scale factors N(1, 0.3²) ("distributed by 30%", no common error — the filter
+    estimates each sensor's total factor), misalignments N(0, 1°²), CSS noise 0.05 at 2 Hz,
+    the intermediate gyro at 10 Hz, TOMS 1°×1.25° albedo with its spread; the star tracker's
+    rate and accuracy are left open by §4.1-4.2 (our choice: every 10 s, 0.02° per axis)."""
+    from .experiments import thesis_scenario
+    from .okeefe2015 import CALIBRATION, ORBIT
+
+    g = as_generator(rng)
+    g_truth, g_st = g.spawn(2)
+    sc = thesis_scenario(configuration, "wavg", variant="thesis", gyro="intermediate",
+                         duration_s=ORBIT["period_s_quoted"] if duration_s is None else duration_s,
+                         albedo=albedo,
+                         sim={"scale_individual_sigma": CALIBRATION["scale_sigma"],
+                              "scale_common_max": 0.0,
+                              "misalignment_sigma_deg": CALIBRATION["misalignment_sigma_deg"]})
+    from .truth import simulate
+
+    r = simulate(sc, g_truth)
+    K = r.t.size
+    sv = np.zeros(K, dtype=bool)
+    if star_period_s > 0:
+        step = max(1, int(round(star_period_s / sc.dt_s)))
+        sv[::step] = True
+    dq = rotvec_to_quat(g_st.normal(0.0, sigma_st_rad, (K, 3)))
+    qst = quat_mult(dq, r.q)
+    scale_true = r.info["css_scale_common"] * np.asarray(r.info["css_scale_individual"])
+    return CalibrationCase(sc.css, r.t, r.y, r.info["gyro_substeps"], np.zeros((K, 3)), r.q,
+                           r.info["sun_I_hat"], r.lit, r.info["r_I_m"], scale_true,
+                           np.asarray(r.info["css_misalignment_rad"]), qst, sv, sc.epoch_utc,
+                           {"spec": None, **r.info})
+
+
+def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "10x10", "reduced"),
+                             *, albedo_dir=None) -> dict:
+    """Tables 4.1-4.3 for one case: for each filter (the full filter with the TOMS grid named,
+    or "reduced"), the largest and smallest final 3σ of the scale factor C and of the
+    misalignments θ (azimuth) and φ (elevation) over the sensors that were initialised
+    (an output above 0.4 once, §5.2), and the fraction of final errors inside 3σ."""
+    from .albedo import load_toms
+    from .gyro import gyro_grade
+
+    spec = gyro_grade("intermediate")
+    out = {}
+    for f in filters:
+        if f == "reduced":
+            prm, alb = CalibrationParams.thesis_reduced(), "builtin"
+        else:
+            prm, alb = CalibrationParams.thesis_full(f), load_toms(f, albedo_dir)
+        prm = prm.for_gyro(spec)
+        res = run_calibration(case.css_nominal, case.t, case.Y, case.gyro, case.sun_N, case.lit,
+                              case.r_I_m, case.epoch_utc, params=prm, albedo=alb,
+                              q_star=case.q_star, star_valid=case.star_valid)
+        init = np.any(case.Y > prm.init_threshold, axis=0)
+        c3 = res.sigma3_scale()[-1][init]
+        m3 = np.degrees(res.sigma3_misalignment_rad()[-1][init])
+        err_c = np.abs(case.scale_true - res.scale()[-1])[init]
+        err_m = np.degrees(np.abs(case.misalignment_true - res.misalignment_rad()[-1]))[init]
+        out[f] = {"c": (float(c3.max()), float(c3.min())),
+                  "theta_deg": (float(m3[:, 0].max()), float(m3[:, 0].min())),
+                  "phi_deg": (float(m3[:, 1].max()), float(m3[:, 1].min())),
+                  "initialised": int(init.sum()),
+                  "inside_3sigma": float(np.mean(np.concatenate([err_c <= c3,
+                                                                 (err_m <= m3).ravel()])))}
+    return out

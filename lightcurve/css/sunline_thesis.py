@@ -13,7 +13,8 @@ updates are computed using an RK4 integrator").
 
 Measurement (modified eq. 3.1, 3.31c-d, 3.57d-e): sensor ``i`` predicts ``h_i = Ĉ_κ n̂_iᵀ d``
 (nominal normals n̂_i, Ĉ_κ = 1) with ``H_i = Ĉ_κ n̂_iᵀ`` when the predicted Sun is inside its
-field of view (``n̂_iᵀ d̂/|d̂| ≥ cos ψ``); ``M = |d̂| diag(Ĉ_κ)`` so ``R_i = |d̂|² σ_V²``.  Sensors
+field of view (``n̂_iᵀ d̂/|d̂| ≥ cos ψ``) and, for the dual pyramid, above the structure horizon
+(§3.2.3 treats that horizon as the sensor's second measurement discontinuity); ``M = |d̂| diag(Ĉ_κ)`` so ``R_i = |d̂|² σ_V²``.  Sensors
 whose output is "above 50% of the expected maximum output" (``y_i > 0.5 |d̂|``) are processed
 too, with increased uncertainty (§3.2.1.2; the increase is left open — σ_V doubled,
 :data:`~lightcurve.css.okeefe2015.EKF_TUNING`).  No update in the Earth's shadow (eq. 3.1's
@@ -36,7 +37,9 @@ with J from eq. 3.57f.  Measurement consistency (§3.2.3): for a sensor whose pr
 within γ of its visibility boundary (inside or outside) (field of view, or for the dual pyramid the structure
 horizon, whichever is nearer along the great circle through the Sun), γ = the 3σ misalignment
 offset of eq. 3.61 plus 3σ of the Sun-direction angle of eq. 3.62, the innovation variance gets
-the maximum error of eq. 3.63, ``(|d̂| Ĉ_κ {cos(ψ_b − min(ψ_b, γ)) + σ_Vα + σ_V})²``.
+the maximum error of eq. 3.63, ``(|d̂| Ĉ_κ {cos(ψ_b − min(ψ_b, γ)) + σ_Vα + σ_V})²``; a strong
+output from a sensor predicted dark (the "increased measurement uncertainty" of §3.2.1.2, left
+open by the text) gets the same bound with γ = π, i.e. the sensor's whole range.
 
 Numba kernels on plain arrays; the state of one filter is the tuple made by
 :func:`thesis_state`.
@@ -222,7 +225,10 @@ def thesis_update_nb(d, P, L, Lam, Beta, Bnu, y, normals, az, el, cos_fov, horiz
     m = 0
     for i in range(N):
         c = normals[i, 0] * u[0] + normals[i, 1] * u[1] + normals[i, 2] * u[2]
-        iv = c >= cos_fov[i]
+        # predicted in view: inside the FOV (eq. 3.31c, 3.57d) and, for the dual pyramid,
+        # above the structure horizon — the "second measurement discontinuity" of §3.2.3
+        iv = c >= cos_fov[i] and (horizon[i, 0] * u[0] + horizon[i, 1] * u[1]
+                                  + horizon[i, 2] * u[2]) >= 0.0
         strong = y[i] > strong_frac * nd
         if iv or strong:
             idx[m] = i
@@ -280,6 +286,10 @@ def thesis_update_nb(d, P, L, Lam, Beta, Bnu, y, normals, az, el, cos_fov, horiz
             for q in range(3):
                 vg += Jg[p] * P[p, q] * Jg[q]
         gamma = gm + cs * np.sqrt(max(vg, 0.0))
+        if not inview[a]:
+            # a strong output from a sensor predicted dark (§3.2.1.2): the model's error can
+            # be the sensor's whole range — eq. 3.63 with the Sun anywhere in the FOV
+            gamma = np.pi
         if abs(psi_b - ang) < gamma:
             emax = nd * (np.cos(psi_b - min(psi_b, gamma)) + prm[11] + sig_v)
             R[a, a] += emax * emax

@@ -56,6 +56,27 @@ from .single_point import lsmn_nb, wavg_nb
 from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
 from .sunline_thesis import thesis_init_nb, thesis_propagate_nb, thesis_update_nb
 
+def _refresh_numba_cache_stamp():
+    """numba's on-disk cache of :func:`truth_loop_nb` is keyed on this file's timestamp only,
+    not on the files of the compiled functions it calls (numba documents this): when one of
+    them is newer than this file, touch this file so that the stale cache is not loaded."""
+    import os
+    from pathlib import Path
+
+    here = Path(__file__)
+    deps = ("sunline_thesis.py", "sunline_ekf.py", "albedo.py", "control.py", "gyro.py",
+            "single_point.py", "_linalg.py", "../rotations.py", "../estimation/kalman.py",
+            "../earth/albedo.py", "../core/rotations.py", "../core/kalman.py")
+    try:
+        newest = max((here.parent / d).stat().st_mtime for d in deps if (here.parent / d).exists())
+        if newest > here.stat().st_mtime:
+            os.utime(here, None)
+    except OSError:  # read-only install: nothing can be stale there
+        pass
+
+
+_refresh_numba_cache_stamp()
+
 __all__ = ["Spacecraft", "Dispersions", "Scenario", "SimResult", "simulate", "simulate_cases",
            "ESTIMATORS",
            "VARIANTS", "MU_EARTH", "R_EARTH_M", "truth_loop_nb"]
@@ -291,7 +312,8 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
     robust gains (3,), axis).  kind −1: no estimator.  ``alb_pre`` (K,N): the albedo part of
     every output when already known (an uncontrolled run repeated with another estimator flies
     the same attitude), else an empty array.
-    Returns Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB at the K samples.
+    Returns Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB at the K samples and GYR, the
+    gyro samples of every propagation step ((K−1)·sub, 3).
     """
     K = t.shape[0]
     n_true, cos_fov_t, gains_t, horizon_t = css_true
@@ -322,6 +344,7 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
     DIR = np.zeros(K, dtype=np.int64)
     NIS = np.full(K, np.nan)
     ALB = np.zeros((K, N))
+    GYR = np.zeros((max(K - 1, 0) * sub, 3))
     have_pre = alb_pre.shape[0] == K
     q = q0.copy()
     w = w0.copy()
@@ -521,6 +544,7 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
             else:
                 # the truth still draws the gyro's random numbers (common random numbers)
                 gyro_step_nb(w, bias, eye3, arw, rrw, h, g_nu[ks], g_nv[ks])
+            GYR[ks] = w_meas
             if j == 0:
                 Wu[k] = w_meas if use_gyro else om_f
             w_acc += w_meas
@@ -562,7 +586,7 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
                 rn = np.sqrt(rb[0] ** 2 + rb[1] ** 2 + rb[2] ** 2)
                 Lext = 3.0 * mu_gg / rn ** 5 * np.cross(rb, I @ rb)
             q, w, Om = _rk4(q, w, Om, u, I, IRW_inv, G, Js, Lext, h)
-    return Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB
+    return Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB, GYR
 
 
 # ---------------------------------------------------------------------------------------
@@ -760,7 +784,7 @@ def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
         (bool(sc.controlled), np.asarray(sc.thesis_control, float),
          np.array([sc.control.k_gain, sc.control.p_gain, sc.control.deadband_rad]), axis),
         _albedo_cache if _albedo_cache is not None else np.zeros((0, N)))
-    Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB = out
+    Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB, GYR = out
     if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(Wt))):
         from ..errors import ConvergenceError
 
@@ -776,7 +800,7 @@ def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
             "css_noise_sigma": disp.css_noise_sigma,
             "gyro": None if spec is None else spec.name, "r_I_m": r_I, "sun_I_hat": sun_hat,
             "pointing_axis": axis, "albedo": alb_label, "variant": sc.variant,
-            "albedo_outputs": ALB}
+            "albedo_outputs": ALB, "gyro_substeps": GYR if spec is not None else None}
     is_filter = sc.estimator in ("ekf", "eckf")
     return SimResult(t, Q, Wt, St, Sh, Y, lit, NA, Wu, OM, err_deg, info,
                      PC if is_filter else None, DH if is_filter else None, DIR, NIS)

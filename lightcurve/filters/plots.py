@@ -105,7 +105,7 @@ def _measured(est, curve):
 
 
 def _fitted(est, curve):
-    pred = getattr(est, "mag_post", None)   # model magnitude at the posterior attitude
+    pred = getattr(est, "predicted_mag", None)   # model magnitude at the posterior attitude
     if pred is not None:
         pred = np.asarray(pred, float)
         return np.where(np.isfinite(pred), pred, np.nan)

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import rotations as rot
+from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..report.views import EstimateViews
 
@@ -258,7 +259,7 @@ class Estimate(EstimateViews):
         gi = (self.meta or {}).get("global_init")
         if gi:   # global initialisation (lightcurve.acquisition.global_init): the modes
             out["global_init"] = {k: gi[k] for k in ("ambiguous", "statement", "n_modes",
-                                                     "modes") if k in gi}
+                                                     "n_modes_total", "modes") if k in gi}
         if self.bias is not None and self.bias_sigma is not None:
             out["final_bias_mag"] = [float(x) for x in self.bias[-1]]
             out["final_bias_sigma_mag"] = [float(x) for x in self.bias_sigma[-1]]
@@ -346,7 +347,6 @@ def read_estimate(path) -> Estimate:
     checked before reading)."""
     import json
 
-    from ..errors import InputError
     from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)

@@ -28,6 +28,8 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .sites import enu_matrix, get_site, itrs_to_geodetic, site_itrs_m
+from .time import is_time, parse_epoch, skyfield_times, timescale
 
 __all__ = [
     "MU_EARTH",
@@ -397,8 +399,6 @@ def check_tle(line1: str, line2: str) -> None:
 def _earth_satellite(line1, line2):
     from skyfield.api import EarthSatellite
 
-    from .time import timescale
-
     check_tle(line1, line2)
     try:
         return EarthSatellite(line1.rstrip(), line2.rstrip(), ts=timescale())
@@ -427,9 +427,7 @@ def satellite_positions(sat, epoch_utc, t_s):
 
     Raises :class:`InputError` when SGP4 reports an error (e.g. decayed) at any time.
     """
-    from .time import _is_time, skyfield_times
-
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     p = sat.at(t)
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T
@@ -452,28 +450,13 @@ def satellite_positions(sat, epoch_utc, t_s):
 # positions from topocentric observations
 # ----------------------------------------------------------------------------------------
 def geodetic_height_m(r_itrs_m) -> np.ndarray:
-    """Height above the WGS84 ellipsoid (m) of ITRS point(s), ``(N,)`` (iterative, < 1 mm)."""
-    from .sites import WGS84_A_M, WGS84_F
-
-    r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
-    e2 = WGS84_F * (2 - WGS84_F)
-    p = np.hypot(r[:, 0], r[:, 1])
-    z = r[:, 2]
-    lat = np.arctan2(z, p * (1 - e2))
-    for _ in range(8):
-        n = WGS84_A_M / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-        h = np.where(np.abs(np.cos(lat)) > 1e-9, p / np.cos(lat) - n,
-                     np.abs(z) - n * (1 - e2))
-        lat = np.arctan2(z, p * (1 - e2 * n / (n + h)))
-    n = WGS84_A_M / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    # robust form valid at all latitudes
-    return p * np.cos(lat) + z * np.sin(lat) - n * (1 - e2 * np.sin(lat) ** 2)
+    """Height above the WGS84 ellipsoid (m) of ITRS point(s), ``(N,)``
+    (:func:`lightcurve.geometry.sites.itrs_to_geodetic`)."""
+    return itrs_to_geodetic(r_itrs_m)[2]
 
 
 def _as_time_list(utc_times):
-    from .time import _is_time, parse_epoch, timescale
-
-    if _is_time(utc_times):
+    if is_time(utc_times):
         return utc_times
     vals = [utc_times] if isinstance(utc_times, str) else list(np.atleast_1d(utc_times))
     dts = [parse_epoch(x if not isinstance(x, np.str_) else str(x)) for x in vals]
@@ -503,8 +486,6 @@ def positions_from_topocentric(site, utc_times, alt_deg, az_deg, range_m=None, h
         reaches (or an altitude below the horizon), negative ranges.
     """
     from .frames import altaz_to_enu, itrs_rotation
-    from .sites import enu_matrix, get_site, site_itrs_m
-
     site = get_site(site)
     if (range_m is None) == (height_m is None):
         raise InputError("give exactly one of range_m or height_m", field="range_m/height_m")
@@ -621,7 +602,7 @@ def orbit_from_section(section) -> Orbit:
     sec = section if isinstance(section, Section) else Section(section, name="orbit")
     kind = sec.str("type", "keplerian", choices=("keplerian", "cartesian", "tle"))
     gravity = sec.str("gravity", "J4", choices=tuple(_GRAVITY))
-    f = sec._field
+    f = sec.field_name
     if kind == "keplerian":
         a_km = sec.float("a_km", min=0.0, min_open=True, max=MAX_ORBIT_RADIUS_KM)
         e = sec.float("e", min=0.0, max=1.0, max_open=True)

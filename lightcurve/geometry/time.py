@@ -216,7 +216,7 @@ def skyfield_times(epoch_utc, t_s):
 
 def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     eph = ephemeris()
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     earth, body = eph["earth"], eph[name]
     if light_time:
         pos = earth.at(t).observe(body).position.m
@@ -229,7 +229,7 @@ def _is_skyfield_time(x) -> bool:
     return type(x).__name__ == "Time" and hasattr(x, "tt") and hasattr(x, "ts")
 
 
-def _is_time(x) -> bool:
+def is_time(x) -> bool:
     """True for a skyfield ``Time`` *array* (the explicit-times form of the geometry
     functions, ``t_s`` ignored); a scalar ``Time`` is an epoch like any other."""
     return _is_skyfield_time(x) and np.ndim(x.tt) > 0

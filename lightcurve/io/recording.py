@@ -207,7 +207,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
         if isinstance(v, bool) or not isinstance(v, (str, int)) or (isinstance(v, int) and v < 0) \
                 or (isinstance(v, str) and not v.strip()):
             raise InputError("expected a column name (text) or a 0-based column index", file=sec.file,
-                             field=sec._field(key), value=v)
+                             field=sec.field_name(key), value=v)
         return v.strip() if isinstance(v, str) else v
 
     cols = {k: col(k, {"time_column": "utc", "mag_column": "mag"}.get(k)) for k in _COLUMN_KEYS}
@@ -234,7 +234,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     sec.check_unknown()
 
     def err(key, msg, value=None, allowed=None):
-        return InputError(msg, file=sec.file, field=sec._field(key), value=value, allowed=allowed)
+        return InputError(msg, file=sec.file, field=sec.field_name(key), value=value, allowed=allowed)
 
     pairs = (("sigma_column", "default_sigma_mag"), ("site_column", "site"),
              ("object_column", "object"), ("band_column", "band"), ("band", "sun_mag"),
@@ -269,7 +269,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     if spec.band is not None:
         from ..photometry.bands import sun_magnitude
 
-        sun_magnitude(spec.band, file=sec.file, field=sec._field("band"))
+        sun_magnitude(spec.band, file=sec.file, field=sec.field_name("band"))
     if spec.epoch_utc is not None:
         from ..geometry.time import parse_epoch
 

@@ -34,6 +34,8 @@ from __future__ import annotations
 import inspect
 import math
 import threading
+import warnings
+from importlib import metadata
 
 import numpy as np
 
@@ -191,16 +193,12 @@ def _load_entry_points() -> None:
     if _ENTRY_POINTS_LOADED:
         return
     _ENTRY_POINTS_LOADED = True
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         if ep.name in _REGISTRY:
             continue
         try:
             obj = ep.load()
         except Exception as exc:  # a broken plug-in must not break the built-ins
-            import warnings
-
             warnings.warn(f"BRDF entry point {ep.name!r} ({ep.value}) failed to load: {exc}",
                           RuntimeWarning, stacklevel=2)
             continue
@@ -280,9 +278,10 @@ def unregister_brdf(name: str) -> None:
 
 
 def get_brdf(name: str, *, file=None, field=None) -> BRDF:
-    """The registered BRDF called ``name``; :class:`InputError` naming file/field if unknown."""
-    from . import brdf_models  # noqa: F401  (registers the built-ins)
+    """The registered BRDF called ``name``; :class:`InputError` naming file/field if unknown.
 
+    The built-ins are registered when :mod:`lightcurve.photometry` is imported (its
+    ``brdf_models``), which Python does before any of its modules."""
     if name not in _REGISTRY and isinstance(name, str):
         _load_entry_point(name)
     try:
@@ -302,7 +301,5 @@ def available_brdfs() -> list[str]:
     Measured tables are not registry names: a material uses one with ``brdf = "tabulated"``
     and ``table = "file.csv"``, or code passes a :class:`~.tabulated.TabulatedBRDF` instance.
     """
-    from . import brdf_models  # noqa: F401  (registers the built-ins)
-
     _load_entry_points()
     return sorted(_REGISTRY)

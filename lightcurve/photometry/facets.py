@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .brdf import PARAM_COLUMNS
+from .brdf_models import perpendicular_unit
 from .materials import Material
 
 __all__ = ["Shape", "facets_convex"]
@@ -73,7 +74,6 @@ class Shape:
     def __init__(self, name, areas_m2, normals_body, centers_body_m, materials, mass_kg,
                  inertia_kg_m2, convex=None, tangents_body=None, description: str = "",
                  source=None, vertices_m=None, faces=None):
-        from .brdf_models import perpendicular_unit
 
         self.name = str(name)
         self.areas_m2 = np.ascontiguousarray(areas_m2, dtype=float).reshape(-1)

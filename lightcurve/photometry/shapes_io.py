@@ -44,6 +44,8 @@ from .._paths import data_dir
 from ..errors import InputError
 from ..io.safe_open import MESH_MAX_BYTES as _MAX_MESH_BYTES
 from ..io.tomlio import Section, load_toml
+from .brdf import get_brdf
+from .brdf_models import perpendicular_unit
 from .facets import Shape, facets_convex
 from .materials import Material, material_from_section
 
@@ -211,8 +213,6 @@ def _load(spec, library_dirs, probs: _Problems):
             if probs.strict or fatal:
                 raise
             # lenient: record every out-of-range parameter, keep the raw values
-            from .brdf import get_brdf
-
             model = get_brdf(msec.data["brdf"])
             raw = {k: v for k, v in msec.data.items() if k not in ("brdf", "description")}
             found: list = []
@@ -356,7 +356,6 @@ def _facets_from_toml(root: Section, materials, file, probs):
     normals = np.array(normals)
     tangents = None
     if any_tangent:
-        from .brdf_models import perpendicular_unit
 
         nn = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
         tangents = perpendicular_unit(nn)

@@ -17,6 +17,7 @@ where each ``DIR`` is the output folder of ``lightcurve css study`` (its ``summa
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from ..io.atomic import atomic_write_text
@@ -49,7 +50,10 @@ def _load(dirs):
     for d in dirs:
         p = Path(d) / "summary.json"
         s = read_json(p, what="study summary")
-        out[s.get("experiment") or Path(d).name] = s
+        key = s.get("experiment") or Path(d).name
+        if key in out or str(s.get("study", "")).startswith("ablation"):
+            key = s.get("study") or Path(d).name   # an ablation of an experiment: by its name
+        out[key] = s
     return out
 
 
@@ -141,17 +145,90 @@ def _claims(studies) -> list[str]:
     else:
         out.append("- Inertial/intermediate gyros no better than moderate: not run.")
     out.append("- Controlled stuck failures nearly undetectable; random failures detected "
-               "fastest (Tables 5.1–5.2): not run (the thesis-variant calibration filter and "
-               "fault study are not implemented yet).")
+               "fastest (Tables 5.1–5.2): not run (the fault study on the thesis-variant "
+               "calibration filter is not implemented yet).")
     out.append("- VMM better than SMM when few diodes are lit (DiGregorio): see `lightcurve css "
                "vmm` (not part of this generated section yet).")
     return out
 
 
-def css_section(study_dirs) -> str:
+def _json_line(path):
+    if path is None:
+        return None
+    for line in reversed(Path(path).read_text(encoding="utf-8").splitlines()):
+        if line.strip().startswith("{"):
+            return json.loads(line)
+    return None
+
+
+def _timing_section(b) -> list[str]:
+    out = ["### Table 3.1 — computation time per call (µs)", ""]
+    if b is None:
+        return out + ["Not measured (`python benchmarks/css.py`).", ""]
+    th = b["thesis_table_3_1_us"]
+    out += [f"`benchmarks/css.py` (numba, thesis-variant estimators, no albedo model — ch. 3 "
+            f"estimators have none; {b['cpu_count']} cores, load {b['load_avg_1min']:.1f}). The "
+            f"thesis: C on an i7 2.5 GHz.", "",
+            "| method | propagation: thesis / ours | update: thesis / ours | ratio (update) |",
+            "|---|---|---|---|"]
+    for m in ("wavg", "lsmn", "wlsmn", "ekf", "eckf"):
+        t = th[m]
+        tp, tu = (t if isinstance(t, list) else (None, t))
+        op, ou = b.get(f"{m}_propagation_us"), b.get(f"{m}_update_us")
+        out.append(f"| {m.upper()} | {_f(tp, 'g') if tp else '–'} / {_f(op)} | {_f(tu, 'g')} / "
+                   f"{_f(ou)} | {_f(None if ou is None else ou / tu)} |")
+    out += ["", f"Closed-loop simulation per 2 Hz sample (5 propagation steps): truth albedo "
+            f"TOMS 1°×1.25° {_f(b.get('sim_step_albedo_toms_1p25x1_us'), '.0f')} µs, albedo off "
+            f"{_f(b.get('sim_step_albedo_off_us'), '.0f')} µs.", ""]
+    return out
+
+
+def _tables4_section(b) -> list[str]:
+    out = ["### Tables 4.1–4.3 — final 3σ after one orbit (largest / smallest over the sensors)",
+           ""]
+    if b is None:
+        return out + ["Not run (`python benchmarks/css_tables_4.py`).", ""]
+    th = b["thesis"]
+    out += [f"`benchmarks/css_tables_4.py` (seed {b['seed']}; one case, like the tables; thesis "
+            f"variant of §4.2-4.3). Thesis / ours.", "",
+            "| table | filter | 3σ C | 3σ θ (deg) | 3σ φ (deg) | errors inside 3σ |",
+            "|---|---|---|---|---|---|"]
+
+    def row(tab, name, ref, ours):
+        cells = []
+        for k in ("c", "theta_deg", "phi_deg"):
+            r = ref.get(k) if ref else None
+            o = ours[k]
+            rt = "–" if r is None else f"{r[0]:g}/{r[1]:g}"
+            cells.append(f"{rt} / {o[0]:.3g}/{o[1]:.3g}")
+        return f"| {tab} | {name} | " + " | ".join(cells) + f" | {ours['inside_3sigma']:.2f} |"
+
+    dp = b.get("dual_pyramid_case", {})
+    cu = b.get("cube_case", {})
+    if "1p25x1" in dp:
+        out.append(row("4.1", "full, 1°×1.25°", th["table4_1"]["full"], dp["1p25x1"]))
+    if "reduced" in dp:
+        out.append(row("4.1/4.3", "reduced", th["table4_3"]["reduced"], dp["reduced"]))
+    if "1p25x1" in cu:
+        out.append(row("4.2", "full, 1°×1.25° (cube)", th["table4_2"]["full"], cu["1p25x1"]))
+    if "reduced" in cu:
+        out.append(row("4.2", "reduced (cube)", None, cu["reduced"]))
+    for g, lab in (("5x5", "5°×5°"), ("10x10", "10°×10°")):
+        if g in dp:
+            out.append(row("4.3", f"full, {lab}", th["table4_3"][g], dp[g]))
+    out += ["", "The reduced-filter columns of tables 4.1 and 4.2 are missing from the text we "
+            "have (table 4.3 gives the dual pyramid's).", ""]
+    return out
+
+
+def css_section(study_dirs, *, timing=None, tables4=None) -> str:
     """The O'Keefe (2015) / DiGregorio section, from the output folders of ``lightcurve css
-    study`` (each with ``summary.json``).  Experiments without a folder are listed as not run."""
+    study`` (each with ``summary.json``) and the JSON lines of ``benchmarks/css.py``
+    (``timing``, Table 3.1) and ``benchmarks/css_tables_4.py`` (``tables4``): paths or None.
+    Experiments without a folder are listed as not run."""
     studies = _load(study_dirs)
+    timing = _json_line(timing)
+    tables4 = _json_line(tables4)
     lines = ["## Coarse sun sensors — O'Keefe (2015), DiGregorio", "",
              "Generated by `python -m lightcurve.studies.reproduction` from the study outputs "
              "(`lightcurve css study pipelines/css/okeefe2015/<experiment>.toml`). \"p99 level\": "
@@ -170,10 +247,23 @@ def css_section(study_dirs) -> str:
                   f"{s['failures']} failed runs.  Verdict: {v}", ""]
         lines += _table(s)
         lines.append("")
-    lines += ["### Tables 3.1, 4.1–4.5, 5.1–5.2", "",
-              "Not generated yet: the thesis-variant calibration filter (ch. 4), its fault study "
-              "(ch. 5) and the timing benchmarks are not part of this section yet.", "",
-              "### The thesis's qualitative claims", ""]
+    extra = [k for k in studies if k not in _EXPERIMENT_TITLE]
+    if extra:
+        lines += ["### Ablations", "", "Studies that switch one error source of an experiment "
+                  "off (their [simulation]/[scenario] differences are in their study.json).", ""]
+        for k in extra:
+            s = studies[k]
+            lines += [f"#### {k}", "", f"{s['runs']} runs per case, truth albedo `{s['albedo']}`.",
+                      ""]
+            lines += _table(s)
+            lines.append("")
+    lines += _timing_section(timing)
+    lines += _tables4_section(tables4)
+    lines += ["### Tables 4.4, 4.5, 5.1–5.2 and fig. 5.5", "",
+              "Not generated: the fault-detection study on the thesis-variant calibration filter "
+              "(ch. 5), the Table 4.4 timings and the Table 4.5 Sun models (Meeus and VSOP87 "
+              "are not implemented; `lightcurve css sun-models` compares Vallado with DE421).",
+              "", "### The thesis's qualitative claims", ""]
     lines += _claims(studies)
     lines.append("")
     return "\n".join(lines)
@@ -191,8 +281,10 @@ def main(argv=None) -> int:
                                 description="write docs/reproduction.md from study outputs")
     p.add_argument("-o", "--output", required=True, help="Markdown file to write")
     p.add_argument("--css", nargs="+", default=[], help="output folders of 'lightcurve css study'")
+    p.add_argument("--css-timing", help="output of python benchmarks/css.py (Table 3.1)")
+    p.add_argument("--css-tables4", help="output of python benchmarks/css_tables_4.py")
     a = p.parse_args(argv)
-    sections = [css_section(a.css)]
+    sections = [css_section(a.css, timing=a.css_timing, tables4=a.css_tables4)]
     write_reproduction(a.output, sections)
     print(f"wrote {a.output}")
     return 0

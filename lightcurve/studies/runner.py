@@ -152,6 +152,7 @@ def execute_task(task: RunTask) -> dict:
             kw["acs_mode"] = opts["acs_mode"]
         if c.reflection != "none":
             kw["reflection"] = c.reflection
+        kw.update(dict(dict(opts.get("filters", ())).get(c.filter, ())))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             est = invert(lc, c.filter, seed=int(task.filter_seed),

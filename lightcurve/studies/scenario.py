@@ -5,7 +5,7 @@ seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (li
 mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
 ``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
-(physics effects switched on; see the diagnosis issue), ``[reflection]`` (truth reflection
+(physics effects switched on; :mod:`lightcurve.physics`), ``[reflection]`` (truth reflection
 parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
 
@@ -16,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .._paths import data_dir
 from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
-__all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
+__all__ = [
+    "SCENARIO_ALIASES", "resolve_scenario","Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
            "scenario_from_lightcurve"]
 
 
@@ -461,3 +463,30 @@ def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, si
     return parse_scenario(doc, file=fname, text=text, library_dirs=library_dirs,
                           site_dirs=site_dirs, sites=known, embedded=embedded,
                           shape=shape if shape is not None else getattr(curve, "shape", None))
+
+
+#: ``--scenario`` short names of the bundled pipelines (``lightcurve demo --scenario thesis``)
+SCENARIO_ALIASES = {
+    "default": "default.toml",
+    "thesis": "thesis/leo-ic1-fast-spin-controlled-1site.toml",
+    "thesis-2site": "thesis/leo-ic1-fast-spin-controlled-2site.toml",
+}
+
+
+def resolve_scenario(spec) -> Path:
+    """A scenario path from a user's spec (``--scenario``, :func:`lightcurve.simulate`): a file,
+    an alias (:data:`SCENARIO_ALIASES`) or a bundled pipeline name relative to ``pipelines/``
+    (``thesis/geo-ic1-…``, ``.toml`` optional)."""
+    p = Path(spec)
+    if p.is_file():
+        return p
+    base = data_dir("pipelines")
+    name = SCENARIO_ALIASES.get(str(spec), str(spec))
+    for cand in (base / name, base / f"{name}.toml"):
+        if cand.is_file() and base.resolve() in cand.resolve().parents:
+            return cand
+    if str(spec).endswith(".toml") or p.parent != Path("."):
+        return p  # a path: the loader names the missing file
+    raise InputError("scenario not found", field="--scenario", value=str(spec),
+                     allowed="a TOML file, " + ", ".join(SCENARIO_ALIASES)
+                     + ", or a name under the bundled pipelines/ (e.g. thesis/geo-ic1-fast-spin-controlled-1site)")

@@ -29,6 +29,10 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     particles = 1000                      # BPF particles
     acs_mode = "random_walk"              # controlled model: "random_walk" or "jitter"
 
+    [filters.ukf]                         # optional per-filter settings: the fields of the
+    variant = "thesis"                    # filter's configuration (lightcurve.filters.config;
+    alpha = 1.0                           # MEKFConfig, UKFConfig, the particle filter's)
+
 Seeds (reproducible, independent of worker count and executor): the simulation seed of run
 ``i`` derives from the study seed, the *scenario* part of the cell key (dynamics, sites,
 r_percent) and ``i`` — so every filter and every initial-error setting sees the same simulated
@@ -291,7 +295,7 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
     raw = sec.raw(key)
     vals = raw if isinstance(raw, list) else [raw]
     if not vals:
-        raise InputError("expected a non-empty list", file=sec.file, field=sec._field(key), value=raw)
+        raise InputError("expected a non-empty list", file=sec.file, field=sec.field_name(key), value=raw)
     out = []
     for v in vals:
         ok = (kind is str and isinstance(v, str)) or (kind is int and isinstance(v, int)
@@ -299,16 +303,16 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
               and not isinstance(v, bool) and np.isfinite(v))
         if not ok:
             raise InputError(f"expected a list of {kind.__name__}", file=sec.file,
-                             field=sec._field(key), value=raw)
+                             field=sec.field_name(key), value=raw)
         if choices is not None and v not in choices:
-            raise InputError("unknown value", file=sec.file, field=sec._field(key), value=v,
+            raise InputError("unknown value", file=sec.file, field=sec.field_name(key), value=v,
                              allowed=", ".join(map(str, choices)))
         if (min is not None and (v < min or (min_open and v == min))) or (max is not None and v > max):
-            raise InputError("out of range", file=sec.file, field=sec._field(key), value=v,
+            raise InputError("out of range", file=sec.file, field=sec.field_name(key), value=v,
                              allowed=f"{'(' if min_open else '['}{min}, {max}]")
         out.append(kind(v))
     if len(set(out)) != len(out):
-        raise InputError("duplicate values", file=sec.file, field=sec._field(key), value=raw)
+        raise InputError("duplicate values", file=sec.file, field=sec.field_name(key), value=raw)
     return out
 
 
@@ -361,6 +365,7 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         Naming the file, key and allowed values for any bad entry.
     """
     from ..filters import METHODS
+    from ..filters.config import BPF_KEYWORDS, filter_config_class
     from .scenario import parse_scenario
 
     path = Path(path)
@@ -399,6 +404,28 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     if o.has("acs_mode"):
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
     o.check_unknown()
+    # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
+    # configuration objects validate them (lightcurve.filters.config)
+    fs = root.section("filters", {})
+    filt = {}
+    for method in METHODS:
+        tab = fs.section(method, None)
+        if tab is None:
+            continue
+        cls = filter_config_class(method)
+        values = dict(tab.data)
+        if cls is not None:
+            filt[method] = cls.from_mapping(values, file=path,
+                                            table=f"filters.{method}").as_options()
+        else:
+            bad = sorted(set(values) - set(BPF_KEYWORDS) - {"variant"})
+            if bad:
+                raise InputError("unknown key", file=path, field=f"filters.{method}.{bad[0]}",
+                                 allowed=", ".join(sorted(BPF_KEYWORDS)))
+            filt[method] = values
+    fs.check_unknown()
+    if filt:   # hashable: sorted (method, sorted (name, value) pairs) pairs
+        opts["filters"] = tuple(sorted((m, tuple(sorted(v.items()))) for m, v in filt.items()))
     root.check_unknown()
 
     lib = tuple(str(Path(d).resolve()) for d in (library_dirs or ()))

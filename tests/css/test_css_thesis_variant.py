@@ -286,3 +286,54 @@ def test_reproduction_css_section(tmp_path):
     assert "ECKF ≈ 1.8× EKF" in txt and "1.75×" in txt and "**agrees**" in txt
     out = write_reproduction(tmp_path / "r.md", [txt])
     assert out.read_text().startswith("# Reproduction")
+
+
+def test_albedo_coefficient_covariance_matches_brute_force():
+    # eq. 4.30b: Σ_j σ_j² A_j² w_j² c_ij c_kj over all sunlit, visible cells in both FOVs,
+    # re-computed here cell by cell from the map (no window)
+    from lightcurve.css.albedo import (AlbedoCells, albedo_coefficient_cov_nb,
+                                       builtin_albedo_map, cell_areas_m2)
+
+    m = builtin_albedo_map(10.0)
+    cells = AlbedoCells.from_map(m)
+    std = 0.5 * m.values
+    sig_area = (cell_areas_m2(m.lat_edges_rad, m.lon_edges_rad) * std).reshape(-1)
+    rng = np.random.default_rng(2)
+    up = np.array([0.3, -0.5, 0.81])
+    up /= np.linalg.norm(up)
+    r = 6778e3 * up
+    s_E = up + np.array([0.4, 0.2, 0.0])
+    s_E /= np.linalg.norm(s_E)
+    nE = rng.normal(size=(4, 3)) - 2 * up
+    nE /= np.linalg.norm(nE, axis=1)[:, None]
+    cf = np.full(4, np.cos(np.radians(60)))
+    hE = np.zeros((4, 3))
+    Ra = albedo_coefficient_cov_nb(*cells.args()[:3], np.ascontiguousarray(sig_area),
+                                   *cells.args()[3:], r, s_E, nE, cf, hE)
+    ref = np.zeros((4, 4))
+    for j in range(cells.centers_m.shape[0]):
+        c, n = cells.centers_m[j], cells.normals[j]
+        d = r - c
+        dist = np.linalg.norm(d)
+        cs, cv = n @ s_E, n @ d / dist
+        if cs <= 0 or cv <= 0:
+            continue
+        w = sig_area[j] * cs * cv / (np.pi * dist ** 2)
+        cc = nE @ (-d / dist)
+        cc = np.where(cc >= cf, cc, 0.0)
+        ref += np.outer(w * cc, w * cc)
+    assert np.abs(ref).max() > 0
+    assert np.allclose(Ra, ref, rtol=1e-10, atol=1e-18)
+
+
+def test_thesis_calibration_parameters_from_the_text():
+    from lightcurve.css.calibration import CalibrationParams
+
+    p = CalibrationParams.thesis_full("5x5")
+    assert p.thesis and p.sigma_css == pytest.approx(0.15)   # 0.05 + 0.1 (§4.4.3)
+    assert p.meas_floor == pytest.approx(0.1)                 # 2 σ_V (§4.2)
+    assert p.init_threshold == 0.4                             # §5.2
+    assert 3 * p.sigma_scale0 == pytest.approx(0.9)            # tables 4.1-4.3 initial 3σ
+    assert 3 * np.degrees(p.sigma_mis0_rad) == pytest.approx(3.0)
+    r = CalibrationParams.thesis_reduced()
+    assert not r.use_albedo and r.sigma_css == 0.05 and r.consider_sigma == 0.1

@@ -138,7 +138,7 @@ def _inverted_inside_3sigma(tmp, h5, oid, method, lib):
 def _diagnosed_consistent(tmp, h5):
     out = tmp / f"diag-{Path(h5).stem}"
     rc = main(["diagnose", str(h5), "-o", str(out), "-q", "--free", "none", "--max-effects", "1",
-               "--no-cv"])
+               "--cv", "none"])
     assert rc == 0
     d = json.loads((out / "diagnosis.json").read_text())
     lo, hi = d["baseline"]["chi2_dof_band"]

@@ -12,8 +12,8 @@ def make_lc(n=20, truth=True):
     rng = np.random.default_rng(1)
     q = rng.normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    r_obj = rng.normal(size=(n, 3))  # random directions, 7000 km out (outside the Earth)
-    r_obj *= 7e6 / np.linalg.norm(r_obj, axis=1, keepdims=True)
+    r_obj = rng.normal(size=(n, 3))
+    r_obj *= 7e6 / np.linalg.norm(r_obj, axis=1, keepdims=True)   # outside the Earth (|r| = 7000 km)
     return Lightcurve(
         epoch_utc="2020-03-01T08:08:40Z", t=np.arange(n) * 5.0, mag=10 + rng.normal(size=n),
         mag_sigma=np.full(n, 0.03), site=np.zeros(n, int), site_names=["socorro"],

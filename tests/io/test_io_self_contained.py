@@ -120,13 +120,21 @@ def test_inline_site_id_rule(tmp_path):
 
 
 def test_invert_without_truth_needs_an_initial_estimate(tmp_path, capsys):
+    """A truth-free file asked to start from the truth, or from a given estimate without one,
+    is refused naming what to give (without --initial it would run the global
+    initialisation: tests/acquisition)."""
     lc = simulate(load_scenario(data_dir("pipelines") / "default.toml"))
     lc.truth_q = lc.truth_omega_rad_s = lc.truth_mag = None
     p = lc.write(tmp_path / "real.h5")
-    rc = main(["invert", str(p), "-o", str(tmp_path / "o"), "--workers", "1", "-q"])
+    rc = main(["invert", str(p), "-o", str(tmp_path / "o"), "--workers", "1", "-q",
+               "--initial", "truth"])
     assert rc == 2
     err = json.loads((tmp_path / "o" / "summary.json").read_text())["real"]["error"]
-    assert "--initial-q" in err and "no truth" in err
+    assert "truth" in err and "global" in err
+    rc = main(["invert", str(p), "-o", str(tmp_path / "o2"), "--workers", "1", "-q",
+               "--initial", "given"])
+    assert rc == 2
+    assert "--initial-q" in capsys.readouterr().err
 
 
 def test_user_library_shape_through_every_command(tmp_path, capsys):
@@ -142,7 +150,7 @@ def test_user_library_shape_through_every_command(tmp_path, capsys):
     summ = json.loads((tmp_path / "inv" / "summary.json").read_text())["sim"]
     assert summ["inside_3sigma"]
     assert main(["diagnose", str(h5), "-o", str(tmp_path / "diag"), "-q", "--max-effects", "1",
-                 "--no-cv"]) == 0
+                 "--cv", "none"]) == 0
     assert main(["fit-reflection", str(h5), "-o", str(tmp_path / "fr"), "--params", "xi",
                  "--facets", "0", "--max-steps", "4000", "-q"]) == 0
     st = tmp_path / "study.toml"

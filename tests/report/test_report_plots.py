@@ -37,7 +37,8 @@ def test_estimate_figure_panels(default_pass):
     import dataclasses
 
     bare = dataclasses.replace(est, att_error_deg=None, omega_error_rad_s=None, nees=None,
-                               mag=None, mag_sigma=None, mag_post=None, epoch_utc="")
+                               mag=None, mag_sigma=None, site=None, predicted_mag=None,
+                               epoch_utc="", source_file="")
     fig = estimate_figure(bare)
     _visible_axes_have_data(fig)
     titles = " ".join(a.get_title(loc="left") for a in fig.axes)
