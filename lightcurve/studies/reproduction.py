@@ -155,7 +155,10 @@ def _claims(studies) -> list[str]:
 def _json_line(path):
     if path is None:
         return None
-    for line in reversed(Path(path).read_text(encoding="utf-8").splitlines()):
+    from ..io.safe_open import read_text
+
+    for line in reversed(read_text(path, max_bytes=64 * 1024 * 1024,
+                                   what="benchmark output").splitlines()):
         if line.strip().startswith("{"):
             return json.loads(line)
     return None
