@@ -20,7 +20,7 @@ Model 3 versus attitude only is ``benchmarks/reflection.py``.
 Usage: python benchmarks/reflection_bpf.py --acceptance [--seeds 10] [--particles 10000]
                                            [--scenario PATH]
        (``--scenario``: another scenario file for the §10.7 runs, e.g. pipelines/thesis/
-       leo-ic1-fast-spin-controlled-1site-inertial-rates.toml; the output gives the per-facet
+       leo-ch10-fast-spin-eci-controlled-1site.toml, the §10.1 start; the output gives the per-facet
        fraction of epochs lit and visible, ``facet_exposure_seed1000``)
        python benchmarks/reflection_bpf.py --combined [--seeds 5] [--particles 10000]
                                            [--rejuvenation auto|separate|joint]

@@ -3,8 +3,8 @@
 Prints ONE JSON line. Three parts (all truth shapes perturbed by 10 % per parameter, §10.1,
 the filters using the nominal shape):
 
-1. ``geo_model1`` — nadir GEO IC2 (pipelines/thesis/geo-ic2-nadir-controlled-1site.toml, our
-   ASSUMED GEO case) with Model 1 site biases (fig. 10.3): innovation χ²/dof w.r.t. the
+1. ``geo_model1`` — nadir GEO IC2 of ch. 10 (pipelines/thesis/geo-ch10-ic2-nadir-controlled-1site
+   .toml, Bernard §9.3.5 and §10.1) with Model 1 site biases (fig. 10.3): innovation χ²/dof w.r.t. the
    measurement noise alone (ν²/σ²), NIS (ν²/S), and post-fit residuals
    ``y − m(q̂) − b̂`` RMS / σ, attitude known and attitude estimated.
 2. ``sec10_7`` — LEO IC1 fast spin, controlled, 1 site (eclipse ignored as in the thesis),
@@ -17,8 +17,8 @@ the filters using the nominal shape):
 
 Usage: ``python benchmarks/reflection_kf.py [--seeds 10] [--parts geo,107,108] [--scenario PATH]``
 (nice -n 10 on a shared machine); ``--scenario`` replaces the LEO file of the ``107`` part, e.g.
-pipelines/thesis/leo-ic1-fast-spin-controlled-1site-inertial-rates.toml (rates read in inertial
-axes, the −Z facet question). The ``107`` output also gives the per-facet fraction of epochs lit
+pipelines/thesis/leo-ch10-fast-spin-eci-controlled-1site.toml (the §10.1 start, body = ECI: the
+−Z facet is lit and seen). The ``107`` output also gives the per-facet fraction of epochs lit
 and visible (truth of the first seed).
 """
 
@@ -45,25 +45,35 @@ from lightcurve.studies.scenario import load_scenario  # noqa: E402
 from lightcurve.studies.simulate import simulate  # noqa: E402
 
 THESIS = data_dir("pipelines") / "thesis"
-GEO = THESIS / "geo-ic2-nadir-controlled-1site.toml"
-LEO = THESIS / "leo-ic1-fast-spin-controlled-1site.toml"
+GEO = THESIS / "geo-ch10-ic2-nadir-controlled-1site.toml"
+# §10.1: ch. 10's LEO fast spin starts with the body frame on ECI (the file carries [reflection])
+LEO = THESIS / "leo-ch10-fast-spin-eci-controlled-1site.toml"
+#: filter variant and Cook–Torrance form of every run (--variant, --cook-torrance)
+OPTS = {"variant": "robust", "cook_torrance": "physical"}
 REFL = '\n[reflection]\nperturb = true\nsigma_frac = 0.1\nparams = ["xi", "a", "m", "A"]\n'
 
 
 def _scenario(path, add_reflection, params=("xi", "a", "m", "A")):
     """Load the scenario ``path``, with the §10.1 ``[reflection]`` perturbation of ``params``
     inserted when ``add_reflection``."""
+    from dataclasses import replace
+
+    from lightcurve.studies.scenario import with_cook_torrance_form
+
     txt = Path(path).read_text()
-    refl = REFL.replace('"xi", "a", "m", "A"', ", ".join(f'"{k}"' for k in params))
-    if not add_reflection:
-        return load_scenario(path)
-    with tempfile.TemporaryDirectory() as d:
-        p = Path(d) / Path(path).name
-        # [effects] is the last table of the thesis files: append [reflection] before it
+    plist = ", ".join(f'"{k}"' for k in params)
+    refl = REFL.replace('"xi", "a", "m", "A"', plist)
+    if "[reflection]" in txt:
+        txt = txt.replace('params = ["xi", "a", "m", "A"]', f"params = [{plist}]")
+    elif add_reflection:
+        # [effects] is the last table of some files: append [reflection] before it
         txt = txt.replace("\n[effects]", refl + "\n[effects]") if "[effects]" in txt \
             else txt + refl
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / Path(path).name
         p.write_text(txt)
-        return load_scenario(p)
+        sc = load_scenario(p)
+    return replace(sc, shape=with_cook_torrance_form(sc.shape, OPTS["cook_torrance"]))
 
 
 def _sim(sc, seed):
@@ -84,9 +94,7 @@ def truth_vector(curve, names):
 
 def postfit(curve, est):
     """Post-fit residuals y − m(q̂_k) − b̂_site (mag) with the nominal shape."""
-    from lightcurve.photometry import load_shape
-
-    m = MagnitudeModel(load_shape(curve.attrs["shape"]), curve)
+    m = MagnitudeModel(curve.resolve_shape(), curve)
     yh = np.array([m.predict_q(est.q[k][None, :], k)[0] for k in range(len(curve))])
     if est.bias is not None:
         yh = yh + est.bias[np.arange(len(curve)), m.site]
@@ -108,7 +116,7 @@ def part_geo_model1(seeds):
             for seed in seeds:
                 c = _sim(sc, seed)
                 e = invert(c, method, seed=seed, reflection="model1", attitude=att,
-                           sigma_theta_deg=3.0)
+                           sigma_theta_deg=3.0, variant=OPTS["variant"])
                 sig = c.mag_sigma
                 v = np.isfinite(e.innovations)
                 chi.append(float(np.mean(e.innovations[v] ** 2 / sig[v] ** 2)))
@@ -116,9 +124,7 @@ def part_geo_model1(seeds):
                 r = postfit(c, e)
                 rms_post.append(float(np.sqrt(np.mean(r ** 2)) / np.mean(sig)))
                 # the "true" bias: mean truth-shape minus nominal-shape magnitude along the truth
-                from lightcurve.photometry import load_shape
-
-                mm = MagnitudeModel(load_shape(c.attrs["shape"]), c)
+                mm = MagnitudeModel(c.resolve_shape(), c)
                 mnom = np.array([mm.predict_q(c.truth_q[k][None, :], k)[0] for k in range(len(c))])
                 db = float(np.mean(c.truth_mag - mnom))
                 bias_err.append((float(e.bias[-1, 0]) - db, float(e.bias_sigma[-1, 0])))
@@ -150,7 +156,7 @@ def part_sec10_7(seeds, scenario=None, params=("xi", "a", "m", "A")):
         for seed in seeds:
             c = _sim(sc, seed)
             e = invert(c, method, seed=seed, reflection="model3", attitude="truth",
-                       reflection_kinds=params)
+                       reflection_kinds=params, variant=OPTS["variant"])
             names = e.refl_names
             tv = truth_vector(c, names)
             prior = np.array(e.meta["reflection"]["prior_sigma_p"])
@@ -180,7 +186,8 @@ def part_sec10_8(seeds):
         for method in ("mekf", "ukf"):
             ok, rss, inside, div = [], [], [], []
             for seed, c in zip(seeds, curves):
-                e = invert(c, method, seed=seed, reflection=model, sigma_theta_deg=st)
+                e = invert(c, method, seed=seed, reflection=model, sigma_theta_deg=st,
+                           variant=OPTS["variant"])
                 s = e.summary()
                 ok.append(success(e))
                 rss.append(round(s["final_att_error_rss_deg"], 3))
@@ -201,11 +208,17 @@ def main(argv=None):
     ap.add_argument("--params", default="xi,a,m,A",
                     help="kinds perturbed and estimated in the 107 part (default xi,a,m,A; "
                     "xi,a,m = areas known)")
+    ap.add_argument("--variant", choices=("robust", "thesis"), default="robust",
+                    help="filters: robust (default) or thesis (Bernard ch. 7-8 as written)")
+    ap.add_argument("--cook-torrance", choices=("physical", "thesis"), default="physical",
+                    help="Cook-Torrance diffuse term of truth and filters (thesis = eq. 5.8)")
     a = ap.parse_args(argv)
+    OPTS.update(variant=a.variant, cook_torrance=a.cook_torrance)
     seeds = list(range(1, a.seeds + 1))
     parts = a.parts.split(",")
     t0 = time.perf_counter()
     res = {"benchmark": "reflection_kf", "cpu_count": os.cpu_count(), "seeds": seeds,
+           "variant": a.variant, "cook_torrance": a.cook_torrance,
            "load_avg_start": os.getloadavg()[0]}
     if "geo" in parts:
         res["geo_model1"] = part_geo_model1(seeds[:3])

@@ -29,6 +29,7 @@ from . import (
     period,
     recordings,
     reflection,
+    reproduction,
     selfcheck,
     shapes,
     simulate,
@@ -39,7 +40,8 @@ __all__ = ["main", "build_parser", "iter_commands"]
 
 _REGISTRARS = (selfcheck.register, sites.register, shapes.register, simulate.register,
                css.register, invert.register, period.register, diagnose.register,
-               compare.register, reflection.register, recordings.register)
+               compare.register, reflection.register, recordings.register,
+               reproduction.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -233,9 +233,11 @@ def add_plot(p, help="also write PNG figures next to the outputs"):
 
 def add_variant(p, default="robust"):
     """``--variant {thesis,robust}``: the source's algorithm or our improved one."""
+    dflt = ("the input's own setting (a lightcurve's stored scenario [filter] variant), "
+            "else robust") if default is None else default
     return p.add_argument("--variant", choices=("thesis", "robust"), default=default,
                           help="thesis: the source text's algorithm exactly; robust: the "
-                          f"improved default (default {default})")
+                          f"improved default (default {dflt})")
 
 
 def add_device(p, default="cpu"):

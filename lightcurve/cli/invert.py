@@ -10,8 +10,8 @@ from ..acquisition.global_init import GlobalInitConfig
 from ..errors import InputError
 from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
 from ..studies.batch import expand_inputs, invert_files
-from ._args import (add_executors, add_model_options, add_output, add_plot, add_quiet, add_seed,
-                    add_variant, csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+from ._args import (add_device, add_executors, add_model_options, add_output, add_plot,
+                    add_quiet, add_seed, add_variant, csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
                     refuse_inapplicable)
 
 __all__ = ["register", "configs_from_args"]
@@ -59,14 +59,19 @@ def configs_from_args(args):
         reflection_kinds=tuple(csv_list(args.reflection_params, "--reflection-params")),
         reflection_facets=(None if args.reflection_facets is None else
                            tuple(csv_ints(args.reflection_facets, "--reflection-facets"))),
-        gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
+        gate=(None if args.gate is None else
+              {"mode": args.gate, "false_alarm": args.gate_false_alarm}),
         shape=args.shape, library_dirs=tuple(args.library) if args.library else None,
         site_dirs=tuple(args.sites) if args.sites else None, initial=args.initial, **start)
     cls = filter_config_class(args.method)
     names = [f.name for f in fields(cls)] if cls is not None else list(BPF_KEYWORDS)
     opts = {n: getattr(args, n) for n in names if hasattr(args, n)}
+    if getattr(args, "variant", None) is None:
+        opts.pop("variant", None)   # the file's scenario [filter] variant, else robust (invert)
     if cls is not None:
         opts = cls(**opts).as_options()    # validated here (InputError → exit 2)
+        if getattr(args, "variant", None) is None:
+            opts.pop("variant", None)
     return problem, opts
 
 
@@ -154,23 +159,28 @@ def register(sub) -> None:
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
     p.add_argument("--roughening", type=number(0.0, 10.0), default=0.2,
                    help="BPF roughening constant G in [0, 10] (Bernard table 7.9: sigma = G E "
-                   "N^(-1/n), E the spread of the cloud; used with --rejuvenation separate; "
-                   "default 0.2)")
-    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic",
-                   help="BPF resampling scheme (default systematic)")
-    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
+                   "N^(-1/n), E the spread of the cloud; used by --rejuvenation separate and "
+                   "table7.9; default 0.2)")
+    p.add_argument("--resampling", choices=("systematic", "multinomial"), default=None,
+                   help="BPF resampling scheme (default: systematic; multinomial, Bernard "
+                   "table 6.3, with --variant thesis)")
+    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint", "table7.9", "none"),
+                   default=None,
                    help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
                    "the whole state with the Musso et al. (2001) bandwidth; separate = the "
-                   "table-7.9 roughening of attitude and rate (uses --roughening); auto = joint "
-                   "when the attitude is estimated (default)")
+                   "table-7.9 sigma added in the GRP chart (uses --roughening); table7.9 = "
+                   "Bernard's table 7.9 as written; none; auto = joint while the attitude cloud "
+                   "is compact, else separate (default: auto; table7.9 with --variant thesis)")
     p.add_argument("--ess-threshold", type=number(0.0, 1.0), default=0.5,
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
-    p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",
-                   help="controlled model: ACS noise as attitude random walk or jitter")
+    p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default=None,
+                   help="controlled model: ACS noise as attitude random walk or jitter "
+                   "(Bernard eq. 7.10; default: the file's scenario, else random_walk)")
     p.add_argument("--pseudo-noise", type=number(0.0, 1.0), default=0.0,
                    help="rate pseudo-noise PSD, (rad/s)^2/s, in [0, 1] (1 already lets the rate "
                    "wander by 1 rad/s in 1 s; default 0)")
-    add_variant(p)
+    add_variant(p, default=None)
+    add_device(p)
     p.add_argument("--alpha", type=number(1e-4, 1.0), default=1.0,
                    help="UKF alpha in [1e-4, 1] (Bernard sec. 6: between 0 and 1; below 1e-4 "
                    "the sigma-point weights lose all precision; default 1)")
@@ -201,11 +211,12 @@ def register(sub) -> None:
     p.add_argument("--attitude-known", action="store_true",
                    help="hold attitude and rate at the file's truth and estimate only the "
                    "reflection states (thesis sec. 10.7 parameter-only runs; needs --reflection)")
-    p.add_argument("--gate", choices=("auto", "reject", "inflate", "off"), default="auto",
+    p.add_argument("--gate", choices=("auto", "reject", "inflate", "off"), default=None,
                    help="innovation (outlier) gate: skip a magnitude whose normalised innovation "
                    "squared exceeds the chi-square threshold (reject), use it with inflated noise "
                    "(inflate), or no gate; auto = reject in the UKF, inflate in the MEKF and the "
-                   "particle filter (default auto; counts in summary.json)")
+                   "particle filter (default auto; off with --variant thesis; counts in "
+                   "summary.json)")
     p.add_argument("--gate-false-alarm", type=number(0.0, 0.5, lo_open=True), default=1e-4,
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")

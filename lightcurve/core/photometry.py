@@ -117,7 +117,10 @@ def cook_torrance_xyz(ns, no, nh, c, xi, a, m, thesis):
     ``a = F0``, ``m`` Beckmann slope; ``thesis`` selects eq. 5.8's printed diffuse form.
     :func:`fresnel_xyz` then :func:`cook_torrance_fresnel_xyz`.
     """
-    if xi >= 1.0 or nh <= 0.0 or c <= 0.0:
+    # no shortcut at ξ = 1 (Table 9.2's fully diffuse −Z): the (1 − ξ) weight zeroes the
+    # specular value, but ∂P/∂ξ = diffuse − FDG/4 needs F, D, G there, and the value stays
+    # affine in ξ across the bound (finite differences of ξ agree with ∂P/∂ξ)
+    if nh <= 0.0 or c <= 0.0:
         return cook_torrance_fresnel_xyz(ns, no, nh, c, 0.0, 0.0, 0.0, xi, a, m, thesis)
     F, dF_dc, dF_df0 = fresnel_xyz(c, a)
     return cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis)
@@ -131,8 +134,8 @@ def cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis)
     once per facet material; pass zeros for the derivatives it does not use).
 
     ``P = ξ a/π ns no + (1−ξ)/4 F D G`` (physical form), or ``ξ a/π ns² no + …`` with
-    ``thesis`` (eq. 5.8 as printed). The specular term is zero for ``ξ ≥ 1``, ``nh ≤ 0`` or
-    ``c ≤ 0``. At the kinks of ``min(…)`` in G the derivative of the active branch is returned.
+    ``thesis`` (eq. 5.8 as printed). The specular term is zero for ``nh ≤ 0`` or ``c ≤ 0``
+    (and its value, not its ξ-derivative, for ``ξ = 1``). At the kinks of ``min(…)`` in G the derivative of the active branch is returned.
     Callers that use only ``P`` pay nothing for the derivatives (inlined, the unused arithmetic
     is removed by the compiler).
     """
@@ -149,7 +152,7 @@ def cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis)
         d_no = kd * ns
         d_xi = a * _INV_PI * ns * no
         d_a = xi * _INV_PI * ns * no
-    if xi >= 1.0 or nh <= 0.0 or c <= 0.0:
+    if nh <= 0.0 or c <= 0.0:
         return diff, d_ns, d_no, 0.0, 0.0, d_xi, d_a, 0.0
     D, dD_dnh, dD_dm = beckmann_xyz(nh, m)
     G = 1.0

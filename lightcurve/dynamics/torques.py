@@ -21,6 +21,12 @@ feed them directly.
   ``T = Σ c_i × F_i``; ``ρ`` from :func:`lightcurve.dynamics.atmosphere.density_kg_m3` at the
   altitude above a spherical Earth. Facet self-shadowing (for SRP) and shielding (for drag)
   are not modelled.
+  ``form="normal"`` is Bernard's eq. 4.21 as written: the facet force acts along the facet
+  normal, ``F_i = −½ ρ C_D A_i |v|² max(v̂·n̂_i, 0) n̂_i`` (body axes), so a facet whose centre
+  of pressure lies on its normal line (a cube) feels no drag torque. The ``max(·, 0)`` is the
+  text's "projected area in the direction of the velocity vector" (§4.2.4: facets facing away
+  from the flow present none); eq. 4.21 itself writes no clamp. The thesis's v is "the orbital
+  velocity vector" — pass ``omega_earth = 0`` for that reading.
 
 The ``*Torque`` classes bundle a torque with its geometry (functions of time) for the truth
 models and expose ``torque(t, q, omega)`` and the attitude partial ``dtheta(t, q, omega)``
@@ -51,8 +57,10 @@ __all__ = [
     "srp_torque_jacobian",
     "drag_torque_jacobian",
     "srp_torque",
+    "srp_torque_nb",
     "srp_facet_forces",
     "drag_torque",
+    "drag_torque_nb",
     "drag_relative_velocity",
     "as_time_function",
     "GravityGradientTorque",
@@ -184,6 +192,35 @@ def srp_torque(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c
     return np.sum(np.cross(c, Fi), axis=-2)
 
 
+@njit(cache=True)
+def srp_torque_nb(q, s_eci, P, areas, normals, centers, c_spec, c_diff):
+    """Numba kernel of :func:`srp_torque` for one state (1-D/2-D float64 arrays, no validation).
+
+    ``q`` (4,) unit quaternion inertial→body; ``s_eci`` (3,) unit object→Sun; ``P`` the pressure
+    already scaled by distance and lit fraction (N/m²); facet arrays (F,), (F,3), (F,3);
+    ``c_spec``, ``c_diff`` (F,). Returns the body torque (3,), N m — the same sum
+    ``Σ c_i × F_i`` as :func:`srp_facet_forces`.
+    """
+    sb = rot.qrot_nb(q, s_eci)
+    out = np.zeros(3)
+    for i in range(areas.shape[0]):
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        cos = nx * sb[0] + ny * sb[1] + nz * sb[2]
+        if cos <= 0.0:
+            continue
+        a = -P * areas[i] * cos
+        kn = 2.0 * (c_spec[i] * cos + c_diff[i] / 3.0)
+        ks = 1.0 - c_spec[i]
+        fx = a * (ks * sb[0] + kn * nx)
+        fy = a * (ks * sb[1] + kn * ny)
+        fz = a * (ks * sb[2] + kn * nz)
+        cx, cy, cz = centers[i, 0], centers[i, 1], centers[i, 2]
+        out[0] += cy * fz - cz * fy
+        out[1] += cz * fx - cx * fz
+        out[2] += cx * fy - cy * fx
+    return out
+
+
 # ----------------------------------------------------------------------------------------
 # aerodynamic drag
 # ----------------------------------------------------------------------------------------
@@ -196,7 +233,7 @@ def drag_relative_velocity(r_eci_m, v_eci_m_s, omega_earth: float = OMEGA_EARTH)
 
 
 def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *, Cd: float = 2.2,
-                density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH):
+                density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH, form: str = "velocity"):
     """Aerodynamic drag torque from facets (N m, body axes; Bernard eq. 4.21–4.23).
 
     Parameters
@@ -213,7 +250,12 @@ def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *
         Density at altitude above the spherical Earth (default: exponential atmosphere).
     omega_earth : float
         Rotation rate of the atmosphere about ECI z, rad/s (0 for a non-rotating atmosphere).
+    form : {"velocity", "normal"}
+        Facet force along the flow (default) or along the facet normal (Bernard eq. 4.21 as
+        written; module docstring).
     """
+    if form not in ("velocity", "normal"):
+        raise ValueError(f"form: expected 'velocity' or 'normal', got {form!r}")
     A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
     Cd = ck.finite_scalar(Cd, "Cd", nonneg=True)
     vrel = drag_relative_velocity(r_eci_m, v_eci_m_s, omega_earth)
@@ -221,8 +263,40 @@ def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *
     v_b = rot.quat_rotate(q, vrel)
     nv = (v_b[..., None, :] @ n.T)[..., 0, :]  # n_i · v_b = |v| cos α_i, (..., F)
     k = np.asarray(-0.5 * Cd * rho)[..., None] * A * np.maximum(nv, 0.0)  # (..., F), N/(m/s)
-    Fi = k[..., None] * v_b[..., None, :]
+    if form == "normal":  # −½ρC_D A |v|² (v̂·n̂)⁺ n̂ = k |v| n̂
+        vn = np.linalg.norm(v_b, axis=-1, keepdims=True)  # (..., 1)
+        Fi = (k * vn)[..., None] * n
+    else:
+        Fi = k[..., None] * v_b[..., None, :]
     return np.sum(np.cross(c, Fi), axis=-2)
+
+
+@njit(cache=True)
+def drag_torque_nb(q, vrel_eci, rho_cd, areas, normals, centers, along_normal):
+    """Numba kernel of :func:`drag_torque` for one state (no validation).
+
+    ``vrel_eci`` (3,) flow velocity (m/s, ECI; relative to the atmosphere, or the orbital
+    velocity for the thesis form); ``rho_cd`` = ρ C_D (kg/m³); ``along_normal`` selects
+    Bernard's eq. 4.21 form (force along n̂) instead of along the flow. Returns N m, body axes.
+    """
+    vb = rot.qrot_nb(q, vrel_eci)
+    vn = np.sqrt(vb[0] ** 2 + vb[1] ** 2 + vb[2] ** 2)
+    out = np.zeros(3)
+    for i in range(areas.shape[0]):
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        nv = nx * vb[0] + ny * vb[1] + nz * vb[2]
+        if nv <= 0.0:
+            continue
+        k = -0.5 * rho_cd * areas[i] * nv
+        if along_normal:
+            fx, fy, fz = k * vn * nx, k * vn * ny, k * vn * nz
+        else:
+            fx, fy, fz = k * vb[0], k * vb[1], k * vb[2]
+        cx, cy, cz = centers[i, 0], centers[i, 1], centers[i, 2]
+        out[0] += cy * fz - cz * fy
+        out[1] += cz * fx - cx * fz
+        out[2] += cx * fy - cy * fx
+    return out
 
 
 # ----------------------------------------------------------------------------------------
@@ -389,8 +463,18 @@ class SRPTorque:
         return s, lit, float(self.sun_distance_m(t))
 
     def torque(self, t, q, omega=None):
-        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``."""
+        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``.
+
+        One finite state goes through the numba kernel :func:`srp_torque_nb` (the truth
+        integrators call this once per right-hand-side evaluation; same formula); stacks and
+        anything else through the validating :func:`srp_torque`.
+        """
         s, lit, d = self._args(t)
+        qa = np.asarray(q, dtype=float)
+        if qa.shape == (4,) and np.isfinite(qa).all() and np.isfinite(s).all() and d > 0:
+            P = self.p_sun_1au * (AU_M / d) ** 2 * lit
+            return srp_torque_nb(np.ascontiguousarray(qa), np.ascontiguousarray(s), P, self.areas,
+                                 self.normals, self.centers, self.c_spec, self.c_diff)
         return srp_torque(q, s, self.areas, self.normals, self.centers, self.c_spec, self.c_diff,
                           lit_fraction=lit, sun_distance_m=d, p_sun_1au=self.p_sun_1au)
 
@@ -411,11 +495,14 @@ class DragTorque:
     ----------
     areas_m2, normals_body, centers_body_m : see :func:`drag_torque`.
     position, velocity : callables ``t -> (3,)`` (ECI, m and m/s), constants or samples.
-    Cd, density_fn, omega_earth : see :func:`drag_torque`.
+    Cd, density_fn, omega_earth, form : see :func:`drag_torque`.
     """
 
     def __init__(self, areas_m2, normals_body, centers_body_m, position, velocity, Cd: float = 2.2,
-                 density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH):
+                 density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH, form: str = "velocity"):
+        if form not in ("velocity", "normal"):
+            raise ValueError(f"form: expected 'velocity' or 'normal', got {form!r}")
+        self.form = form
         self.areas, self.normals, self.centers = ck.facets(areas_m2, normals_body, centers_body_m)
         self.position = as_time_function(position, "position")
         self.velocity = as_time_function(velocity, "velocity")
@@ -424,13 +511,30 @@ class DragTorque:
         self.omega_earth = ck.finite_scalar(omega_earth, "omega_earth")
 
     def torque(self, t, q, omega=None):
-        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``."""
-        return drag_torque(q, self.position(t), self.velocity(t), self.areas, self.normals,
-                           self.centers, Cd=self.Cd, density_fn=self.density_fn,
-                           omega_earth=self.omega_earth)
+        """Torque (N m, body axes) at time ``t`` (s) and attitude ``q``.
+
+        One finite state goes through the numba kernel :func:`drag_torque_nb` (same formula);
+        stacks and anything else through the validating :func:`drag_torque`.
+        """
+        r, v = self.position(t), self.velocity(t)
+        qa = np.asarray(q, dtype=float)
+        ra, va = np.asarray(r, dtype=float), np.asarray(v, dtype=float)
+        if (qa.shape == (4,) and ra.shape == (3,) and va.shape == (3,) and np.isfinite(qa).all()
+                and np.isfinite(ra).all() and np.isfinite(va).all()):
+            vrel = drag_relative_velocity(ra, va, self.omega_earth)
+            rho = float(self.density_fn(altitude_m(ra)))
+            return drag_torque_nb(np.ascontiguousarray(qa), np.ascontiguousarray(vrel),
+                                  rho * self.Cd, self.areas, self.normals, self.centers,
+                                  self.form == "normal")
+        return drag_torque(q, r, v, self.areas, self.normals, self.centers, Cd=self.Cd,
+                           density_fn=self.density_fn, omega_earth=self.omega_earth,
+                           form=self.form)
 
     def dtheta(self, t, q, omega=None):
         """``∂T/∂δθ`` (N m/rad, 3×3)."""
+        if self.form != "velocity":
+            raise NotImplementedError("the attitude Jacobian of the along-normal drag form "
+                                      "(Bernard eq. 4.21) is not implemented")
         return drag_torque_jacobian(q, self.position(t), self.velocity(t), self.areas, self.normals,
                                     self.centers, Cd=self.Cd, density_fn=self.density_fn,
                                     omega_earth=self.omega_earth)

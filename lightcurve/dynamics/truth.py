@@ -67,7 +67,8 @@ from .kinematics import check_omega
 from .rigid_body import check_inertia
 from .torques import DragTorque, GravityGradientTorque, SRPTorque
 
-__all__ = ["ControlledTruth", "UncontrolledTruth", "srp_coefficients_from_materials"]
+__all__ = ["ControlledTruth", "UncontrolledTruth", "srp_coefficients_from_materials",
+           "srp_coefficients_thesis"]
 
 _TORQUE_NAMES = ("gravity_gradient", "srp", "drag")
 
@@ -112,6 +113,23 @@ def srp_coefficients_from_materials(materials):
             s_, d_ = s_ / tot, d_ / tot
         cs.append(s_)
         cd.append(d_)
+    return np.array(cs), np.array(cd)
+
+
+def srp_coefficients_thesis(materials):
+    """Specular and diffuse SRP reflectivities ``(R_s (F,), R_d (F,))`` of Bernard eq. 4.17–4.18.
+
+    ``R_d = ξ``, ``R_s = 1 − ξ`` for every Cook–Torrance material (the weighting ξ of the
+    measurement model; nothing absorbed). A material without ``xi`` raises ``ValueError``.
+    """
+    cs, cd = [], []
+    for m in materials:
+        p = dict(getattr(m, "params", {}) or {})
+        if "xi" not in p:
+            raise ValueError(f"material {getattr(m, 'name', m)!r}: the thesis SRP form (Bernard "
+                             "eq. 4.17-4.18) needs a Cook-Torrance weighting xi")
+        cd.append(float(p["xi"]))
+        cs.append(1.0 - float(p["xi"]))
     return np.array(cs), np.array(cd)
 
 
@@ -248,11 +266,22 @@ class UncontrolledTruth:
         :func:`srp_coefficients_from_materials`. Added to ``torque_models``.
     geometry_step_s : float
         Sampling step of the orbit geometry for the named torques, s (default 20).
+    torque_forms : {"physical", "thesis"}
+        Forms of the named SRP and drag torques. ``"physical"`` (default): SRP coefficients from
+        :func:`srp_coefficients_from_materials`, drag along the flow relative to the co-rotating
+        atmosphere. ``"thesis"``: Bernard (2021) eq. 4.16–4.21 as written — SRP reflectivities
+        ``R_d = ξ``, ``R_s = 1 − ξ`` of each Cook–Torrance facet (eq. 4.17–4.18; nothing
+        absorbed), drag along the facet normal with the orbital velocity (eq. 4.21,
+        ``omega_earth = 0``); gravity gradient is eq. 4.20 in both.
     """
 
     def __init__(self, q0, omega0_rad_s, J, torque_models=(), eta_sigma_rad_s2: float = 0.0, rng=None,
                  *, t0_s=None, noise: str = "continuous", rtol: float = 1e-12, atol: float = 1e-12,
-                 torques=None, shape=None, orbit=None, epoch_utc=None, geometry_step_s: float = 20.0):
+                 torques=None, shape=None, orbit=None, epoch_utc=None, geometry_step_s: float = 20.0,
+                 torque_forms: str = "physical"):
+        if torque_forms not in ("physical", "thesis"):
+            raise ValueError(f"torque_forms: expected 'physical' or 'thesis', got {torque_forms!r}")
+        self.torque_forms = torque_forms
         self.q0 = _single_q(q0, "q0")
         self.omega0 = _single_w(omega0_rad_s, "omega0_rad_s")
         self.J = check_inertia(J)
@@ -315,14 +344,21 @@ class UncontrolledTruth:
             models.append(GravityGradientTorque(self.J, pos))
         if "drag" in self.named_torques:
             sh = self.shape
-            models.append(DragTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, pos, vel))
+            if self.torque_forms == "thesis":  # eq. 4.21: along the normal, orbital velocity
+                models.append(DragTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, pos, vel,
+                                         omega_earth=0.0, form="normal"))
+            else:
+                models.append(DragTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, pos, vel))
         if "srp" in self.named_torques:
             sh = self.shape
             rs = np.asarray(sun_position_gcrs(self.epoch_utc, tg), dtype=float)
             rel = rs - r
             d = np.linalg.norm(rel, axis=1)
             lit = np.asarray(lit_fraction(r, rs), dtype=float)
-            cs, cd = srp_coefficients_from_materials(sh.materials)
+            if self.torque_forms == "thesis":
+                cs, cd = srp_coefficients_thesis(sh.materials)
+            else:
+                cs, cd = srp_coefficients_from_materials(sh.materials)
             u = CubicSpline(tg, rel / d[:, None], axis=0)
             dist = CubicSpline(tg, d)
             models.append(SRPTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, cs, cd, u,

@@ -118,7 +118,9 @@ class ProblemConfig(ConfigBase):
     shape : Shape, library name or None — default the file's shape.
     dynamics : "controlled" | "uncontrolled" | None — default the file's scenario.
     acs_sigma_deg : float ≥ 0 or None — ACS noise 1σ, deg (controlled; default the scenario's).
-    acs_mode : "random_walk" | "jitter" — how ζ acts (:mod:`lightcurve.filters.models`).
+    acs_mode : "random_walk" | "jitter" | None — how ζ acts (:mod:`lightcurve.filters.models`;
+        Bernard eq. 7.10 is "jitter"); default the stored scenario's ``[attitude] acs_mode``,
+        else random_walk.
     pseudo_noise : float ≥ 0 — rate pseudo-noise PSD, (rad/s)²/s.
     eta_sigma_deg_s2 : float ≥ 0 or None — uncontrolled η level (default the scenario's).
     inertia_kg_m2 : (3,3) or None — uncontrolled inertia (default scenario, then shape).
@@ -138,6 +140,9 @@ class ProblemConfig(ConfigBase):
         (:func:`lightcurve.filters.invert.invert`).
     global_config : :class:`lightcurve.acquisition.global_init.GlobalInitConfig` or None —
         settings of ``initial="global"``.
+    init_seed : int ≥ 0 or None — seeds the initial-estimate draw alone (default ``seed``):
+        every filter of a Monte Carlo run given one ``init_seed`` starts from the same
+        estimate (Bernard §9.3.1).
     """
 
     seed: int = 0
@@ -148,7 +153,7 @@ class ProblemConfig(ConfigBase):
     shape: object = None
     dynamics: str | None = None
     acs_sigma_deg: float | None = None
-    acs_mode: str = "random_walk"
+    acs_mode: str | None = None
     pseudo_noise: float = 0.0
     eta_sigma_deg_s2: float | None = None
     inertia_kg_m2: object = None
@@ -164,6 +169,7 @@ class ProblemConfig(ConfigBase):
     site_dirs: tuple | None = None
     initial: str = "auto"
     global_config: object = None
+    init_seed: int | None = None
 
     def __post_init__(self):
         s = object.__setattr__
@@ -197,7 +203,18 @@ class ProblemConfig(ConfigBase):
             _choice("dynamics", self.dynamics, DYNAMICS)
         s(self, "acs_sigma_deg", _num("acs_sigma_deg", self.acs_sigma_deg, lo=0.0,
                                       allow_none=True))
-        _choice("acs_mode", self.acs_mode, ACS_MODES)
+        if self.acs_mode is not None:
+            _choice("acs_mode", self.acs_mode, ACS_MODES)
+        if self.init_seed is not None:
+            try:
+                iseed = int(self.init_seed)
+            except (TypeError, ValueError):
+                raise InputError("must be an integer", field="init_seed",
+                                 value=self.init_seed) from None
+            if iseed < 0 or iseed != self.init_seed:
+                raise InputError("must be an integer >= 0", field="init_seed",
+                                 value=self.init_seed)
+            s(self, "init_seed", iseed)
         s(self, "pseudo_noise", _num("pseudo_noise", self.pseudo_noise, lo=0.0))
         s(self, "eta_sigma_deg_s2", _num("eta_sigma_deg_s2", self.eta_sigma_deg_s2, lo=0.0,
                                          allow_none=True))

@@ -5,15 +5,25 @@ Instead of absorbing uncertain reflection parameters into a magnitude bias (Mode
 Cook–Torrance facet i the diffuse fraction ξ_i ∈ (0,1), the albedo / normal-incidence
 reflectance a_i = F0 ∈ (0,1), the Beckmann rms slope m_i > 0 and the area A_i > 0 (m²).
 
-Unconstrained coordinates (eq. 8.41–8.44 style; the thesis text is not available here, so the
-exact form is an ASSUMPTION shared with :mod:`lightcurve.studies.fit_reflection`)::
+Unconstrained coordinates (Bernard eq. 8.41–8.44, shared with
+:mod:`lightcurve.studies.fit_reflection`)::
 
     z_ξ = logit ξ,   z_a = logit a,   z_m = ln m,   z_A = ln A,
 
-so every filter state, sigma point or particle maps to physical values in range. The inverse
+so every filter state, sigma point or particle maps to physical values in range. Bernard
+eq. 8.41–8.44 writes the bounded maps as ``p = ½ tanh z̃ + ½`` = logistic(2 z̃): the same map
+up to the factor 2 on the coordinate, which a Kalman or particle filter does not see (the state
+and its covariance scale together). Eq. 8.43 bounds m to (0, 1) that way too; ``bounded_m=True``
+(the thesis variant, :func:`lightcurve.filters.invert.invert`) uses the logit for m as well,
+the default keeps ln m (m > 0). The inverse
 and the (diagonal) Jacobian are ``ξ = 1/(1+e^{−z})``, ``dξ/dz = ξ(1−ξ)``; ``m = e^z``,
 ``dm/dz = m``. (The shape files bound m ≤ 1; the log map lets m exceed 1, where the Beckmann
 formula is still defined — stated, not hidden.)
+
+Parameters on a closed bound of their range (ξ = 0 or 1 — Table 9.2's −Z facet is fully
+diffuse, ξ = 1) have no finite unbounded coordinate: they are held fixed at that value and left
+out of the state (listed in ``held``); the §10.1 truth draw
+(:func:`lightcurve.studies.fit_reflection.perturb_reflection`) holds them fixed too.
 
 Prior (§10.1): the truth perturbation is ``p ~ N(p₀, (frac·p₀)²)``, p₀ the shape file's value,
 frac = 10 % by default. The filters' initial state is ``z₀ = z(p₀)`` with covariance
@@ -49,6 +59,7 @@ import numpy as np
 
 from ..core.photometry import (
     COOK_TORRANCE,
+    COOK_TORRANCE_THESIS,
     brdf_product_nb,
     facet_flux_nb,
     magnitude_partials_q_nb,
@@ -66,6 +77,9 @@ KINDS = ("xi", "a", "m", "A")
 #: parameters in (0,1) (logit map); the others are > 0 (log map)
 LOGIT_KINDS = ("xi", "a")
 _KIND_COL = {"xi": 0, "a": 1, "m": 2, "A": 3}
+#: kernel ids of the Cook–Torrance forms whose ξ, a, m Model 3 can estimate (physical and
+#: Bernard eq. 5.8 diffuse term)
+CT_IDS = (COOK_TORRANCE, COOK_TORRANCE_THESIS)
 
 
 # --------------------------------------------------------------------------------------------
@@ -243,15 +257,17 @@ def check_kinds(kinds):
     return kinds
 
 
-def select_ct_facets(shape, facets, purpose, field="facets"):
+def select_ct_facets(shape, facets, purpose, field="facets", ids=(COOK_TORRANCE,)):
     """Indices of the Cook–Torrance facets (area > 0) whose parameters are estimated.
 
     ``facets`` None → all of them; otherwise each index must be such a facet (InputError
     naming it and the allowed ones). ``purpose`` completes the message when the shape has
-    none ("estimated (Model 3)", "fitted"). Returns a sorted int64 array.
+    none ("estimated (Model 3)", "fitted"). ``ids``: the accepted kernel ids (default the
+    physical Cook–Torrance only; Model 3 also takes the eq. 5.8 form, :data:`CT_IDS`). Returns a
+    sorted int64 array.
     """
     F = shape.n_facets
-    ct = np.flatnonzero((shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0))
+    ct = np.flatnonzero(np.isin(shape.model_ids, ids) & (shape.areas_m2 > 0))
     if facets is None:
         fidx = ct
     else:
@@ -290,8 +306,12 @@ class FacetParameterStates:
     fidx (K,) estimated facet indices.
     """
 
-    def __init__(self, shape, *, facets=None, kinds=KINDS, prior_frac=0.1, process_noise=0.0):
+    def __init__(self, shape, *, facets=None, kinds=KINDS, prior_frac=0.1, process_noise=0.0,
+                 bounded_m=False):
         self.kinds = tuple(k for k in KINDS if k in check_kinds(kinds))   # canonical order
+        #: m through a bounded (0,1) map (Bernard eq. 8.43, the thesis variant) instead of ln
+        self.bounded_m = bool(bounded_m)
+        bounded = LOGIT_KINDS + (("m",) if self.bounded_m else ())
         self.prior_frac = float(prior_frac)
         if not (self.prior_frac > 0 and np.isfinite(self.prior_frac)):
             raise InputError("prior fraction must be > 0", field="reflection_frac",
@@ -300,23 +320,36 @@ class FacetParameterStates:
         if not (self.process_noise >= 0 and np.isfinite(self.process_noise)):
             raise InputError("process noise must be >= 0", field="process_noise",
                              value=process_noise)
-        fidx = select_ct_facets(shape, facets, "estimated (Model 3)", field="reflection")
+        fidx = select_ct_facets(shape, facets, "estimated (Model 3)", field="reflection",
+                                ids=CT_IDS)
         self.shape = shape
         self.fidx = np.ascontiguousarray(fidx, dtype=np.int64)
-        names, kc, fc = [], [], []
-        for kind in self.kinds:
-            for i in self.fidx:
-                names.append(f"{kind}[{int(i)}]")
-                kc.append(_KIND_COL[kind])
-                fc.append(int(i))
-        self.names = names
-        self.dim = len(names)
-        self.kind_col = np.asarray(kc, np.int64)
-        self.facet = np.asarray(fc, np.int64)
-        self.logit = self.kind_col < 2
         _, areas, _, params = shape.kernel_arrays()
         self._areas0 = np.ascontiguousarray(areas, dtype=float)
         self._params0 = np.ascontiguousarray(params, dtype=float)
+        names, kc, fc, held = [], [], [], []
+        for kind in self.kinds:
+            col = _KIND_COL[kind]
+            for i in self.fidx:
+                p = self._areas0[i] if col == 3 else self._params0[i, col]
+                if kind in bounded and p in (0.0, 1.0):
+                    # on a closed bound (Table 9.2's −Z: ξ = 1, fully diffuse): no unbounded
+                    # coordinate reaches it, so the parameter is held fixed at its value
+                    held.append(f"{kind}[{int(i)}]")
+                    continue
+                names.append(f"{kind}[{int(i)}]")
+                kc.append(col)
+                fc.append(int(i))
+        if not names:
+            raise InputError("every selected reflection parameter lies on a bound (held fixed): "
+                             "nothing to estimate", field="reflection", value=",".join(held))
+        self.names = names
+        #: parameters on a closed bound of their range (ξ = 0 or 1), held at that value
+        self.held = held
+        self.dim = len(names)
+        self.kind_col = np.asarray(kc, np.int64)
+        self.facet = np.asarray(fc, np.int64)
+        self.logit = (self.kind_col < 2) | ((self.kind_col == 2) & self.bounded_m)
         self.p_nominal = np.where(self.kind_col == 3, self._areas0[self.facet],
                                   self._params0[self.facet, np.minimum(self.kind_col, 2)])
         for d in range(self.dim):
@@ -396,7 +429,7 @@ class FacetParameterStates:
             else:
                 name = KINDS[c]
                 if name not in kw:
-                    kw[name] = np.where(self.shape.model_ids == COOK_TORRANCE,
+                    kw[name] = np.where(np.isin(self.shape.model_ids, CT_IDS),
                                         self.shape.params[:, c], np.nan)
                 kw[name][f] = p[d]
         return self.shape.copy_with(areas_m2=areas, check=False, **kw)
@@ -475,8 +508,9 @@ class FacetParameterStates:
         """JSON-ready description of the states."""
         return {"model": "model3", "names": list(self.names),
                 "facets": [int(i) for i in self.fidx], "kinds": list(self.kinds),
-                "transform": {k: ("logit" if k in LOGIT_KINDS else "log") for k in self.kinds},
+                "transform": {k: ("logit" if k in LOGIT_KINDS or (k == "m" and self.bounded_m)
+                                  else "log") for k in self.kinds},
                 "prior_frac": self.prior_frac, "p_nominal": self.p_nominal.tolist(),
                 "prior_sigma_p": self.prior_sd_p.tolist(),
                 "prior_sigma_z": self.prior_sd_z.tolist(),
-                "process_noise_z2_per_s": self.process_noise}
+                "process_noise_z2_per_s": self.process_noise, "held_fixed": list(self.held)}

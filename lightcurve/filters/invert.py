@@ -14,6 +14,15 @@ magnitude biases (``"random-walk"``, ``"model1"``, ``"model2"``,
 (``"model3"``, :mod:`lightcurve.filters.facet_states`). ``attitude="truth"`` is the
 "attitude known" mode of §10.7: q, ω are held at the file's truth and only the reflection
 states are estimated.
+
+``variant`` (a field of every filter configuration): ``"robust"`` (default) runs our improved
+filters (innovation gate, …); ``"thesis"`` runs Bernard's ch. 7–8 filters as written — the MEKF
+of Tables 7.1–7.2, the UKF of Tables 7.3–7.4 (:mod:`lightcurve.filters.ukf_thesis`), the
+particle filter's ``BPFConfig.thesis()`` — without an innovation gate (unless one is given),
+with Model 2's τ uncapped (eq. 8.12) and Model 3's m through a bounded map (eq. 8.43). Unless
+given, the variant is the stored scenario's ``[filter] variant``, else robust.
+``init_seed`` (:class:`~lightcurve.filters.config.ProblemConfig`) seeds the initial-estimate
+draw alone: §9.3.1 starts every filter of a Monte Carlo run from the same initial estimate.
 """
 
 from __future__ import annotations
@@ -28,16 +37,8 @@ from ..io.tomlio import Section, loads_toml
 from ..studies.scenario import scenario_from_lightcurve
 from . import bpf as _bpf
 from ._common import FilterProblem
-from .config import (
-    ATTITUDE_MODES,
-    BPF_KEYWORDS,
-    INITIAL_MODES,
-    METHOD_NAMES,
-    ConfigBase,
-    ProblemConfig,
-    filter_config_class,
-    split_options,
-)
+from .config import (ATTITUDE_MODES, BPF_KEYWORDS, INITIAL_MODES, METHOD_NAMES, VARIANTS,
+                     ConfigBase, ProblemConfig, filter_config_class, split_options)
 from .facet_states import FacetParameterStates
 from .gating import set_gate
 from .mekf import run_mekf
@@ -45,9 +46,10 @@ from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
 from .reflection import SiteBias
 from .result import Estimate
 from .ukf import run_ukf
+from .ukf_thesis import run_ukf_thesis
 
-__all__ = ["invert", "build_problem", "initial_mode", "METHODS", "ATTITUDE_MODES",
-           "INITIAL_MODES"]
+__all__ = ["invert", "build_problem", "initial_mode", "resolve_variant", "METHODS",
+           "ATTITUDE_MODES", "INITIAL_MODES", "VARIANTS"]
 
 METHODS = METHOD_NAMES
 """Filter methods: "mekf", "ukf", "bpf"."""
@@ -58,10 +60,32 @@ _RUNNERS = {"mekf": run_mekf, "ukf": run_ukf, "bpf": _bpf.run_bpf}
 BPF_BYTES_PER_PARTICLE = 512
 
 
+def _scenario_table(curve, name):
+    """The raw [name] table of the scenario TOML stored in the file ({} if none)."""
+    txt = getattr(curve, "scenario_toml", "") or ""
+    if not txt.strip():
+        return {}
+    src = (curve.attrs or {}).get("file") or "<lightcurve>"
+    t = loads_toml(txt, file=f"{src}:scenario").get(name, {})
+    return t if isinstance(t, dict) else {}
+
+
+def resolve_variant(curve, variant=None) -> str:
+    """The filter variant: ``variant`` if given, else the stored scenario's ``[filter]
+    variant``, else ``"robust"``; InputError for anything else."""
+    v = variant if variant is not None else _scenario_table(curve, "filter").get("variant",
+                                                                                 "robust")
+    if v not in VARIANTS:
+        raise InputError("unknown filter variant", field="variant", value=v,
+                         allowed=", ".join(VARIANTS))
+    return v
+
+
 def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
     """The ``[attitude]`` of the scenario stored in the file, validated: keys ``dynamics``,
-    ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and ``inertia_kg_m2`` when set. ``{}`` when the
-    file has no scenario.
+    ``acs_sigma_deg``, ``acs_mode``, ``eta_sigma_deg_s2`` (sized from ``drift_deg_per_orbit``
+    by the scenario loader when the file gives that, Bernard §9.2.4) and ``inertia_kg_m2``
+    when set. ``{}`` when the file has no scenario.
 
     A complete scenario (a ``[scenario]`` table with its ``epoch_utc``, as ``simulate`` and
     ``import`` store) goes through the scenario loader
@@ -79,7 +103,7 @@ def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
         at = scenario_from_lightcurve(curve, src, shape=shape, library_dirs=library_dirs,
                                       site_dirs=site_dirs).attitude
         out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
-               "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
+               "acs_mode": at.acs_mode, "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
         if at.inertia_kg_m2 is not None:
             out["inertia_kg_m2"] = at.inertia_kg_m2
         return out
@@ -87,6 +111,7 @@ def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
     out = {"dynamics": sec.str("dynamics", "controlled",
                                choices=("controlled", "uncontrolled", "law")),
            "acs_sigma_deg": sec.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+           "acs_mode": sec.str("acs_mode", "random_walk", choices=("random_walk", "jitter")),
            "eta_sigma_deg_s2": sec.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0)}
     J = sec.matrix("inertia_kg_m2", None, shape=(3, 3))
     if J is not None:
@@ -153,8 +178,8 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
             else cfg.acs_sigma_deg
         if not (acs >= 0 and np.isfinite(acs)):
             raise InputError("ACS sigma must be >= 0", field="acs_sigma_deg", value=acs)
-        dyn = ControlledDynamics(np.radians(acs), acs_mode=cfg.acs_mode,
-                                 pseudo_noise=cfg.pseudo_noise)
+        mode = cfg.acs_mode or at.get("acs_mode", "random_walk")
+        dyn = ControlledDynamics(np.radians(acs), acs_mode=mode, pseudo_noise=cfg.pseudo_noise)
     else:
         J = cfg.inertia_kg_m2
         if J is None:
@@ -169,7 +194,8 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
 
     st, sw = cfg.sigma_theta_deg, cfg.sigma_omega_deg_s
     st_r, sw_r = np.radians(st), np.radians(sw)
-    rng = np.random.default_rng(np.random.SeedSequence([int(cfg.seed), 0x1A77]))
+    init_seed = cfg.seed if cfg.init_seed is None else cfg.init_seed
+    rng = np.random.default_rng(np.random.SeedSequence([int(init_seed), 0x1A77]))
     dth = rng.standard_normal(3) * st_r
     dw = rng.standard_normal(3) * sw_r
     if cfg.initial_q is None:
@@ -191,7 +217,8 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
     else:
         w0 = np.asarray(cfg.initial_omega, float)
     P0 = np.diag([st_r ** 2] * 3 + [sw_r ** 2] * 3)
-    meta = {"seed": int(cfg.seed), "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
+    meta = {"seed": int(cfg.seed), "init_seed": int(init_seed), "sigma_theta_deg": st,
+            "sigma_omega_deg_s": sw,
             "dynamics": dyn_kind, "acs_sigma_deg": float(np.degrees(dyn.acs_sigma)),
             "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", "")}
     if cfg.attitude == "truth":
@@ -201,17 +228,28 @@ def build_problem(curve, config: ProblemConfig | None = None, **options) -> Filt
                          attitude_known=cfg.attitude == "truth")
 
 
-def _extra_states(problem, cfg: ProblemConfig):
+def _extra_states(problem, cfg: ProblemConfig, variant: str = "robust"):
     """The reflection states of ``cfg.reflection`` (Bernard ch. 8): ``(SiteBias | None,
-    FacetParameterStates | None)``."""
+    FacetParameterStates | None)``. The thesis variant: Model 3's m through a bounded map
+    (eq. 8.43), Model 2's τ uncapped (eq. 8.12); its random walk (eq. 8.4) is not
+    implemented."""
     if cfg.reflection == "none":
         return None, None
+    thesis = variant == "thesis"
     if cfg.reflection == "model3":
         return None, FacetParameterStates(problem.model.shape, facets=cfg.reflection_facets,
                                           kinds=cfg.reflection_kinds,
                                           prior_frac=cfg.reflection_frac,
-                                          process_noise=cfg.reflection_process_noise)
-    return SiteBias.from_problem(cfg.reflection, problem, frac=cfg.reflection_frac), None
+                                          process_noise=cfg.reflection_process_noise,
+                                          bounded_m=thesis)
+    if thesis and cfg.reflection == "random-walk":
+        raise NotImplementedError(
+            "thesis-variant random-walk bias: the noise strength of Bernard eq. 8.4 (second "
+            "derivatives of the magnitude in the facet parameters, attitude and observer "
+            "motion) is not implemented; the robust variant's constant strength σ_b²/T is a "
+            "different model")
+    return SiteBias.from_problem(cfg.reflection, problem, frac=cfg.reflection_frac,
+                                 tau_max_s=np.inf if thesis else None), None
 
 
 
@@ -291,6 +329,9 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None, method
         raise InputError("unknown filter method", field="method", value=method,
                          allowed=", ".join(METHODS))
     prob_opts, filt_opts = split_options(method, options)
+    if fconf is None and filt_opts.get("variant") is None:
+        # the stored scenario's [filter] variant, else robust
+        filt_opts["variant"] = resolve_variant(curve)
     if problem is None:
         pcfg = ProblemConfig(**prob_opts)
     else:
@@ -325,13 +366,19 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None, method
                                  config=pcfg.global_config).best
     fp = build_problem(curve, pcfg)
     fp.meta["method"] = method
+    variant = fconf.variant if fconf is not None else filt_opts.get("variant", "robust")
+    fp.meta["variant"] = variant
+    gate = pcfg.gate
+    if gate is None and variant == "thesis":
+        gate = "off"            # ch. 7's filters have no innovation gate
+    if gate is not None:   # innovation gate / epoch screening settings (filters.gating)
+        set_gate(fp, gate)
+    bias, facets = _extra_states(fp, pcfg, variant)
     if fconf is not None:
-        fp.meta["variant"] = fconf.variant
-    if pcfg.gate is not None:   # innovation gate / epoch screening settings (filters.gating)
-        set_gate(fp, pcfg.gate)
-    bias, facets = _extra_states(fp, pcfg)
-    if fconf is not None:
-        est = _RUNNERS[method](fp, fconf, bias=bias, facets=facets)
+        run = run_ukf_thesis if (method == "ukf" and variant == "thesis") else _RUNNERS[method]
+        # the particle filter also takes its random seed and the attitude-known mode
+        extra = {"seed": pcfg.seed, "attitude": pcfg.attitude} if method == "bpf" else {}
+        est = run(fp, fconf, bias=bias, facets=facets, **extra)
         attach_measurements(est, curve, fp.model)
         return est
     # the particle filter's keyword form (no registered configuration class)

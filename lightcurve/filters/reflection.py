@@ -21,7 +21,9 @@ error into a magnitude bias ``b_s`` per observing site s, appended to the filter
   (eq. 8.13), so the stationary variance is σ_b². Exact discrete transition
   ``Φ = exp(−Δt/τ)``, ``Q_d = σ_b² (1 − exp(−2Δt/τ))``. As ``|ω̂| → 0`` τ → ∞ and the model
   tends to Model 1; τ is capped at ``tau_max_s`` (default: the lightcurve's duration, at
-  least 1 s), which keeps Φ and Q_d finite and well conditioned.
+  least 1 s), which keeps Φ and Q_d finite and well conditioned — a departure from eq. 8.12,
+  which has no cap; the thesis variant (``tau_max_s = inf``) uses τ uncapped (Φ → 1, Q_d → 0
+  as |ω̂| → 0, Model 1 in the limit).
 
 Model 3 (direct estimation of the facet parameters ξ, a, m, A in unconstrained coordinates,
 eq. 8.39–8.44) is :class:`lightcurve.filters.facet_states.FacetParameterStates`, appended to
@@ -33,7 +35,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.photometry import COOK_TORRANCE
 from ..errors import InputError
 from ..photometry.partials import magnitude_partials
 
@@ -58,7 +59,9 @@ def reflection_prior_variance(shape, q, model, frac=0.1, epochs=None):
     with np.errstate(divide="ignore", invalid="ignore"):
         mp = magnitude_partials(shape, np.asarray(q, float), model.s_eci[idx], model.o_eci[idx],
                                 model.range_obs[idx], model.range_sun[idx], sun_mag=model.sun_mag)
-    ct = shape.model_ids == COOK_TORRANCE
+    from .facet_states import CT_IDS
+
+    ct = np.isin(shape.model_ids, CT_IDS)
     var = (mp.dm_dA * frac * shape.areas_m2[None, :]) ** 2
     for name, col in (("dm_dxi", 0), ("dm_da", 1), ("dm_dm", 2)):
         d = getattr(mp, name)[:, ct] * frac * shape.params[ct, col][None, :]
@@ -76,7 +79,8 @@ class SiteBias:
     site : (N,) int site index of every epoch
     var0 : (S,) prior (Model 1) variance per site, mag² (> 0)
     duration_s : float, the lightcurve's duration T (random-walk strength, τ cap)
-    tau_max_s : float or None — Model 2 τ cap (default max(T, 1 s))
+    tau_max_s : float or None — Model 2 τ cap (default max(T, 1 s); ``inf`` = no cap, eq. 8.12
+        as written — the thesis variant)
     """
 
     def __init__(self, kind, site, var0, duration_s, tau_max_s=None):
@@ -146,4 +150,5 @@ class SiteBias:
         """JSON-ready settings."""
         return {"model": self.kind, "prior_sigma_mag": np.sqrt(self.var0).tolist(),
                 "random_walk_psd_mag2_s": self.q_rw.tolist() if self.kind == "random-walk" else None,
-                "tau_max_s": self.tau_max_s if self.kind == "model2" else None}
+                "tau_max_s": (self.tau_max_s if np.isfinite(self.tau_max_s) else "none (eq. 8.12)")
+                if self.kind == "model2" else None}

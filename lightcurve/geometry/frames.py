@@ -161,12 +161,11 @@ def lvlh_dcm(r_m, v_m_s) -> np.ndarray:
 
 
 def nadir_dcm(r_m, v_m_s) -> np.ndarray:
-    """ECI → nadir frame DCM (Bernard 2021 eq. 4.2–4.6 as implemented here), ``(..., 3, 3)``.
+    """ECI → nadir frame DCM, Bernard (2021) eq. 4.6, ``(..., 3, 3)``.
 
-    The thesis text was not available to us while writing this; we implement the standard
-    nadir-pointing frame of the attitude literature it builds on (Markley & Crassidis 2014,
-    the same as :func:`lvlh_dcm`): z = nadir ``−r̂``, y = negative orbit normal
-    ``−(r × v)/|r × v|``, x = y × z (along-track). Rows are x, y, z in ECI. A body with
+    Eq. 4.2–4.4: ``i_x = (h × r)/|h × r|``, ``i_y = h/|h|``, ``i_z = r/|r|``; eq. 4.6 stacks the
+    rows ``[i_x, −i_y, −i_z]``: z = nadir ``−r̂``, y = negative orbit normal, x = y × z
+    (along-track) — the same frame as :func:`lvlh_dcm` (Markley & Crassidis 2014). A body with
     identity attitude relative to this frame points its +z at the Earth's centre.
     """
     return lvlh_dcm(r_m, v_m_s)

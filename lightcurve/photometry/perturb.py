@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.photometry import COOK_TORRANCE
+from ..core.photometry import COOK_TORRANCE, COOK_TORRANCE_THESIS
 
 __all__ = ["REFLECTION_KINDS", "perturb_reflection"]
 
@@ -22,10 +22,13 @@ _LOGIT = ("xi", "a")
 def perturb_reflection(shape, rng, frac=0.1, kinds=REFLECTION_KINDS, facets=None):
     """Perturbed copy of ``shape`` (Bernard §10.1): each Cook–Torrance parameter p of the chosen
     facets ← p + N(0, (frac·p)²), redrawn (up to 100 times) until in range (ξ, a in (0,1), m, A
-    > 0). Returns (shape_copy, dict kind -> (F,) new values; NaN for ξ, a, m of facets whose
-    BRDF is not Cook–Torrance)."""
+    > 0). A parameter on a closed bound of its range (ξ = 0 or 1, e.g. Table 9.2's fully
+    diffuse −Z, ξ = 1) is held fixed: a symmetric perturbation cannot stay in range there (the
+    filters' Model 3 holds it fixed as well, :mod:`lightcurve.filters.facet_states`). Both
+    Cook–Torrance forms (physical and Bernard eq. 5.8) are perturbed. Returns (shape_copy, dict
+    kind -> (F,) new values; NaN for ξ, a, m of facets whose BRDF is not Cook–Torrance)."""
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-    ct = (shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0)
+    ct = np.isin(shape.model_ids, (COOK_TORRANCE, COOK_TORRANCE_THESIS)) & (shape.areas_m2 > 0)
     sel = np.zeros(shape.n_facets, bool)
     sel[np.flatnonzero(ct) if facets is None else np.asarray(facets, int)] = True
     sel &= ct
@@ -35,6 +38,8 @@ def perturb_reflection(shape, rng, frac=0.1, kinds=REFLECTION_KINDS, facets=None
     for k in kinds:
         for i in np.flatnonzero(sel):
             p0 = new[k][i]
+            if k in _LOGIT and p0 in (0.0, 1.0):
+                continue  # on a closed bound: held fixed (docstring)
             for _ in range(100):
                 p = p0 + frac * p0 * rng.standard_normal()
                 if p > 0 and (p < 1 or k not in _LOGIT):

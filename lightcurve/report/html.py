@@ -30,6 +30,7 @@ from .style import PAGE_CSS, figsize, verdict_html  # noqa: E402
 __all__ = ["write_study_report", "figure_to_data_uri", "fig94_table_html"]
 
 _BG = {"green": "#8fd18f", "yellow": "#f3e27a", "red": "#ee8a80"}
+_THESIS_BG = dict(_BG, grey="#c8c8c8", unknown="#ffffff")
 _ROW_AXES = ("filter", "reflection", "sigma_theta_deg")
 _COL_AXES = ("dynamics", "sites", "sigma_omega_deg_s", "r_percent")
 _LABEL = {"filter": "filter", "reflection": "reflection", "sigma_theta_deg": "σθ (°)",
@@ -64,12 +65,32 @@ def _fmt(key, v):
     return html.escape(str(v))
 
 
-def fig94_table_html(cells: list) -> str:
-    """The traffic-light table (module docstring) as an HTML ``<table>``."""
-    rows_axes = [k for k in _ROW_AXES if len(_uniq(cells, k)) > 1 or k != "reflection"]
+def _order(key):
+    """Sort key of a grid axis: the study's order for names, numeric order for numbers."""
+    if key == "filter":
+        return lambda v: ("mekf", "ukf", "bpf").index(v) if v in ("mekf", "ukf", "bpf") else 9
+    if key == "dynamics":
+        return lambda v: ("controlled", "uncontrolled").index(v) \
+            if v in ("controlled", "uncontrolled") else 9
+    if key == "reflection":
+        return lambda v: 0 if v == "none" else 1
+    return float
+
+
+def fig94_table_html(cells: list, not_run=()) -> str:
+    """The traffic-light table (module docstring) as an HTML ``<table>``.
+
+    A cell with a published colour (``thesis_color``, :mod:`lightcurve.studies.agreement`)
+    shows it beside ours in a small box labelled "thesis" (✓ when they agree); ``not_run``
+    cells (the thesis's grey cells) are drawn grey, "not run".
+    """
+    skip = {tuple(c[k] for k in ("filter", "reflection", "sigma_theta_deg", "dynamics", "sites",
+                                 "sigma_omega_deg_s", "r_percent")) for c in not_run}
+    allc = list(cells) + [dict(c, reflection=c.get("reflection", "none")) for c in not_run]
+    rows_axes = [k for k in _ROW_AXES if len(_uniq(allc, k)) > 1 or k != "reflection"]
     col_axes = list(_COL_AXES)
-    rvals = [_uniq(cells, k) for k in rows_axes]
-    cvals = [_uniq(cells, k) for k in col_axes]
+    rvals = [sorted(_uniq(allc, k), key=_order(k)) for k in rows_axes]
+    cvals = [sorted(_uniq(allc, k), key=_order(k)) for k in col_axes]
     index = {tuple(c[k] for k in rows_axes + col_axes): c for c in cells}
     cols = list(itertools.product(*cvals))
     out = ['<table class="fig94">']
@@ -88,15 +109,29 @@ def fig94_table_html(cells: list) -> str:
         for cv in cols:
             c = index.get(tuple(rv) + tuple(cv))
             if c is None:
-                out.append('<td class="none">–</td>')
+                key = dict(zip(rows_axes + col_axes, tuple(rv) + tuple(cv)))
+                key.setdefault("reflection", "none")
+                if tuple(key.get(k) for k in ("filter", "reflection", "sigma_theta_deg",
+                                              "dynamics", "sites", "sigma_omega_deg_s",
+                                              "r_percent")) in skip:
+                    out.append(f'<td style="background:{_THESIS_BG["grey"]}">not run<br>'
+                               '(thesis: grey)</td>')
+                else:
+                    out.append('<td class="none">–</td>')
                 continue
             o = c["outside_3sigma"]
             title = (f"{c['runs']} runs, {c['failures']} failed; median RSS "
                      f"{c['rss_att_deg_median']:.3g}°, p95 {c['rss_att_deg_p95']:.3g}°")
+            tc = c.get("thesis_color")
+            thesis = ""
+            if tc:
+                mark = " ✓" if tc == c["color"] else ("" if tc in ("grey", "unknown") else " ✗")
+                thesis = (f'<br><span class="thesis" style="background:{_THESIS_BG[tc]}">'
+                          f'thesis: {html.escape(tc)}{mark}</span>')
             out.append(f'<td style="background:{_BG[c["color"]]}" title="{html.escape(title)}">'
                        f'{o[0]} {o[1]} {o[2]}<br>{o[3]} {o[4]} {o[5]}'
                        + (f'<br><b>{c["failures"]} failed</b>' if c["failures"] else "")
-                       + "</td>")
+                       + thesis + "</td>")
         out.append("</tr>")
     out.append("</table>")
     return "\n".join(out)
@@ -178,6 +213,8 @@ def _plain_log_formatter():
 
 _CSS = """
 table.fig94 td{font-family:monospace;min-width:4.5em}
+span.thesis{display:inline-block;border:1px solid #555;padding:0 3px;margin-top:2px;
+font-size:10px}
 th.corner{border:none}
 """
 
@@ -201,11 +238,24 @@ def write_study_report(path, summary: dict, envelopes=()) -> None:
     ncol = {c: sum(1 for x in cells if x["color"] == c) for c in _BG}
     n_runs = sum(c["runs"] for c in cells)
     n_fail = sum(c["failures"] for c in cells)
+    ind = summary.get("indicative")
+    agr = summary.get("agreement")
+    head = ""
+    if agr is not None:
+        byf = ", ".join(f"{_FILTER_NAME.get(f, f)} {v['agree']}/{v['compared']}"
+                        for f, v in agr["by_filter"].items())
+        head = (f"<p><b>Bernard (2021) Fig. {html.escape(str(summary.get('thesis_figure')))}, "
+                f"cell by cell: {agr['agree']} of {agr['compared']} run cells agree ({byf}); "
+                f"variant {html.escape(str(summary.get('variant')))}.</b></p>")
+    if ind:
+        head += (f"<p><b>INDICATIVE</b>: {summary['runs_per_cell']} runs per cell; the thesis's "
+                 "rule is defined for 100 runs and its thresholds are scaled to the run count "
+                 "(a count c out of n read as c·100/n).</p>")
     title = f"Study {summary['study']}"
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
              f"</title><style>{PAGE_CSS}{_CSS}</style></head><body>",
              f"<h1>{html.escape(title)}</h1>",
-             verdict_html(*study_verdict(cells)),
+             verdict_html(*study_verdict(cells)), head,
              f"<p>{len(cells)} cells × {summary['runs_per_cell']} runs; {n_runs} runs finished, "
              f"{n_fail} failed. Colours: {ncol['green']} green, {ncol['yellow']} yellow, "
              f"{ncol['red']} red. Study seed {summary['seed']}, hash "
@@ -215,8 +265,10 @@ def write_study_report(path, summary: dict, envelopes=()) -> None:
              "<p>Each box: number of runs whose final error component lies outside ±3σ of the "
              "filter's own covariance; first line attitude θx θy θz, second line rate ωx ωy ωz. "
              "Red: more than 10 runs outside for any component; yellow: 6–10 for some component, "
-             "or two or more components with exactly 5; green: otherwise.</p>",
-             fig94_table_html(cells),
+             "or two or more components with exactly 5; green: otherwise (per 100 runs). A "
+             "'thesis' box gives the colour Bernard (2021) published for the cell (✓ agree, "
+             "✗ disagree).</p>",
+             fig94_table_html(cells, summary.get("not_run_grey", ())),
              "<h2>RSS attitude error versus time</h2>",
              "<p>Median (solid) and 95th percentile (dashed) over the runs of every σω and r, "
              "per initial attitude error σθ (colour).</p>"]

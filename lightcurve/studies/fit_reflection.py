@@ -135,9 +135,14 @@ class ReflectionPosteriorModel:
         K = self.fidx.size
         self.nominal = {"xi": shape.params[fidx, 0].copy(), "a": shape.params[fidx, 1].copy(),
                         "m": shape.params[fidx, 2].copy(), "A": shape.areas_m2[fidx].copy()}
-        self.names, self._slot = [], []
+        self.names, self._slot, self.held = [], [], []
         for kind in kinds:
             for j in range(K):
+                if kind in _LOGIT and self.nominal[kind][j] in (0.0, 1.0):
+                    # on a closed bound (ξ = 1 for a fully diffuse facet): held fixed, as the
+                    # truth draw (perturb_reflection) and Model 3 hold it
+                    self.held.append(f"{kind}[{int(fidx[j])}]")
+                    continue
                 self.names.append(f"{kind}[{int(fidx[j])}]")
                 self._slot.append((kind, j))
         self.dim = len(self.names)

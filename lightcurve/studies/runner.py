@@ -41,7 +41,7 @@ from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
 from .metrics import cell_summary, run_metrics
 from .study import GRID_KEYS, RunTask, Study
 
-__all__ = ["limit_blas_threads", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
+__all__ = ["limit_blas_threads", "init_worker", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
            "prepare_output", "iter_results", "progress_bar", "RUN_FORMAT"]
 
 RUN_FORMAT = "lightcurve-study-run"
@@ -101,17 +101,23 @@ def _scenario(text: str, file: str, library_dirs: tuple = (), site_dirs: tuple =
 
 @functools.lru_cache(maxsize=32)
 def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
-                library_dirs: tuple = (), site_dirs: tuple = ()):
+                library_dirs: tuple = (), site_dirs: tuple = (), cook_torrance: str = "",
+                truth_acs_mode: str = ""):
+    from .scenario import with_cook_torrance_form
     from .simulate import simulate
 
     sc = _scenario(text, file, library_dirs, site_dirs)
     sc = replace(sc, measurement=replace(sc.measurement, r_percent=float(r_percent)))
+    if cook_torrance:   # study [options] cook_torrance: the diffuse form of truth and filters
+        sc = replace(sc, shape=with_cook_torrance_form(sc.shape, cook_torrance))
+    if truth_acs_mode:  # study [options] truth_acs_mode: the controlled truth's ζ model
+        sc = replace(sc, attitude=replace(sc.attitude, acs_mode=truth_acs_mode))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the thesis cases ignore the eclipse on purpose
         return simulate(sc, seed=sim_seed)
 
 
-def execute_task(task: RunTask) -> dict:
+def execute_task(task: RunTask, device: str = "cpu") -> dict:
     """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
     ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
 
@@ -141,15 +147,27 @@ def execute_task(task: RunTask) -> dict:
            "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
            "status": "ok", "error": ""}
     try:
-        dirs = (tuple(getattr(task, "library_dirs", ())), tuple(getattr(task, "site_dirs", ())))
-        lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
-                         int(task.sim_seed), *(dirs if any(dirs) else ()))
         opts = dict(task.options)
+        lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
+                         int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
+                         tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
+                         opts.get("truth_acs_mode", ""))
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])
+        if c.filter == "bpf" and device != "cpu":
+            kw["device"] = device
         if "acs_mode" in opts:
             kw["acs_mode"] = opts["acs_mode"]
+        if "variant" in opts:
+            kw["variant"] = opts["variant"]
+        if "gate" in opts:
+            kw["gate"] = opts["gate"]
+        for k in ("alpha", "beta", "kappa"):
+            if k in opts and c.filter == "ukf":
+                kw[k] = float(opts[k])
+        if task.init_seed is not None:
+            kw["init_seed"] = int(task.init_seed)
         if c.reflection != "none":
             kw["reflection"] = c.reflection
         kw.update(dict(dict(opts.get("filters", ())).get(c.filter, ())))
@@ -298,14 +316,18 @@ def _iter_inline(tasks, fn=None):
         yield fn(t)
 
 
-def init_worker(parent_pid: int) -> None:
+def init_worker(parent_pid: int, numba_threads: int | None = None) -> None:
     """Initialiser of every pool worker: die with the main process
     (:func:`lightcurve.process.watch_parent`), single-threaded BLAS
-    (:func:`limit_blas_threads`)."""
+    (:func:`limit_blas_threads`), at most ``numba_threads`` numba threads
+    (:mod:`lightcurve.threads`: workers × threads ≤ cores)."""
     from ..process import watch_parent
+    from ..threads import limit_numba_threads
 
     watch_parent(parent_pid)
     limit_blas_threads()
+    if numba_threads is not None:
+        limit_numba_threads(numba_threads)
 
 
 def process_pool(workers: int):
@@ -315,6 +337,9 @@ def process_pool(workers: int):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    from ..threads import threads_per_worker
+
+    nt = threads_per_worker(workers)   # set in each worker by init_worker
     # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
     # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
     if "forkserver" in mp.get_all_start_methods():
@@ -323,7 +348,34 @@ def process_pool(workers: int):
     else:
         ctx = mp.get_context("spawn")
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=init_worker,
-                               initargs=(os.getpid(),))
+                               initargs=(os.getpid(), nt))
+
+
+class _ThreadLimited:
+    """``fn(task)`` run with at most n numba threads in the calling thread (Dask tasks run in
+    the worker's executor threads, where a limit set at worker start does not apply). ``n``
+    comes from the cores of the worker's host and the Dask threads on it (``host_threads``:
+    host → threads of all workers there; a worker not listed divides by its own threads)."""
+
+    def __init__(self, fn, host_threads):
+        self.fn = fn
+        self.host_threads = dict(host_threads)
+
+    def __call__(self, task):
+        from ..threads import available_cores, limited_threads, user_thread_limit
+
+        try:
+            import distributed
+
+            w = distributed.get_worker()
+            host = str(w.address).split("://")[-1].rsplit(":", 1)[0]
+            busy = self.host_threads.get(host) or int(w.state.nthreads)
+        except (ImportError, ValueError, AttributeError):
+            busy = 1
+        n = max(1, available_cores() // max(1, int(busy)))
+        u = user_thread_limit()
+        with limited_threads(min(n, u) if u is not None else n):
+            return self.fn(task)
 
 
 def _iter_pool(tasks, workers, fn=None):
@@ -369,13 +421,17 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
     distributed = _import_distributed()
     fn = execute_task if fn is None else fn
     key = (lambda t: f"lightcurve-run-{t.run_id}-{t.filter_seed}") if key is None else key
+    from ..threads import threads_per_worker
+
     cluster = None
     if address is None:
         import logging
 
+        nt = threads_per_worker(int(n_workers))
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
                                            processes=True, dashboard_address=None,
-                                           silence_logs=logging.ERROR)
+                                           silence_logs=logging.ERROR,
+                                           env={"NUMBA_NUM_THREADS": str(nt)})
         client = distributed.Client(cluster)
     else:
         try:
@@ -392,6 +448,11 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
             window = max(64, 4 * sum(client.nthreads().values()))
         except Exception:  # noqa: BLE001 - a scheduler without workers yet
             window = 64
+        hosts = {}
+        for addr, info in client.scheduler_info().get("workers", {}).items():
+            h = str(addr).split("://")[-1].rsplit(":", 1)[0]
+            hosts[h] = hosts.get(h, 0) + int(info.get("nthreads", 1))
+        fn = _ThreadLimited(fn, hosts)
         it = iter(tasks)
         ac = distributed.as_completed()
         # bounded in flight: tasks are generated lazily and submitted as results come back
@@ -454,7 +515,7 @@ def progress_bar(total: int, *, initial: int = 0, desc: str = "", progress: bool
 # ----------------------------------------------------------------------------------------
 def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | None = None,
               scheduler: str | None = None, dask_local: int | None = None, force: bool = False,
-              progress: bool = True, write_report: bool = True) -> dict:
+              progress: bool = True, write_report: bool = True, device: str = "cpu") -> dict:
     """Run (or resume) a study and write ``summary.json`` and ``report.html``.
 
     Parameters
@@ -467,6 +528,9 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
     dask_local : int, optional — start a Dask LocalCluster with this many worker processes
     force : bool — discard stored runs of a different study instead of refusing
     progress : bool — tqdm progress bar (runs done, failures, time left) on stderr
+    device : {"cpu", "gpu"} — where the particle-filter cells run
+        (:func:`lightcurve.filters.invert`, ``device``); the results of a cell do not depend
+        on it beyond round-off
 
     Returns
     -------
@@ -498,7 +562,9 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         limit_blas_threads()  # before any worker starts (inherited) and for inline runs
         failures = 0
         if n_done < total:
-            it = iter_results(todo, execute_task, workers=workers, scheduler=scheduler,
+            fn = execute_task if device == "cpu" else functools.partial(execute_task,
+                                                                        device=device)
+            it = iter_results(todo, fn, workers=workers, scheduler=scheduler,
                               dask_local=dask_local)
             bar = progress_bar(total, initial=n_done, desc=study.name, progress=progress)
             h = study.hash
@@ -530,7 +596,8 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     Only the runs 0…runs−1 of each cell are used (a study extended and then summarised with
     fewer runs ignores the extra files). Cells keep the study's grid order.
     """
-    from .metrics import rss_envelope
+    from .agreement import agreement, thesis_color
+    from .metrics import FULL_RUNS, rss_envelope
 
     out = Path(out_dir)
     n = study.runs if runs is None else int(runs)
@@ -552,6 +619,7 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
             rss.append(np.linalg.norm(r["att_error_deg"], axis=1))
         entry = cell_summary(c.as_dict(), mets, fails)
         entry["missing"] = int(n - len(mets) - fails)
+        entry["thesis_color"] = thesis_color(study.thesis_table, c.as_dict())
         if errors:
             entry["first_error"] = errors[0]
         cells.append(entry)
@@ -566,7 +634,16 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     summary = {"format": _SUMMARY_FORMAT, "format_version": 1, "study": study.name,
                "study_hash": study.hash, **_code_fields(), "seed": study.seed,
                "runs_per_cell": n,
+               # the traffic-light rule is defined for 100 runs; fewer runs scale it
+               # (lightcurve.studies.metrics.traffic_light) and the table is indicative
+               "indicative": bool(n < FULL_RUNS),
+               "variant": study.options.get("variant", "robust"),
                "grid_keys": list(GRID_KEYS), "cells": cells}
+    if study.thesis_table is not None:
+        summary["thesis_figure"] = study.thesis_table.figure
+        summary["thesis_title"] = study.thesis_table.title
+        summary["agreement"] = agreement(cells)
+        summary["not_run_grey"] = [c.as_dict() for c in study.skipped_cells]
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1) + "\n")
     if write_report:
         from ..report.html import write_study_report

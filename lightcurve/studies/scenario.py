@@ -2,9 +2,12 @@
 
 Sections (documented in docs/formats.md): ``[scenario]`` (epoch_utc, duration_s, cadence_s,
 seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (library name or
-mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
+mesh + materials; ``cook_torrance = "physical" | "thesis"`` selects the diffuse term,
+:func:`with_cook_torrance_form`), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
-``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
+``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[filter]``
+(``variant = "robust" | "thesis"``: the filters ``invert`` runs on the simulated file by
+default, :mod:`lightcurve.filters.invert`), ``[effects]``
 (physics effects switched on; :mod:`lightcurve.physics`), ``[reflection]`` (truth reflection
 parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
@@ -21,8 +24,9 @@ from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
 __all__ = [
-    "SCENARIO_ALIASES", "resolve_scenario","Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
-           "scenario_from_lightcurve"]
+    "SCENARIO_ALIASES", "resolve_scenario", "Scenario", "SiteSpec", "AttitudeSpec",
+    "MeasurementSpec", "load_scenario", "parse_scenario", "scenario_from_lightcurve",
+    "eta_sigma_from_drift", "orbital_period_s", "with_cook_torrance_form", "COOK_TORRANCE_FORMS"]
 
 
 @dataclass
@@ -45,6 +49,18 @@ class AttitudeSpec:
     ``frame = "nadir"`` makes ``euler321_deg`` relative to the nadir (LVLH) frame at the epoch
     (z to the Earth's centre, y along the negative orbit normal) and ``omega_deg_s`` relative to
     it, so zero angles and rates give a nadir-pointing object turning at the orbit rate.
+
+    ``acs_mode`` (controlled): ``"random_walk"`` (default; ζ accumulates,
+    ``q_k = exp(ζ_k) ⊗ exp(ωΔt) ⊗ q_{k−1}``) or ``"jitter"`` (Bernard eq. 7.10: the true attitude
+    is the commanded constant-rate profile perturbed by ζ_k at each measurement time, without
+    accumulation). ``torque_forms`` (uncontrolled): ``"physical"`` (default) or ``"thesis"``
+    (Bernard eq. 4.16–4.21 as written; see :class:`lightcurve.dynamics.truth.UncontrolledTruth`).
+    ``drift_deg_per_orbit`` (uncontrolled, instead of ``eta_sigma_deg_s2``): the process noise is
+    sized so that η alone gives a 1σ attitude error of this many degrees per axis after one
+    orbital period T (Bernard §9.2.4: 2° LEO, 10° MEO, 15° GEO), i.e. for white η of PSD σ_η²
+    the double integral has variance ``σ_η² T³/3`` (gyroscopic coupling neglected), so
+    ``σ_η = d √(3/T³)`` (:func:`eta_sigma_from_drift`); T from the osculating semi-major axis
+    at the epoch.
 
     ``omega_frame`` (TOML ``[attitude] omega_frame``, default ``"body"``) says in which axes the
     file gave the rates. ``"body"``: the file's ``omega_deg_s`` are body-axis components and are
@@ -74,6 +90,16 @@ class AttitudeSpec:
     omega_frame: str = "body"
     #: the rates exactly as written in the file (deg/s, in ``omega_frame`` axes); None = omega_deg_s
     omega_input_deg_s: np.ndarray | None = None
+    #: controlled truth: how the ACS error ζ acts — "random_walk" (accumulates) or "jitter"
+    #: (perturbs the commanded profile without accumulating, Bernard eq. 7.10)
+    acs_mode: str = "random_walk"
+    #: uncontrolled truth: forms of the named torques — "physical" or "thesis" (Bernard
+    #: eq. 4.16–4.21 as written: SRP reflectivities R_d = ξ, R_s = 1 − ξ; drag along the facet
+    #: normal with the orbital velocity)
+    torque_forms: str = "physical"
+    #: uncontrolled truth: 1σ attitude drift per axis after one orbital period that sized
+    #: ``eta_sigma_deg_s2`` (Bernard §9.2.4); None when the file gave η directly
+    drift_deg_per_orbit: float | None = None
 
 
 @dataclass
@@ -149,6 +175,55 @@ _MAX_EPOCHS = 50_000_000
 #: scenario at 1 s cadence, 2·10⁴ to 8·10⁴ epochs; rounded up)
 SIMULATE_BYTES_PER_EPOCH = 600
 _TORQUES = ("gravity_gradient", "srp", "drag")
+_ACS_MODES = ("random_walk", "jitter")
+_TORQUE_FORMS = ("physical", "thesis")
+
+
+#: ``[shape] cook_torrance``: the Cook–Torrance diffuse term of the shape's materials
+COOK_TORRANCE_FORMS = ("physical", "thesis")
+_CT_BRDF = {"physical": "cook_torrance", "thesis": "cook_torrance_bernard"}
+
+
+def with_cook_torrance_form(shape, form: str):
+    """A copy of ``shape`` whose Cook–Torrance materials use the ``form`` diffuse term:
+    ``"physical"`` (``cook_torrance``, f_d = ξ a/π) or ``"thesis"`` (``cook_torrance_bernard``,
+    Bernard eq. 5.8 as printed, f_d = ξ a (n̂·ŝ)/π); other materials are kept. Same parameters."""
+    from ..photometry.facets import Shape
+    from ..photometry.materials import Material
+
+    if form not in _CT_BRDF:
+        raise ValueError(f"form: expected one of {', '.join(_CT_BRDF)}, got {form!r}")
+    mats, changed = [], False
+    for m in shape.materials:
+        if m.brdf_name in _CT_BRDF.values() and m.brdf_name != _CT_BRDF[form]:
+            mats.append(Material.create(m.name, _CT_BRDF[form], **dict(m.params)))
+            changed = True
+        else:
+            mats.append(m)
+    if not changed:
+        return shape
+    return Shape(shape.name, shape.areas_m2, shape.normals_body, shape.centers_body_m, mats,
+                 shape.mass_kg, shape.inertia_kg_m2, convex=shape.convex,
+                 tangents_body=shape.tangents_body, description=shape.description,
+                 source=shape.source, vertices_m=shape.vertices_m, faces=shape.faces)
+
+
+def orbital_period_s(orbit, epoch_utc) -> float:
+    """Osculating period 2π√(a³/μ) (s) of ``orbit`` at ``epoch_utc`` (a from the vis-viva
+    equation with the epoch state; μ = 3.986004418e14 m³/s²)."""
+    from ..dynamics.torques import MU_EARTH
+
+    r, v = orbit.positions(epoch_utc, np.array([0.0]))
+    rn, vn = float(np.linalg.norm(r[0])), float(np.linalg.norm(v[0]))
+    a = 1.0 / (2.0 / rn - vn * vn / MU_EARTH)
+    return float(2.0 * np.pi * np.sqrt(a ** 3 / MU_EARTH))
+
+
+def eta_sigma_from_drift(drift_deg: float, period_s: float) -> float:
+    """σ_η (deg/s^{3/2}) of white angular-acceleration noise whose double integral has a 1σ of
+    ``drift_deg`` (deg, per axis) after ``period_s`` seconds: ``σ_η = d √(3/T³)``
+    (variance of ∫∫η over T is σ_η² T³/3; Bernard §9.2.4 sizes the process noise this way)."""
+    return float(drift_deg) * float(np.sqrt(3.0 / float(period_s) ** 3))
 
 
 def load_scenario(path, library_dirs=None, site_dirs=None, *, shape=None) -> Scenario:
@@ -242,6 +317,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
     else:
         spec = sh.str("name")
     areas = sh.vector("areas_m2", None, min=0.0, min_open=True)
+    ct_form = sh.str("cook_torrance", "physical", choices=COOK_TORRANCE_FORMS)
     sh.check_unknown()
     given_shape = shape is not None
     if not given_shape:
@@ -256,6 +332,8 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
             raise InputError(f"expected {shape.n_facets} facet areas", file=file,
                              field="shape.areas_m2", value=areas.tolist())
         shape = shape.copy_with(areas_m2=areas)
+    if ct_form == "thesis" and not given_shape:
+        shape = with_cook_torrance_form(shape, "thesis")
 
     at = root.section("attitude")
     dyn = at.str("dynamics", "controlled", choices=_DYNAMICS)
@@ -269,7 +347,19 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         frame=at.str("frame", "inertial", choices=("inertial", "nadir")),
         eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
         inertia_kg_m2=at.matrix("inertia_kg_m2", None, shape=(3, 3)),
+        acs_mode=at.str("acs_mode", "random_walk", choices=_ACS_MODES),
+        torque_forms=at.str("torque_forms", "physical", choices=_TORQUE_FORMS),
     )
+    if at.has("drift_deg_per_orbit"):
+        if at.has("eta_sigma_deg_s2"):
+            raise InputError("give either eta_sigma_deg_s2 or drift_deg_per_orbit, not both",
+                             file=file, field="attitude.drift_deg_per_orbit")
+        if orbit is None:
+            raise InputError("drift_deg_per_orbit needs an [orbit] (its period sizes the "
+                             "process noise)", file=file, field="attitude.drift_deg_per_orbit")
+        att.drift_deg_per_orbit = at.float("drift_deg_per_orbit", min=0.0, max=180.0)
+        att.eta_sigma_deg_s2 = eta_sigma_from_drift(att.drift_deg_per_orbit,
+                                                    orbital_period_s(orbit, epoch))
     if att.inertia_kg_m2 is not None:
         from ..photometry.shapes_io import check_inertia_magnitude
 
@@ -398,6 +488,10 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         if meas.ignore_eclipse and "penumbra" in effects and effects["penumbra"].get("enabled", True):
             raise InputError("the penumbra effect contradicts measurement.ignore_eclipse = true",
                              file=file, field="effects.penumbra")
+    flt = root.section("filter", None)
+    if flt is not None:   # [filter] variant: the default of invert (lightcurve.filters.invert)
+        flt.str("variant", "robust", choices=("robust", "thesis"))
+        flt.check_unknown()
     refl = root.section("reflection", None)
     if refl is not None:
         kinds = refl.raw("params", ["xi", "a", "m", "A"])

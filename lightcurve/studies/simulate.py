@@ -89,12 +89,14 @@ def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v
         return q, law_body_rates(q, t_s)
     q0, w0 = initial_attitude(scenario)
     if at.dynamics == "controlled":
-        model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng, t0_s=0.0)
+        model = ControlledTruth(q0, w0, np.radians(at.acs_sigma_deg), rng, t0_s=0.0,
+                                mode=at.acs_mode)
         return model.simulate(t_s)
     J = at.inertia_kg_m2 if at.inertia_kg_m2 is not None else scenario.shape.inertia_kg_m2
     model = UncontrolledTruth(q0, w0, J, torques=at.torques, eta_sigma_rad_s2=np.radians(at.eta_sigma_deg_s2),
                               rng=rng, shape=scenario.shape, orbit=scenario.orbit,
-                              epoch_utc=scenario.epoch_utc, t0_s=0.0)
+                              epoch_utc=scenario.epoch_utc, t0_s=0.0,
+                              torque_forms=at.torque_forms)
     return model.simulate(t_s)
 
 

@@ -28,6 +28,23 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     [options]                             # optional filter settings shared by every cell
     particles = 1000                      # BPF particles
     acs_mode = "random_walk"              # controlled model: "random_walk" or "jitter"
+                                          # (default: each scenario's [attitude] acs_mode)
+    variant = "thesis"                    # filters: "robust" (default) or "thesis" (Bernard
+                                          # ch. 7 as written; lightcurve.filters.invert)
+    cook_torrance = "thesis"              # diffuse term of the shape's Cook–Torrance materials
+                                          # for truth and filters: "physical" (default) or
+                                          # "thesis" (eq. 5.8 as printed)
+    gate = "off"                          # innovation gate (default: the variant's)
+    alpha = 1.0                           # UKF α, β, κ (default 1, 2, 0)
+    shared_init = true                    # one initial estimate for all filters of a run
+                                          # (default: true with variant = "thesis")
+    truth_acs_mode = "random_walk"        # controlled TRUTH model (default: the scenario's)
+
+A study may name the thesis's published table of its grid (``[study] thesis_table =
+"tables/bernard2021-fig9-4.toml"``, relative to the study file;
+:mod:`lightcurve.studies.agreement`): the summary then carries the published colour of every
+cell (``thesis_color``) and the agreement counts, and cells the thesis did not run (grey) are
+not run here either.
 
     [filters.ukf]                         # optional per-filter settings: the fields of the
     variant = "thesis"                    # filter's configuration (lightcurve.filters.config;
@@ -38,7 +55,9 @@ Seeds (reproducible, independent of worker count and executor): the simulation s
 r_percent) and ``i`` — so every filter and every initial-error setting sees the same simulated
 lightcurves (common random numbers) — and the filter seed from the study seed, the full cell
 key and ``i``; both through :class:`numpy.random.SeedSequence` seeded with SHA-256 words of the
-key text.
+key text. With ``variant = "thesis"`` the initial estimate is drawn from a third seed, of the
+cell key *without the filter*, so every filter of a run starts from the same initial estimate
+(Bernard §9.3.1: "all of the filters were initialized to the same values").
 """
 
 from __future__ import annotations
@@ -55,7 +74,7 @@ from ..filters.reflection import REFLECTION_CHOICES as _FILTER_REFLECTION_CHOICE
 from ..io.tomlio import Section, load_toml
 
 __all__ = ["Study", "Cell", "RunTask", "load_study", "GRID_KEYS", "REFLECTION_MODELS",
-           "cell_key", "run_seeds", "study_hash", "input_hash", "code_fingerprint"]
+           "cell_key", "run_seeds", "init_seed", "study_hash", "input_hash", "code_fingerprint"]
 
 #: grid axes in table order (also the order of the cell key)
 GRID_KEYS = ("filter", "dynamics", "sites", "sigma_theta_deg", "sigma_omega_deg_s", "r_percent",
@@ -118,6 +137,13 @@ def _seed_from(study_seed: int, text: str, run: int) -> int:
     return int(ss.generate_state(1, np.uint64)[0] >> np.uint64(1))  # in [0, 2**63)
 
 
+def init_seed(study_seed: int, cell: Cell, run: int) -> int:
+    """Seed of run ``run``'s initial-estimate draw, the same for every filter of the run: the
+    cell key without the filter (module docstring)."""
+    key = "|".join(f"{k}={_fmt(getattr(cell, k))}" for k in GRID_KEYS if k != "filter")
+    return _seed_from(study_seed, "init|" + key, run)
+
+
 def run_seeds(study_seed: int, cell: Cell, run: int) -> tuple[int, int]:
     """``(simulation_seed, filter_seed)`` of run ``run`` (0-based) of ``cell`` (module doc)."""
     return (_seed_from(study_seed, "sim|" + cell.scenario_key, run),
@@ -137,6 +163,7 @@ class RunTask:
     options: tuple = ()  # sorted (name, value) pairs of [options]
     library_dirs: tuple = ()  # extra shape-library folders (absolute paths)
     site_dirs: tuple = ()     # extra observatory folders (absolute paths)
+    init_seed: int | None = None  # initial-estimate seed shared by the filters (thesis variant)
 
     @property
     def run_id(self) -> str:
@@ -162,6 +189,12 @@ class Study:
     site_dirs: tuple = ()
     #: fingerprints of the shapes resolved from ``library_dirs`` (part of the input hash)
     shape_fingerprints: dict = field(default_factory=dict)
+    #: the published table of the grid (:class:`lightcurve.studies.agreement.ThesisTable`)
+    thesis_table: object = None
+    #: text of the table file (part of the input hash: it decides which cells run)
+    thesis_table_text: str = ""
+    #: grid cells not run because the thesis did not run them (grey)
+    skipped_cells: list = field(default_factory=list)
 
     @property
     def hash(self) -> str:
@@ -175,9 +208,11 @@ class Study:
 
     def _task(self, c: Cell, i: int, opts: tuple) -> "RunTask":
         s, fs = run_seeds(self.seed, c, i)
+        shared = self.options.get("shared_init", self.options.get("variant") == "thesis")
         return RunTask(c, i, s, fs, self.scenario_texts[(c.dynamics, c.sites)],
                        str(self.scenario_files[(c.dynamics, c.sites)]), opts,
-                       self.library_dirs, self.site_dirs)
+                       self.library_dirs, self.site_dirs,
+                       init_seed(self.seed, c, i) if shared else None)
 
     def iter_tasks(self, runs: int | None = None):
         """Every :class:`RunTask`, generated lazily in execution order: scenario keys sorted,
@@ -207,6 +242,8 @@ def input_hash(study: Study) -> str:
     ``--runs`` is not part of it: adding runs to a finished study reuses the stored ones.
     """
     h = hashlib.sha256(study.text.encode())
+    if study.thesis_table_text:
+        h.update(b"\0thesis_table\0" + study.thesis_table_text.encode())
     for k in sorted(study.scenario_texts):
         h.update(f"\0{k[0]}|{k[1]}\0".encode())
         h.update(study.scenario_texts[k].encode())
@@ -376,7 +413,20 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     seed = st.int("seed", 0, min=0, max=2**63 - 1)
     runs = st.int("runs", 100, min=1, max=_MAX_RUNS)
     template = st.str("scenario")
+    table_rel = st.str("thesis_table", "")
     st.check_unknown(extra_allowed=("description",))
+    table, table_text = None, ""
+    if table_rel:
+        from .agreement import load_thesis_table
+
+        tp = Path(table_rel)
+        if not tp.is_absolute():
+            tp = path.parent / tp
+        if not tp.is_file():
+            raise InputError("thesis table not found", file=path, field="study.thesis_table",
+                             value=str(tp))
+        table = load_thesis_table(tp)
+        table_text = table.text
 
     g = root.section("grid")
     axes = {
@@ -403,6 +453,20 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
                          file=path, field="options.particles", value=opts["particles"])
     if o.has("acs_mode"):
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
+    if o.has("variant"):
+        opts["variant"] = o.str("variant", choices=("robust", "thesis"))
+    if o.has("cook_torrance"):
+        opts["cook_torrance"] = o.str("cook_torrance", choices=("physical", "thesis"))
+    if o.has("gate"):
+        opts["gate"] = o.str("gate", choices=("auto", "reject", "inflate", "off"))
+    for k in ("alpha", "beta", "kappa"):
+        if o.has(k):
+            opts[k] = o.float(k, min=0.0 if k == "alpha" else None,
+                              min_open=k == "alpha", max=None)
+    if o.has("shared_init"):
+        opts["shared_init"] = o.bool("shared_init")
+    if o.has("truth_acs_mode"):
+        opts["truth_acs_mode"] = o.str("truth_acs_mode", choices=("random_walk", "jitter"))
     o.check_unknown()
     # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
     # configuration objects validate them (lightcurve.filters.config)
@@ -456,7 +520,14 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
             files[(dyn, ns)] = f.resolve()
             texts[(dyn, ns)] = txt
     cells = [Cell(*vals) for vals in itertools.product(*(axes[k] for k in GRID_KEYS))]
+    skipped = []
+    if table is not None:
+        from .agreement import thesis_color
+
+        skipped = [c for c in cells if thesis_color(table, c.as_dict()) == "grey"]
+        cells = [c for c in cells if c not in skipped]
     return Study(name=name, seed=seed, runs=runs, cells=cells, scenario_files=files,
                  scenario_texts=texts, options=opts, source=str(path), text=text,
-                 library_dirs=lib, site_dirs=sdirs, shape_fingerprints=prints)
+                 library_dirs=lib, site_dirs=sdirs, shape_fingerprints=prints,
+                 thesis_table=table, thesis_table_text=table_text, skipped_cells=skipped)
 

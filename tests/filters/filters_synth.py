@@ -16,7 +16,7 @@ AU = 149_597_870_700.0
 
 
 def make_curve(n=60, dt=5.0, seed=1, r_percent=1.0, acs_sigma_deg=0.1, omega_deg_s=(2.0, 1.0, 3.6),
-               euler_deg=(-42.4122, 59.1601, 48.9897), shape="cube_1u", acs_mode="random_walk",
+               euler_deg=(-42.4122, 59.1601, 48.9897), shape="cube_1u_mixed", acs_mode="random_walk",
                dynamics="controlled", inertia=(0.002, 0.003, 0.004), eta_deg=1e-3,
                two_sites=False):
     """A synthetic lightcurve (module docstring) as a Lightcurve with truth.

@@ -9,8 +9,8 @@ import pytest
 from filters_synth import make_curve
 from scipy import stats
 
+from lightcurve.core import rotations as CR
 from lightcurve.errors import InputError
-from lightcurve.filters import _kernels as K
 from lightcurve.filters.facet_states import (FacetParameterStates, dp_dz, from_unbounded,
                                              mag_states_nb, to_unbounded)
 from lightcurve.filters.invert import invert
@@ -21,13 +21,13 @@ from lightcurve.studies.fit_reflection import perturb_reflection
 
 @pytest.fixture(scope="module")
 def cube():
-    return load_shape("cube_1u")
+    return load_shape("cube_1u_mixed")
 
 
 def _perturbed_curve(n=120, dt=2.0, refl_seed=5, noise_seed=3):
     """make_curve's geometry and attitude, magnitudes from a §10.1-perturbed cube (10 %)."""
     c = make_curve(n=n, dt=dt)
-    sh = load_shape("cube_1u")
+    sh = load_shape("cube_1u_mixed")
     pert, new = perturb_reflection(sh, np.random.default_rng(refl_seed))
     m = apparent_magnitude(pert, c.truth_q, c.obj_to_sun_unit, c.obj_to_obs_unit, c.range_obs_m,
                            c.range_sun_m)
@@ -156,7 +156,7 @@ def test_partials_against_central_differences(cube):
         fd = (mz[:fs.dim] - mz[fs.dim:]) / (2 * h)
         np.testing.assert_allclose(dz, fd, rtol=1e-6, atol=1e-8)
         d = np.concatenate([h * np.eye(3), -h * np.eye(3)])
-        Qp = K.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
+        Qp = CR.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
         mq = fs.magnitudes(mm, Qp, z, k)
         np.testing.assert_allclose(dth, (mq[:3] - mq[3:]) / (2 * h), rtol=1e-6, atol=1e-8)
         checked += 1
@@ -200,7 +200,7 @@ def test_model3_with_attitude_and_hdf5_round_trip(pcurve, tmp_path):
     e = invert(c, "ukf", reflection="model3", sigma_theta_deg=3.0, seed=2)
     s = e.summary()
     assert s["inside_3sigma"] and not e.diverged
-    fs = FacetParameterStates(load_shape("cube_1u"))
+    fs = FacetParameterStates(load_shape("cube_1u_mixed"))
     np.testing.assert_allclose(e.refl_p, fs.to_p(e.refl_z), rtol=1e-12)
     np.testing.assert_allclose(e.refl_p_sigma, fs.jacobian(e.refl_z) * e.refl_z_sigma, rtol=1e-12)
     assert set(s["final_reflection"]) == set(fs.names)
@@ -261,7 +261,7 @@ def test_cli_invert_model3_parameter_and_facet_selection(tmp_path):
     assert rc == 0
     fr = json.loads((out / "summary.json").read_text())["m3"]["final_reflection"]
     assert sorted(fr) == ["m[0]", "m[2]", "xi[0]", "xi[2]"]
-    xi0 = load_shape("cube_1u").facet_params("xi")[0]      # 0.2 in shapes/cube_1u.toml
+    xi0 = load_shape("cube_1u_mixed").facet_params("xi")[0]      # 0.2 in shapes/cube_1u_mixed.toml
     assert fr["xi[0]"]["prior_sigma"] == pytest.approx(0.2 * xi0, rel=1e-9)
     for bad in (["--reflection-params", "xi,q"], ["--reflection-facets", "0,x"],
                 ["--reflection-facets", "-1"]):
@@ -270,3 +270,21 @@ def test_cli_invert_model3_parameter_and_facet_selection(tmp_path):
                    "--attitude-known", *bad, "-o", str(o)])
         assert rc == 2, bad
         assert not (o / "m3.ukf.h5").exists()
+
+
+def test_parameter_on_its_bound_is_held_fixed():
+    """Table 9.2's −Z facet is fully diffuse (ξ = 1): no logit reaches 1, so Model 3 holds ξ[5]
+    fixed (23 states, listed as held) and the §10.1 truth draw leaves it at 1, while every other
+    parameter of the facet is estimated / perturbed."""
+    cube = load_shape("cube_1u")
+    assert cube.params[5, 0] == 1.0
+    fs = FacetParameterStates(cube)
+    assert fs.dim == 23 and "xi[5]" not in fs.names and fs.held == ["xi[5]"]
+    assert {"a[5]", "m[5]", "A[5]"} <= set(fs.names) and np.all(np.isfinite(fs.z0))
+    assert fs.describe()["held_fixed"] == ["xi[5]"]
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        _, new = perturb_reflection(cube, rng)
+        assert new["xi"][5] == 1.0 and new["a"][5] != cube.params[5, 1]
+    with pytest.raises(InputError, match="bound"):
+        FacetParameterStates(cube, facets=[5], kinds=("xi",))

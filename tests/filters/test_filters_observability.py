@@ -1,13 +1,15 @@
 """A facet's reflection parameters are learned exactly when the facet is lit AND visible.
 
-Issue 6, Bernard §10.7 (parameter-only runs, attitude known, Model 3) and fig. 10.11f (the −Z
-facet's ξ and a shrink). Geometry facts (measured by the lead, issue 6 notes, and recomputed
-here with an independent plain-numpy eq. 3.16): in the thesis LEO fast-spin case with the rates
-read as BODY-axis components (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml) the
-spin axis is fixed in body and inertial axes, points near the Sun and is 32° from +Z, so +Z is
-lit at every epoch and −Z (facet 5 of cube_1u: +X, −X, +Y, −Y, +Z, −Z) at none. With the
-ASSUMED alternative reading "rates in inertial axes"
-(…-1site-inertial-rates.toml) −Z is lit and visible at about a third of the epochs.
+Bernard §10.7 (parameter-only runs, attitude known, Model 3) and fig. 10.11f (the −Z facet's ξ
+and a shrink). Geometry facts (recomputed here with an independent plain-numpy eq. 3.16): in
+the ch. 9 LEO fast-spin case (§9.3.3 attitude, body rates [2, 1, 3.6] deg/s;
+pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml) the spin axis is fixed in body and
+inertial axes, points near the Sun and is 32° from +Z, so +Z is lit at every epoch and −Z
+(facet 5 of cube_1u: +X, −X, +Y, −Y, +Z, −Z) at none. Ch. 10 starts the same spin with the
+body frame equal to ECI (§10.1; …/leo-ch10-fast-spin-eci-controlled-1site.toml): there −Z is
+lit and visible at about a third of the epochs. Table 9.2 makes −Z fully diffuse (ξ = 1, on its
+bound): the §10.1 truth draw and Model 3 hold ξ[5] fixed (not a state), so of the −Z
+parameters a, m and A are estimated.
 
 The magnitude (DESIGN.md) is a sum over facets of A_i max(n̂·ŝ,0) max(n̂·ô,0) f_r,i, so a facet
 that is never lit and visible has ∂m/∂p = 0 at every epoch: a Kalman update cannot move its
@@ -18,12 +20,11 @@ states (zero cross-covariance) and its posterior σ must equal the prior σ. Che
 * sensitivity: ∂m/∂(ξ, a, m, A) of facet 5 by central differences of ``apparent_magnitude`` —
   exactly 0 at every epoch in the body reading, nonzero at the lit-and-visible epochs in the
   inertial reading;
-* filter (UKF, Model 3, attitude = truth, one fixed seed): body reading → every facet-5
+* filter (UKF, Model 3, attitude = truth, one fixed seed): ch. 9 start → every facet-5
   parameter keeps its prior σ (shrink < 1.1) and its prior mean, while the always-lit +Z facet
-  and +X facet are learned (positive control); inertial reading → ξ[5] shrinks ≥ 2× and ends
-  inside 3σ, while a[5] and A[5] shrink only ≈ √2 (only their product a·A is constrained,
-  so the issue's "a shrinks ≥ 2×" cannot hold in either reading while A is estimated too —
-  with the areas known it does, last test). The "shrink < 1.1" check would fail for a filter
+  and +X facet are learned (positive control); ch. 10 start → a[5] and A[5] shrink only ≈ √2
+  (a fully diffuse facet reflects A ξ a/π: only the product a·A is constrained, so "a shrinks
+  ≥ 2×" cannot hold while A is estimated too — with the areas known it does, last test). The "shrink < 1.1" check would fail for a filter
   that updated unlit facets (e.g.
   through spurious prior correlations or a wrong measurement model that lets −Z reflect).
 """
@@ -45,7 +46,7 @@ from lightcurve.studies.simulate import simulate
 
 THESIS = data_dir("pipelines") / "thesis"
 FILES = {"body": THESIS / "leo-ic1-fast-spin-controlled-1site.toml",
-         "inertial": THESIS / "leo-ic1-fast-spin-controlled-1site-inertial-rates.toml"}
+         "inertial": THESIS / "leo-ch10-fast-spin-eci-controlled-1site.toml"}
 REFL = "\n[reflection]\nperturb = true\nsigma_frac = 0.1\n"   # Bernard §10.1
 SEED = 1          # one fixed seed (simulation and filter), chosen before looking at results
 MZ = 5            # the −Z facet of cube_1u
@@ -69,7 +70,8 @@ def lit_visible(lc, normals):
 def runs():
     out = {}
     for key, path in FILES.items():
-        sc = parse_scenario(path.read_text() + REFL, file=str(path))
+        txt = path.read_text()
+        sc = parse_scenario(txt if "[reflection]" in txt else txt + REFL, file=str(path))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             lc = simulate(sc, SEED)
@@ -102,7 +104,7 @@ def test_minus_z_sensitivity_zero_exactly_when_never_lit(runs):
         both = (lit & vis)[:, MZ]
 
         def mag(**kw):
-            sh = shape.copy_with(**kw)
+            sh = shape.copy_with(check=False, **kw)   # ξ[5] = 1 + h: affine in ξ
             with np.errstate(divide="ignore"):
                 return apparent_magnitude(sh, lc.truth_q, lc.obj_to_sun_unit, lc.obj_to_obs_unit,
                                           lc.range_obs_m, lc.range_sun_m)
@@ -127,12 +129,13 @@ def test_minus_z_sensitivity_zero_exactly_when_never_lit(runs):
             assert np.all(d[:, ~both] == 0.0)                  # no light from −Z → no signal
             # ξ and A matter wherever −Z reflects (ξ enters the diffuse term ξ a/π)
             assert np.all(np.abs(d[0, both]) > 1e-4) and np.all(np.abs(d[3, both]) > 1e-4)
-            # a and A enter (almost) only as the product a·A: the diffuse term is A ξ a/π and
-            # the specular Fresnel factor is ≈ F0 = a near normal incidence, so the columns
-            # ∂m/∂ln a and ∂m/∂ln A are proportional over the epochs (cube_1u −Z: ξ = 0.9)
+            # a and A enter only as the product a·A: −Z is fully diffuse (Table 9.2, ξ = 1),
+            # its flux is A ξ a/π, so the columns ∂m/∂ln a and ∂m/∂ln A are equal over the
+            # epochs, and m (the specular slope) has no effect at all
             dla, dlA = d[1, both] * shape.params[MZ, 1], d[3, both] * A[MZ]
             assert np.corrcoef(dla, dlA)[0, 1] > 0.999
             np.testing.assert_allclose(dla, dlA, rtol=0.02)
+            assert np.all(np.abs(d[2]) < 1e-9)
 
 
 def test_ukf_learns_facet_parameters_only_when_lit_and_visible(runs):
@@ -147,39 +150,39 @@ def test_ukf_learns_facet_parameters_only_when_lit_and_visible(runs):
         zerr[key] = dict(zip(names, (e.refl_p[-1] - tv) / e.refl_p_sigma[-1]))
         if key == "body":
             p0 = np.array(e.meta["reflection"]["p_nominal"])
-            for kind in ("xi", "a", "m", "A"):
+            assert f"xi[{MZ}]" not in names   # ξ = 1 on its bound: held fixed
+            for kind in ("a", "m", "A"):
                 d = names.index(f"{kind}[{MZ}]")
                 # never lit: no information → prior σ and prior mean kept (a filter updating
                 # unlit facets fails here)
                 assert shrink[key][f"{kind}[{MZ}]"] < 1.1, (kind, shrink[key])
                 assert abs(e.refl_p[-1][d] - p0[d]) < 1e-6 * p0[d]
-    # positive controls in the same run: lit and visible facets are learned (issue 6 notes:
-    # UKF median shrink ξ[0] 6.2×, m[0] 20×)
-    assert shrink["body"]["xi[0]"] >= 2 and shrink["body"]["m[0]"] >= 2
-    # inertial-rates reading: −Z is lit and visible ~1/3 of the time → ξ[5] learned
-    assert shrink["inertial"][f"xi[{MZ}]"] >= 2.0, shrink["inertial"]
-    assert abs(zerr["inertial"][f"xi[{MZ}]"]) <= 3.0
-    # ... but a[5] and A[5] cannot be separated (the a·A product, see the sensitivity test):
-    # with equal 10 % priors on ln a and ln A, knowing ln a + ln A exactly leaves
-    # var(ln a) = σ²/2, i.e. a shrink of at most √2 (+ the tiny Fresnel-shape information)
-    for kind in ("a", "A"):
-        assert 1.1 < shrink["inertial"][f"{kind}[{MZ}]"] < 1.6, shrink["inertial"]
+    # positive controls in the same run: lit and visible facets are learned — the always-lit
+    # +Z facet's ξ and the glinting +X facet's m (Table 9.2: ξ 0.1, m 0.04)
+    assert shrink["body"]["xi[4]"] >= 2 and shrink["body"]["m[0]"] >= 2
+    # ch. 10 start: −Z is lit and visible ~1/3 of the time, but a[5] and A[5] cannot be
+    # separated (the a·A product, see the sensitivity test). With Gaussian priors σ_a (on the
+    # logit of a) and σ_A (on ln A), exact knowledge of their sum leaves ln A the variance
+    # σ_A²σ_a²/(σ_A² + σ_a²), a shrink of at most √2 when σ_a ≥ σ_A (here σ_a = 0.1/(1−0.95)
+    # = 2 ≫ σ_A = 0.1): A[5] shrinks ≤ √2 (+ noise), while the product's information lands in a
+    assert 1.1 < shrink["inertial"][f"A[{MZ}]"] < 1.6, shrink["inertial"]
+    assert shrink["inertial"][f"a[{MZ}]"] > 2.0, shrink["inertial"]
 
 
 def test_bpf_minus_z_xi_and_a_learned_with_areas_known():
-    """The issue's §10.7 criterion for the −Z facet (fig. 10.11f) with the BPF, in the one
-    setting where it is physically attainable: the inertial-rates reading (−Z lit and visible)
-    and the areas known (Model 3 over ξ, a, m only; the truth perturbs the same three, §10.1),
-    which removes the a·A degeneracy. Attitude known, resample-move (the BPF's default there).
-    Benchmark on 10 seeds × 10⁴ particles (benchmarks/reflection_bpf.py --acceptance --params
-    xi,a,m --scenario …-inertial-rates.toml): ξ[5] shrink ≥ 4.8×, a[5] ≥ 7.5×, all inside 3σ
-    (10/10). Here one fixed seed with 2,000 particles; bounds: shrink ≥ 2 (the issue's) and
-    |error| ≤ 3σ (a consistent posterior fails that with probability ≈ 0.3 % per parameter)."""
+    """The §10.7 criterion for the −Z facet (fig. 10.11f) with the BPF, in the one setting where
+    it is physically attainable: the ch. 10 start (body = ECI, −Z lit and visible) and the
+    areas known (Model 3 over ξ, a, m only; the truth perturbs the same three, §10.1), which
+    removes the a·A degeneracy. ξ[5] = 1 is on its bound and held fixed (Table 9.2), so a[5]
+    is the −Z parameter tested. Attitude known, resample-move (the BPF's default there). One
+    fixed seed with 2,000 particles; bounds: shrink ≥ 2 and |error| ≤ 3σ (a consistent
+    posterior fails that with probability ≈ 0.3 %)."""
     from lightcurve.filters import build_problem, run_bpf
     from lightcurve.filters.facet_states import FacetParameterStates
 
     path = FILES["inertial"]
-    sc = parse_scenario(path.read_text() + REFL + 'params = ["xi", "a", "m"]\n', file=str(path))
+    sc = parse_scenario(path.read_text().replace('params = ["xi", "a", "m", "A"]',
+                                                 'params = ["xi", "a", "m"]'), file=str(path))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         lc = simulate(sc, 1000 + SEED)
@@ -191,7 +194,8 @@ def test_bpf_minus_z_xi_and_a_learned_with_areas_known():
     prior_sd = fs.to_p(z).std(axis=0)
     e = run_bpf(p, particles=2000, seed=SEED, facets=fs, attitude="truth")
     tr = json.loads(lc.attrs["reflection_truth"])
-    for kind in ("xi", "a"):
+    assert f"xi[{MZ}]" not in fs.names and f"xi[{MZ}]" in fs.held
+    for kind in ("a",):
         d = fs.names.index(f"{kind}[{MZ}]")
         assert prior_sd[d] / e.refl_p_sigma[-1][d] >= 2.0, kind
         assert abs(e.refl_p[-1][d] - tr[kind][MZ]) <= 3.0 * e.refl_p_sigma[-1][d], kind

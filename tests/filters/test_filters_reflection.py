@@ -42,7 +42,7 @@ def test_eq_8_10_prior_variance_against_finite_differences():
     """σ_b² = Σ_p (∂m/∂p · 0.1 p)² with the analytic partials equals the same sum with central
     finite differences of apparent_magnitude on perturbed shapes (independent path)."""
     curve = make_curve(n=12)
-    shape = load_shape("cube_1u")
+    shape = load_shape("cube_1u_mixed")
     model = MagnitudeModel(shape, curve)
     v = reflection_prior_variance(shape, curve.truth_q, model, frac=0.1)
     ref = np.zeros(len(curve))

@@ -20,7 +20,7 @@ C = 299_792_458.0
 
 @pytest.fixture(scope="module")
 def cube():
-    return load_shape("cube_1u")
+    return load_shape("cube_1u_mixed")
 
 
 def _mag(shape, q, r_obj, r_site, r_sun, sun_mag=-26.74):

@@ -20,7 +20,7 @@ from lightcurve.studies.fit_reflection import (
 
 @pytest.fixture(scope="module")
 def cube():
-    return load_shape("cube_1u")
+    return load_shape("cube_1u_mixed")
 
 
 def _truth_vector(model, vals):
@@ -206,7 +206,14 @@ def test_fit_reflection_synthetic_coverage(cube):
     per case, so requiring ≥ 2 of 3 cases has a false-alarm rate ≈ 3p² ≤ 3 %.
     Also: a facet that is never both lit and visible stays at its prior width (ratio 0.8–1.2:
     nothing learned; checked whenever a case has such a facet), and the 95 %
-    posterior-predictive band covers 85–100 % of the measurements."""
+    posterior-predictive band covers 85–100 % of the measurements.
+
+    Step budget: the function's default 20,000 (this test used 12,000). Seed 1's posterior has
+    a curved ridge along ξ[5]·a[5] = const (the −Z facet is mostly diffuse, ξ = 0.9, so its
+    flux is ≈ A ξ a/π), which the ensemble crosses slowly: τ(ξ[5]) ≈ 310 steps, so the 50 τ
+    rule needs ≈ 15,500 steps (measured with numpy 2.4.6 / emcee 3.1.6; the τ estimate moved
+    across 240 with the library update, which made 12,000 fail deterministically). The
+    coverage claim is unchanged."""
     kinds = ("xi", "a")
     ok = 0
     for seed in (0, 1, 3):
@@ -214,7 +221,7 @@ def test_fit_reflection_synthetic_coverage(cube):
         model = ReflectionPosteriorModel(cube, curve, curve.truth_q, kinds=kinds)
         truth = _truth_vector(model, vals)
         fit = fit_reflection(curve, shape=cube, kinds=kinds, seed=seed, truth=truth,
-                             max_steps=12000)
+                             max_steps=20000)
         assert fit.diagnostics.converged
         assert fit.identified.sum() >= 2  # the data constrain something
         inside = fit.truth_inside(0.99)
@@ -309,7 +316,11 @@ def test_scenario_reflection_section_perturbs_truth(tmp_path):
     nominal = load_shape("cube_1u")
     rel = np.concatenate([np.array(tv["xi"]) / nominal.params[:, 0] - 1,
                           np.array(tv["A"]) / nominal.areas_m2 - 1])
-    assert np.all(rel != 0) and np.all(np.abs(rel) < 0.5)             # perturbed, |z| < 5σ
+    # Table 9.2: −Z (facet 5) has ξ = 1 on its bound, held fixed; every other value perturbed
+    held = np.zeros(12, bool)
+    held[5] = True
+    assert np.all(rel[held] == 0) and np.all(rel[~held] != 0)
+    assert np.all(np.abs(rel) < 0.5)                                    # |z| < 5σ
     assert not np.allclose(lc.truth_mag, base.truth_mag)
     sh = nominal.copy_with(check=False, xi=tv["xi"], a=tv["a"], m=tv["m"], areas_m2=tv["A"])
     ref = apparent_magnitude(sh, lc.truth_q, lc.obj_to_sun_unit, lc.obj_to_obs_unit,

@@ -8,7 +8,7 @@ Talts et al. 2018, "Validating Bayesian inference algorithms with simulation-bas
 calibration"). This is the evidence that intervals from ``fit_reflection`` have their nominal
 coverage; the larger version (200 runs, 4 and 8 parameters) is in ``benchmarks/reflection_emcee.py``.
 
-Problem kept small for speed: ξ and m of the +Y facet of cube_1u (the glinting facet whose ξ
+Problem kept small for speed: ξ and m of the +Y facet of cube_1u_mixed (the glinting facet whose ξ
 is the parameter the 24-parameter acceptance cases identify most often), 150 epochs.
 """
 
@@ -27,7 +27,7 @@ FAST = dict(facets=[2], kinds=("xi", "m"), n_epochs=150, block=200, min_steps=40
 
 @pytest.fixture(scope="module")
 def cube():
-    return load_shape("cube_1u")
+    return load_shape("cube_1u_mixed")
 
 
 def test_sbc_ranks_uniform_fast(cube):

@@ -30,7 +30,6 @@ from lightcurve.studies.simulate import truth_attitude
 
 THESIS = data_dir("pipelines") / "thesis"
 BASE = THESIS / "leo-ic1-fast-spin-controlled-1site.toml"
-INERTIAL = THESIS / "leo-ic1-fast-spin-controlled-1site-inertial-rates.toml"
 
 
 def A_of_q(q):
@@ -104,7 +103,7 @@ def test_default_body_reading_unchanged():
 
 
 def test_thesis_inertial_rates_conversion():
-    sc = load_scenario(INERTIAL)
+    sc = parse_scenario(_doc(omega_frame="inertial"), file="inertial-rates.toml")
     at = sc.attitude
     assert at.omega_frame == "inertial"
     assert np.array_equal(at.omega_input_deg_s, [2.0, 1.0, 3.6])
@@ -112,7 +111,7 @@ def test_thesis_inertial_rates_conversion():
     np.testing.assert_allclose(at.omega_deg_s, A0 @ np.array([2.0, 1.0, 3.6]), atol=1e-12)
     # the lead's measured numbers for this reading (issue 6 notes, 3 decimals)
     np.testing.assert_allclose(at.omega_deg_s, [-2.680, 3.282, 0.088], atol=6e-4)
-    # the same file otherwise equals the thesis file
+    # the rest equals the thesis file
     base = load_scenario(BASE)
     assert np.array_equal(base.attitude.euler321_deg, at.euler321_deg)
     assert base.epoch_utc == sc.epoch_utc and base.duration_s == sc.duration_s

@@ -1,0 +1,120 @@
+"""The thesis's published Monte Carlo tables as data, and cell-by-cell agreement with a study.
+
+A table file (``pipelines/studies/tables/bernard2021-*.toml``, transcribed from Bernard 2021
+Fig. 9.4 and Figs. B.1–B.4) holds ``figure``, ``title`` and eight ``[[row]]`` entries
+(``dynamics``, ``sigma_omega_deg_s``, ``r_percent``, ``colors``: twelve cells — one site
+σθ = 3°, 5°, 10°, then two sites, each σθ as EKF (our MEKF) and UKF). Cell colours are
+``green`` / ``yellow`` / ``red``, ``grey`` (not run by the thesis) or ``unknown`` (lost in the
+text; not compared).
+
+:func:`thesis_color` gives a study cell's published colour (``None`` when the table has no
+such cell, e.g. the particle filter or a σθ the thesis did not tabulate); :func:`agreement`
+counts, per filter, the cells both ran (published green/yellow/red and ours finished) and
+those whose colours match.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InputError
+
+__all__ = ["ThesisTable", "load_thesis_table", "thesis_color", "agreement", "TABLE_COLORS",
+           "COMPARED"]
+
+TABLE_COLORS = ("green", "yellow", "red", "grey", "unknown")
+#: published colours that are compared with ours
+COMPARED = ("green", "yellow", "red")
+_SIGMA_THETA = (3.0, 5.0, 10.0)
+_FILTERS = ("mekf", "ukf")
+
+
+@dataclass
+class ThesisTable:
+    """A published Monte Carlo table: ``cells`` maps (filter, dynamics, sites, σθ, σω, r) to
+    its colour."""
+
+    figure: str
+    title: str
+    cells: dict = field(default_factory=dict)
+    source: str = ""
+    text: str = ""      # the file's text as read (part of a study's input hash)
+
+    def color(self, filter, dynamics, sites, sigma_theta_deg, sigma_omega_deg_s, r_percent):
+        """The published colour of one cell, or None (not in the table)."""
+        return self.cells.get((str(filter), str(dynamics), int(sites), float(sigma_theta_deg),
+                               float(sigma_omega_deg_s), float(r_percent)))
+
+
+def load_thesis_table(path) -> ThesisTable:
+    """Load a table file (module docstring); InputError naming the file and key otherwise."""
+    from ..io.tomlio import Section, load_toml
+
+    path = Path(path)
+    doc, text = load_toml(path, with_text=True)
+    root = Section(doc, file=path)
+    fig = root.str("figure")
+    title = root.str("title", "")
+    root.str("columns", "")
+    tab = ThesisTable(figure=fig, title=title, source=str(path), text=text)
+    rows = root.sections("row")
+    if not rows:
+        raise InputError("a thesis table needs [[row]] entries", file=path, field="row")
+    for r in rows:
+        dyn = r.str("dynamics", choices=("controlled", "uncontrolled"))
+        so = r.float("sigma_omega_deg_s", min=0.0, min_open=True)
+        rp = r.float("r_percent", min=0.0, min_open=True, max=100.0)
+        cols = r.raw("colors")
+        if (not isinstance(cols, list) or len(cols) != 12
+                or any(c not in TABLE_COLORS for c in cols)):
+            raise InputError("expected 12 colours", file=path, field=f"{r.name}.colors",
+                             value=cols, allowed=", ".join(TABLE_COLORS))
+        r.check_unknown()
+        i = 0
+        for sites in (1, 2):
+            for st in _SIGMA_THETA:
+                for flt in _FILTERS:
+                    key = (flt, dyn, sites, st, so, rp)
+                    if key in tab.cells:
+                        raise InputError("duplicate row", file=path, field=r.name,
+                                         value=f"{dyn}, {so}, {rp}")
+                    tab.cells[key] = cols[i]
+                    i += 1
+    root.check_unknown()
+    return tab
+
+
+def thesis_color(table, cell: dict):
+    """Published colour of a study cell dict (keys of :data:`lightcurve.studies.study.GRID_KEYS`),
+    or None without a table, for a reflection model, or for a cell the table lacks."""
+    if table is None or cell.get("reflection", "none") != "none":
+        return None
+    return table.color(cell["filter"], cell["dynamics"], cell["sites"], cell["sigma_theta_deg"],
+                       cell["sigma_omega_deg_s"], cell["r_percent"])
+
+
+def agreement(cells) -> dict:
+    """Agreement counts over summary cells carrying ``thesis_color`` and ``color``.
+
+    Returns ``{"compared": n, "agree": k, "by_filter": {filter: {"compared", "agree"}},
+    "disagree": [cell keys…]}``; a cell counts when its published colour is green, yellow or
+    red and it has finished runs here.
+    """
+    out = {"compared": 0, "agree": 0, "by_filter": {}, "disagree": []}
+    for c in cells:
+        tc = c.get("thesis_color")
+        if tc not in COMPARED or not c.get("runs"):
+            continue
+        f = out["by_filter"].setdefault(c["filter"], {"compared": 0, "agree": 0})
+        out["compared"] += 1
+        f["compared"] += 1
+        if c["color"] == tc:
+            out["agree"] += 1
+            f["agree"] += 1
+        else:
+            out["disagree"].append({k: c[k] for k in ("filter", "dynamics", "sites",
+                                                       "sigma_theta_deg", "sigma_omega_deg_s",
+                                                       "r_percent")}
+                                   | {"color": c["color"], "thesis_color": tc})
+    return out

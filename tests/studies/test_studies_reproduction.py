@@ -1,0 +1,73 @@
+"""docs/reproduction.md generator: verdicts from study summaries (hand-made summaries here)."""
+
+from __future__ import annotations
+
+import json
+
+from lightcurve.cli import main
+from lightcurve.studies.reproduction import bernard_section
+
+
+def _cell(filter, dynamics, sites, st, so, r, color, thesis, rss, below=1.0, runs=100):
+    return dict(filter=filter, dynamics=dynamics, sites=sites, sigma_theta_deg=st,
+                sigma_omega_deg_s=so, r_percent=r, reflection="none", runs=runs, color=color,
+                thesis_color=thesis, outside_3sigma=[0] * 6, rss_att_deg_median=rss,
+                below_5deg=below)
+
+
+def _write(tmp_path, name, cells, **extra):
+    from lightcurve.studies.agreement import agreement
+
+    d = tmp_path / name
+    d.mkdir()
+    s = {"study": name, "runs_per_cell": cells[0]["runs"], "variant": "thesis",
+         "indicative": cells[0]["runs"] < 100, "cells": cells, **extra}
+    if any(c["thesis_color"] for c in cells):
+        s["agreement"] = agreement(cells)
+        s["thesis_figure"] = "9.4"
+    (d / "summary.json").write_text(json.dumps(s))
+    return d
+
+
+def test_tables_claims_and_not_testable(tmp_path):
+    f94 = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3),
+           _cell("ukf", "controlled", 2, 3.0, 0.02, 1.0, "green", "green", 0.28),
+           _cell("ukf", "uncontrolled", 1, 3.0, 0.02, 1.0, "green", "green", 0.6),
+           _cell("mekf", "controlled", 1, 3.0, 0.02, 1.0, "red", "green", 2.0),
+           _cell("ukf", "controlled", 1, 10.0, 0.02, 1.0, "red", "red", 50.0, below=0.4)]
+    nadir = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "red", None, 3.0, runs=20),
+             _cell("ukf", "controlled", 2, 3.0, 0.02, 1.0, "red", None, 1.0, runs=20),
+             _cell("ukf", "uncontrolled", 1, 3.0, 0.02, 1.0, "red", None, 3.1, runs=20)]
+    inert = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "red", None, 4.0, runs=20)]
+    beyond = [_cell("ukf", "controlled", 1, 20.0, 0.02, 1.0, "red", None, 90.0, runs=20),
+              _cell("mekf", "controlled", 1, 30.0, 0.02, 1.0, "red", None, 90.0, runs=20)]
+    dirs = [_write(tmp_path, "thesis-fig9-4", f94),
+            _write(tmp_path, "thesis-claims-leo-nadir", nadir),
+            _write(tmp_path, "thesis-claims-leo-inertial", inert),
+            _write(tmp_path, "thesis-claims-beyond-10deg", beyond)]
+    md = bernard_section(dirs)
+    # 4 of 5 cells agree = 80 % < 85 %: the table disagrees, with its disagreeing cell listed
+    assert "| Fig. 9.4 (LEO, fast spin) | 4/5 cells agree (80 %" in md
+    assert "| disagrees |" in md.split("\n| Fig. B.1")[0]
+    assert "| MEKF | controlled | 1 | 3 | 0.02 | 1 | red | green |" in md
+    assert "not testable (no output of `thesis-fig-b1-meo-cubesat`)" in md
+    lines = {ln.split(" | ")[0].lstrip("| "): ln for ln in md.splitlines() if ln.startswith("| ")}
+    assert lines["EKF and UKF not suitable for initial attitude uncertainty σθ > 10°"].endswith(
+        "| agrees |")
+    assert lines["better attitude estimates with the faster spinning spacecraft"].endswith(
+        "| agrees |")
+    # second site: fast 0.28/0.3 ≈ 0.93 (not significant), nadir 1/3 (significant) → agrees
+    assert "fast 0.93, nadir 0.33" in md
+    # dynamics: fast 0.6/0.3 = 2 (differs), nadir 3.1/3 (same) → agrees
+    assert "fast 2.00, nadir 1.03" in md
+    assert "not testable (no `thesis-bpf-leo` output)" in md
+
+
+def test_cli_writes_the_file(tmp_path):
+    d = _write(tmp_path, "thesis-fig9-4",
+               [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3, runs=10)])
+    out = tmp_path / "reproduction.md"
+    assert main(["reproduction", "--study", str(d), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert text.startswith("# Reproduction of the source documents")
+    assert "indicative: 10 runs/cell" in text
