@@ -50,14 +50,10 @@ class Transfer:
 def read_fit(path) -> dict:
     """The ``model`` of a diagnosis.json (InputError naming the file and field)."""
     p = Path(path)
-    if not p.is_file():
-        raise InputError("file not found", file=p)
-    if p.stat().st_size > 64 * 1024 * 1024:
-        raise InputError("file too large for a diagnosis.json", file=p, allowed="<= 64 MiB")
-    try:
-        js = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"not a JSON file: {exc}", file=p) from None
+    from ..io.safe_open import read_json
+
+    # a regular file (no FIFO or device) of at most 64 MiB, size from the opened descriptor
+    js = read_json(p, max_bytes=64 * 1024 * 1024, what="diagnosis.json")
     if not isinstance(js, dict) or js.get("format") != "lightcurve-diagnosis":
         raise InputError("not a diagnosis.json", file=p, field="format",
                          value=js.get("format") if isinstance(js, dict) else None,
