@@ -252,8 +252,21 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
 
 
 def held_values(effect, params) -> dict:
-    """The values of the parameters fits hold fixed (integer, grid, held) in ``params``."""
-    return {k: v for k, v in params.items() if k in held_names(effect)}
+    """The values of the parameters fits hold fixed: integer and grid parameters at their
+    values in ``params``; parameters in the effect's ``hold`` (held at their reference value
+    because the data do not identify them) at their default."""
+    specs = {s.name: s for s in effect.params}
+    hold = set(getattr(effect, "hold", ()) or ())
+    out = {}
+    for k, v in params.items():
+        if k not in held_names(effect):
+            continue
+        if k in hold:
+            d = float(specs[k].default)
+            out[k] = np.full(np.shape(v), d) if np.ndim(v) else d
+        else:
+            out[k] = v
+    return out
 
 
 def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: int = 60,
