@@ -33,6 +33,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from reflection_bpf import print_with_machine  # noqa: E402  (shared JSON footer)
 
+from lightcurve.studies.runner import limit_blas_threads  # noqa: E402
+
+limit_blas_threads()   # small dense fits: threaded BLAS only spins (children inherit the env)
+
 SCEN = ROOT / "pipelines" / "real" / "starlink_pomenis.toml"
 PUBLISHED_RMS = 0.762
 

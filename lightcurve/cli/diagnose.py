@@ -11,6 +11,10 @@ __all__ = ["register"]
 def _cmd_diagnose(args) -> int:
     from ..diagnosis.folds import GROUPINGS
     from ..errors import InputError
+    from ..studies.runner import limit_blas_threads
+
+    # the diagnosis fits are small dense least-squares problems: threaded BLAS only spins
+    limit_blas_threads()
 
     say = (lambda m: None) if args.quiet else (lambda m: print(m, flush=True))
     if args.apply is not None:

@@ -211,7 +211,10 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
              max_effects: int = 2, pair_candidates: int = 3, surface: bool = True,
              cv_report=(), skip_reasons=None, seed: int = 0, max_nfev: int = 60,
              cv_nfev: int = 30, progress=None) -> Diagnosis:
-    """Run the diagnosis of ``problem`` (module docstring).
+    """Run the diagnosis of ``problem`` (module docstring). Its fits are small dense
+    least-squares problems: with a multi-threaded OpenBLAS, call
+    :func:`lightcurve.studies.runner.limit_blas_threads` first (``lightcurve diagnose`` does;
+    4× less CPU on a loaded 2-core machine).
 
     ``folds``: grouping for the selection ("auto" or one of :data:`~.folds.GROUPINGS`, or
     None for no cross-validation); ``n_folds``: number of folds; ``min_gain``: held-out gain
