@@ -16,8 +16,9 @@ For each effect of the problem's kind (``magnitude`` or ``css``) that is not exc
    facet or glint the body-frame Sun–observer bisector at the epochs most brighter than the
    model: the normal a mirror must have to flash there). Integer parameters (a CSS sensor)
    are enumerated and step times (``t_start_s``) scanned on a grid of the data's times.
-3. **Evidence**: ΔBIC = n ln(χ²₀/χ²₁) − k ln n (:func:`~.baseline.bic_gain`; k = the
-   effect's parameter count). Candidates are ranked by ΔBIC (largest first).
+3. **In-sample evidence**: ΔBIC = n ln(χ²₀/χ²₁) − k ln n (:func:`~.baseline.bic_gain`; k =
+   the effect's parameter count); the list is ordered by it. The choice between candidates
+   is made on held-out data by :mod:`.selection`.
 """
 
 from __future__ import annotations

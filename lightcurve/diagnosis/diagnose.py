@@ -40,7 +40,7 @@ import numpy as np
 
 from ..report.views import DiagnosisViews
 from .baseline import bic_gain, fit_baseline, fit_terms
-from .candidates import params_to_json, score_candidates
+from .candidates import score_candidates
 from .folds import DEFAULT_FOLDS, make_folds
 from .identify import identify_free, identify_term
 from .residuals import consistency, find_segments

@@ -107,8 +107,6 @@ def _jsonable(v):
 
 def model_json(model) -> dict:
     """The fitted model in the form ``diagnose --apply`` reads (module docstring)."""
-    from ..physics.registry import ParamSpec  # noqa: F401  (documentation of the params)
-
     prob = model.problem
     fit = model.fit
     out = {"channels": prob.channel_names, "sites": list(prob.site_names),
