@@ -13,7 +13,8 @@ Part 2 also runs the 5° and 10° filters with the albedo-grid representation er
 R (:func:`lightcurve.css.calibration.albedo_grid_error`) and reports the pooled NEES / NMEE of
 the final scale factors and misalignments against their 99 % χ² / normal bounds.
 
-Part 3 (``--runs-star``): the star tracker every 10 s of §4.4 is our assumption; the full and
+Part 3 (``--runs-star``): O'Keefe §4.1-4.2 leave the star tracker's rate and accuracy open
+(we chose one every 10 s); the full and
 reduced filters are re-run with it every 60 s, 300 s and without it.
 
 Prints one JSON line (with os.cpu_count()).  Usage: python benchmarks/css_calibration_mc.py
@@ -135,7 +136,7 @@ def part2(n):
 
 
 def part3(n, periods):
-    """Star-tracker dependence (§4.4 assumes one every 10 s): full and reduced filters with
+    """Star-tracker dependence (our choice: one every 10 s; §4.1-4.2 leave it open): full and reduced filters with
     the star tracker every P s (0: none; the filter then starts from the true attitude)."""
     out = {}
     for per in periods:

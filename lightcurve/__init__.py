@@ -20,23 +20,12 @@ __all__ = ["InputError", "ConvergenceError", "__version__", "simulate", "read_li
            "Lightcurve", "load_scenario", "invert"]
 
 
-def simulate(scenario, seed=None):
-    """Simulate a lightcurve from a :class:`~lightcurve.studies.scenario.Scenario`, a TOML path
-    or a bundled scenario name (``"default"``, ``"thesis"``, ``"thesis/<case>"``).
-
-    Returns a :class:`Lightcurve`; ``seed`` overrides the scenario's seed.
-    """
-    from .studies.scenario import Scenario, load_scenario
-    from .studies.simulate import simulate as _simulate
-
-    if not isinstance(scenario, Scenario):
-        from .cli.simulate import resolve_scenario
-
-        scenario = load_scenario(resolve_scenario(scenario))
-    return _simulate(scenario, seed=seed)
-
-
 def __getattr__(name):
+    if name == "simulate":   # the one simulate: lightcurve.studies.simulate.simulate (a
+        # Scenario, a TOML path or a bundled scenario name: "default", "thesis", "thesis/<case>")
+        from .studies.simulate import simulate
+
+        return simulate
     if name in ("read_lightcurve", "Lightcurve"):
         from .io import lightcurve_h5
 

@@ -52,4 +52,18 @@ class InputError(ValueError):
 
 
 class ConvergenceError(RuntimeError):
-    """A numerical procedure failed (factorisation, divergence) and could not recover."""
+    """A numerical procedure failed (factorisation, divergence, an MCMC chain that did not
+    converge) and could not recover.
+
+    Parameters
+    ----------
+    message : str
+        What failed and why.
+    diagnostics : object, optional
+        The procedure's diagnostics (e.g. the chain diagnostics of
+        :func:`lightcurve.studies.fit_reflection.fit_reflection`), kept as ``.diagnostics``.
+    """
+
+    def __init__(self, message, diagnostics=None):
+        super().__init__(message)
+        self.diagnostics = diagnostics

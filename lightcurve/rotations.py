@@ -50,6 +50,7 @@ __all__ = [
     "quat_conj",
     "quat_inv",
     "quat_normalize",
+    "quat_average",
     "quat_identity",
     "quat_to_dcm",
     "dcm_to_quat",
@@ -448,6 +449,22 @@ def attitude_error_angle(q_true, q_est) -> np.ndarray:
 def attitude_error_rotvec(q_true, q_est) -> np.ndarray:
     """Error rotation vector (rad, body axes) of ``δq`` (Bernard eq. 9.6; exact, not small-angle)."""
     return quat_to_rotvec(attitude_error(q_true, q_est))
+
+
+def quat_average(q, weights=None) -> np.ndarray:
+    """Weighted average attitude of quaternions q (n,4) → (4,), ``q1 >= 0``.
+
+    The maximiser of ``Σ wᵢ (qᵀqᵢ)²`` over unit q: the eigenvector of ``M = Σ wᵢ qᵢ qᵢᵀ`` with the
+    largest eigenvalue (Markley, Cheng, Crassidis & Oshman 2007, "Averaging quaternions",
+    JGCD 30(4), eq. 12–13). Independent of the signs of the qᵢ (q and −q are one attitude).
+    """
+    q = _as_quat(q).reshape(-1, 4)
+    w = np.ones(q.shape[0]) if weights is None else np.asarray(weights, float).reshape(-1)
+    if w.shape[0] != q.shape[0] or not np.all(w >= 0) or not w.sum() > 0:
+        raise ValueError("weights must be non-negative, one per quaternion, not all zero")
+    M = (q * w[:, None]).T @ q
+    _, vec = np.linalg.eigh(M)
+    return quat_normalize(vec[:, -1])
 
 
 # ----------------------------------------------------------------------------------------

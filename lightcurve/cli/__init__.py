@@ -1,19 +1,21 @@
 """The ``lightcurve`` command line.
 
 One module per subcommand group (``sites``, ``shapes``, ``simulate``/``plot``/``demo``, ``css``,
-``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``, ``selfcheck``); each has a
-``register(subparsers)`` function and thin handlers that parse arguments, call the library and
-print. Shared option types live in :mod:`lightcurve.cli._args`. Exit codes: 0 success,
-1 run-time failure, 2 bad usage or bad input (one clear line; the traceback only with
-``--debug``), 130 / 143 / 129 interrupted by SIGINT / SIGTERM / SIGHUP (stored results kept;
-one line saying how to resume, :mod:`lightcurve.process`). Every command runs with its
-inputs tracked (:func:`lightcurve.io.safe_open.track_inputs`): an output that would replace
-one of its inputs is refused (exit 2).
+``invert``, ``diagnose``, ``compare``, ``fit-reflection``, ``import``/``passes``,
+``selfcheck``); each has a ``register(subparsers)`` function and thin handlers that parse
+arguments, call the library and print. Shared option types live in
+:mod:`lightcurve.cli._args`. Exit codes: 0 success, 1 run-time failure, 2 bad usage or bad
+input (one clear line; the traceback only with ``--debug``), 130 / 143 / 129 interrupted by
+SIGINT / SIGTERM / SIGHUP (stored results kept; one line saying how to resume,
+:mod:`lightcurve.process`). Every command runs with its inputs tracked
+(:func:`lightcurve.io.safe_open.track_inputs`): an output that would replace one of its inputs
+is refused (exit 2).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import traceback
@@ -24,6 +26,7 @@ from . import (
     css,
     diagnose,
     invert,
+    period,
     recordings,
     reflection,
     selfcheck,
@@ -35,8 +38,8 @@ from . import (
 __all__ = ["main", "build_parser", "iter_commands"]
 
 _REGISTRARS = (selfcheck.register, sites.register, shapes.register, simulate.register,
-               css.register, invert.register, diagnose.register, compare.register,
-               reflection.register, recordings.register)
+               css.register, invert.register, period.register, diagnose.register,
+               compare.register, reflection.register, recordings.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -139,7 +142,7 @@ def main(argv=None) -> int:
     from ..process import Terminated, exit_code, handle_termination
 
     try:
-        with handle_termination(), track_inputs():
+        with handle_termination(), track_inputs(), _one_line_warnings():
             from ..plugins import load_plugin
 
             for spec in args.plugin:
@@ -170,6 +173,25 @@ def main(argv=None) -> int:
         hint = "" if args.debug else " (run with --debug for details)"
         print(f"lightcurve: failed: {type(exc).__name__}: {_one_line(exc)}{hint}", file=sys.stderr)
         return 1
+
+
+#: NumPy's floating-point chatter (results carry their own NaN/flag checks)
+_NUMPY_FP = r"(invalid value|divide by zero|overflow|underflow) encountered|Mean of empty slice"
+
+
+@contextlib.contextmanager
+def _one_line_warnings():
+    """Warnings of a command as one ``lightcurve: warning: ...`` line each (no source line,
+    no file path of the package); NumPy floating-point chatter is not shown."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"lightcurve: warning: {_one_line(message)}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=_NUMPY_FP, category=RuntimeWarning)
+        warnings.showwarning = show
+        yield
 
 
 def _one_line(exc: BaseException, limit: int = 2000) -> str:

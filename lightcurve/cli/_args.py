@@ -14,11 +14,11 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input", "csv_floats",
-           "initial_q", "initial_omega_rad_s", "SHARED_OPTIONS", "add_output", "add_library",
-           "add_sites", "add_shape", "add_model_options", "add_seed", "add_executors",
-           "add_workers", "add_quiet", "add_plot", "add_variant", "add_device", "given",
-           "refuse_inapplicable", "progress_bar"]
+__all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input", "naming_file",
+           "csv_floats", "initial_q", "initial_omega_rad_s", "SHARED_OPTIONS", "add_output",
+           "add_library", "add_sites", "add_shape", "add_model_options", "add_seed",
+           "add_executors", "add_workers", "add_quiet", "add_plot", "add_variant", "add_device",
+           "given", "refuse_inapplicable", "progress_bar"]
 
 
 def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
@@ -91,6 +91,23 @@ def output_not_input(output, *inputs, option: str = "-o/--output") -> None:
             raise InputError("the output would overwrite an input file of this command",
                              file=output, field=option, value=str(inp),
                              allowed="an output path that is not one of the inputs")
+
+
+class naming_file:  # noqa: N801 - used as a context manager: ``with naming_file(path):``
+    """Re-raise an :class:`InputError` that names no file as one naming ``path`` (the input
+    the command was working on), so every error line says which file it is about."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        if isinstance(exc, InputError) and not exc.file and self.path is not None:
+            raise InputError(exc.bare_message, file=self.path, field=exc.field,
+                             value=exc.value, allowed=exc.allowed) from None
+        return False
 
 
 def csv_floats(text, option, n=None):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._args import add_model_options, number
+from ._args import add_executors, add_model_options, add_output, add_quiet, number
 
 __all__ = ["register"]
 
@@ -38,17 +38,13 @@ def register(sub) -> None:
     p.add_argument("study", metavar="STUDY.toml", help="study file (docs/formats.md, Studies)")
     p.add_argument("--runs", type=number(1, 1_000_000, integer=True), default=None,
                    help="runs per cell (default: the study's [study] runs)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    ex = p.add_mutually_exclusive_group()
-    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None,
-                    help="local process-pool size (default: all CPUs; 1 runs in this process)")
-    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
-    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None, metavar="W",
-                    help="start a Dask LocalCluster with W worker processes")
+    add_output(p, what="folder", required=True,
+               help="output folder (runs/, summary.json, report.html; reused to resume)")
+    add_executors(p, workers_help="local process-pool size (default: all CPUs; 1 runs in this "
+                  "process)")
     p.add_argument("--force", action="store_true",
                    help="discard stored runs of a different (changed) study instead of refusing")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_quiet(p, help="no progress bar")
     add_model_options(p, shape=False)
     p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
                    "run the same command again to resume")

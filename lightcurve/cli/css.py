@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
 
-from ._args import SEED, number, output_not_input
+from ._args import (add_executors, add_output, add_plot, add_quiet, add_seed, add_workers, number,
+                    output_not_input)
 
 __all__ = ["register"]
 
@@ -30,21 +33,45 @@ def _css_albedo(spec):
 def _cmd_css_simulate(args) -> int:
 
     from ..css.recording import write_recording
-    from ..css.study import gyroless_params, settled_mask
+    from ..css.study import settled_mask
+    from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams
     from ..css.truth import Scenario, simulate
 
-    output_not_input(args.out, args.config, args.albedo, args.filter_albedo, option="--out")
+    output_not_input(args.output, args.config, args.albedo, args.filter_albedo, option="--output")
     css = _css_sensors(args.config, args.fov_deg)
+    from ..memory import check_allocation
+
+    # the simulation's per-step arrays (measured 590 B per step with 8 sensors), refused
+    # before anything is allocated
+    n_steps = int(args.duration_s / args.dt_s) + 1
+    check_allocation(n_steps * (400 + 32 * len(np.atleast_2d(css.normals))),
+                     f"CSS simulation of {n_steps} steps", field="--duration-s/--dt-s",
+                     value=n_steps)
     gyro = None if args.gyro == "none" else args.gyro
     fp = FilterParams() if gyro else gyroless_params()
     from dataclasses import replace as _replace
 
     fp = _replace(fp, albedo_model=args.filter_albedo != "none")
-    sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
-                  duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
-                  albedo=_css_albedo(args.albedo), filter_params=fp,
-                  filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
+    if args.variant is not None:
+        # O'Keefe (2015) §2.4 set-up (60° FOV, structure horizon, 2 Hz / 10 Hz, J2-J6 orbit,
+        # TOMS albedo when the data folder is there) with the thesis or robust estimators
+        from ..css.experiments import thesis_scenario
+
+        if args.config not in ("dual_pyramid", "cube"):
+            from ..errors import InputError
+
+            raise InputError("--variant runs the thesis set-up: dual_pyramid or cube only",
+                             field="--config", value=args.config, allowed="dual_pyramid, cube")
+        sc = thesis_scenario(args.config, args.estimator, variant=args.variant, gyro=gyro,
+                             controlled=args.controlled, duration_s=args.duration_s,
+                             albedo="toms" if args.albedo == "builtin" else _css_albedo(args.albedo))
+        css = sc.css
+    else:
+        sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
+                      duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
+                      albedo=_css_albedo(args.albedo), filter_params=fp,
+                      filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
     r = simulate(sc, args.seed)
     m = settled_mask(r.t, r.lit, args.settle_s)
     e = r.error_deg[m]
@@ -57,9 +84,9 @@ def _cmd_css_simulate(args) -> int:
     if args.controlled:
         pe = np.degrees(np.arccos(np.clip(r.s_true @ r.info["pointing_axis"], -1, 1)))
         print(f"final pointing error {pe[-1]:.2f} deg")
-    if args.out:
-        write_recording(args.out, r, css, args.epoch, gyro is not None)
-        print(f"wrote {args.out}")
+    if args.output:
+        write_recording(args.output, r, css, args.epoch, gyro is not None)
+        print(f"wrote {args.output}")
     return 0
 
 
@@ -67,10 +94,10 @@ def _cmd_css_estimate(args) -> int:
 
     from ..css.recording import read_recording
     from ..css.single_point import angle_deg, estimate
-    from ..css.study import gyroless_params
+    from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams, run_filter
 
-    output_not_input(args.out, args.recording, option="--out")
+    output_not_input(args.output, args.recording, option="--output")
     rec = read_recording(args.recording)
     gyro = None if args.no_gyro else rec["gyro"]
     if args.estimator in ("ekf", "eckf"):
@@ -89,35 +116,46 @@ def _cmd_css_estimate(args) -> int:
         if sel.any():
             print(f"angular error (sunlit, after {args.settle_s:g} s): median "
                   f"{np.median(err[sel]):.2f} deg, 99th percentile {np.percentile(err[sel], 99):.2f} deg")
-    if args.out:
+    if args.output:
         from ..io.atomic import atomic_path
 
-        with atomic_path(args.out, suffix=".csv") as tmp:
+        with atomic_path(args.output, suffix=".csv") as tmp:
             np.savetxt(tmp, np.column_stack([rec["t"], s_hat]), delimiter=",",
                        header="t_s,s_hat_x,s_hat_y,s_hat_z (body axes)", comments="")
-        print(f"wrote {args.out}")
+        print(f"wrote {args.output}")
     return 0
 
 
 def _cmd_css_study(args) -> int:
-    from dataclasses import replace
-
-    from ..css.study import load_study, run_study, write_report
+    from ..css.study import load_study, run_study
 
     spec = load_study(args.pipeline)
-    if args.runs is not None:
-        spec = replace(spec, n_runs=args.runs)
-    cases = run_study(spec)
-    if args.out:
-        out_dir = args.out
-    else:  # derived from the study's name (data): keep it inside the current folder
+    out_dir = args.output
+    if out_dir is None:  # derived from the study's name (data): keep it inside the current folder
         from ..io.paths import safe_output_path
 
         out_dir = safe_output_path(".", f"{spec.name}-report", field="study.name")
-    out = write_report(spec, cases, out_dir)
-    print((out / "summary.txt").read_text(), end="")
-    print(f"report in {out}/ (summary.json, summary.txt, envelopes.png, error_maps.png)")
+    summary = run_study(spec, out_dir, runs=args.runs, workers=args.workers,
+                        scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
+                        progress=not args.quiet)
+    print(f"{spec.name}: {summary['verdict']['text']}")
+    print(f"{'estimator':>9} {'variant':>7} {'gyro':>12} {'runs':>5} {'p99 lvl':>8} "
+          f"{'thesis':>7} {'>15 max min/orb':>15}")
+    for c in summary["cases"]:
+        lv = c.get("p99_level_deg")
+        th = c.get("thesis_p99_deg")
+        a15 = c.get("above15_s_per_orbit", {}).get("max")
+        print(f"{c['estimator']:>9} {c['variant']:>7} {c['gyro']:>12} {c['runs']:5d} "
+              f"{'-' if lv is None else format(lv, '8.2f'):>8} {'-' if th is None else format(th, 'g'):>7} "
+              f"{'-' if a15 is None else format(a15 / 60, '15.2f'):>15}")
+    print(f"report in {out_dir}/ (summary.json, report.html)")
     return 0
+
+
+def _output(q, text) -> None:
+    """``-o/--output FILE`` plus the deprecated hidden alias ``--out``."""
+    add_output(q, what="file", help=text)
+    q.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
 
 
 def register(sub) -> None:
@@ -131,8 +169,8 @@ def register(sub) -> None:
     def common(q):
         q.add_argument("--config", default="dual_pyramid",
                        help="sensor set: dual_pyramid, cube or a sensor TOML file (default dual_pyramid)")
-        q.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=70.0,
-                       help="FOV half angle of the bundled sets, deg (default 70)")
+        q.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=60.0,
+                       help="FOV half angle of the bundled sets, deg (default 60, O'Keefe §2.1.3)")
 
     s = css_sub.add_parser(
         "simulate", help="simulate one dispersed run (truth, CSS, gyro, estimator, control)",
@@ -143,9 +181,15 @@ def register(sub) -> None:
     common(s)
     s.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
                    help="estimator in the loop (default ekf)")
-    s.add_argument("--gyro", default="tactical", choices=("rate", "tactical", "navigation", "none"),
-                   help="gyro grade, or none for gyro-less operation (default tactical)")
+    s.add_argument("--gyro", default="tactical", choices=("inertial", "intermediate", "moderate", "low", "rate", "tactical",
+                            "navigation", "none"),
+                   help="gyro grade (Table 2.3: inertial, intermediate, moderate, low; generic: "
+                   "rate, tactical, navigation), or none for gyro-less operation (default tactical)")
     s.add_argument("--controlled", action="store_true", help="run the sun-pointing controller")
+    s.add_argument("--variant", choices=("thesis", "robust"), default=None,
+                   help="simulate O'Keefe's own set-up (§2.4: 60° FOV, structure horizon, 2 Hz CSS, "
+                   "10 Hz gyro, J2-J6 orbit, TOMS albedo) with the thesis's estimators and "
+                   "controller (thesis) or ours (robust); default: the generic set-up below")
     s.add_argument("--duration-s", type=number(0.0, 366 * 86400.0, lo_open=True), default=1800.0, help="duration, s (default 1800)")
     s.add_argument("--dt-s", type=number(1e-3, 60.0), default=0.5, help="sample and control step, s (default 0.5)")
     s.add_argument("--epoch", default="2015-03-01T00:00:00Z", help="epoch, ISO 8601 UTC")
@@ -154,10 +198,10 @@ def register(sub) -> None:
     s.add_argument("--filter-albedo", default="builtin",
                    help="albedo model inside the EKF/ECKF: builtin (default), none (no albedo "
                    "model, first-session filter), or a CERES CSV / TOMS .dat file")
-    s.add_argument("--seed", type=SEED, default=1, help="random seed (default 1)")
+    add_seed(s, default=1)
     s.add_argument("--settle-s", type=number(0.0), default=300.0,
                    help="ignore errors this long after entering sunlight, s (default 300)")
-    s.add_argument("--out", help="write the run to this HDF5 file")
+    _output(s, "write the run to this HDF5 file (a CSS recording: 'css estimate', 'diagnose', 'plot')")
     s.set_defaults(func=_cmd_css_simulate)
 
     e = css_sub.add_parser(
@@ -165,25 +209,33 @@ def register(sub) -> None:
         description="Run WAVG, LSMN, WLSMN, the sun-line EKF or the ECKF on a CSS recording "
         "(HDF5 written by 'css simulate'); prints the error against the truth when present.")
     e.add_argument("recording", help="HDF5 CSS recording")
-    e.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"))
+    e.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
+                   help="sun-direction estimator: sun-line EKF or ECKF, or the single-point "
+                   "WAVG, LSMN, WLSMN (default ekf)")
     e.add_argument("--no-gyro", action="store_true",
                    help="ignore the gyro: rates from successive estimates (eq. 3.67)")
     e.add_argument("--threshold", type=number(), default=0.5,
                    help="activity threshold of the single-point methods (default 0.5)")
     e.add_argument("--settle-s", type=number(0.0), default=300.0, help="skip this long before scoring, s")
-    e.add_argument("--out", help="write the estimates to this CSV file")
+    _output(e, "write the estimates to this CSV file (t_s,s_hat_x,s_hat_y,s_hat_z)")
     e.set_defaults(func=_cmd_css_estimate)
 
     st = css_sub.add_parser(
-        "study", help="Monte Carlo study from a pipeline TOML (percentile envelopes, time above 15/30 deg)",
-        description="Run a CSS Monte Carlo study (e.g. pipelines/css/*.toml) and write "
-        "summary.json, summary.txt, envelopes.png and error_maps.png: 99th-percentile errors "
-        "after the first minutes in sunlight next to the thesis values, time above 15/30 deg "
-        "per orbit, with control the time to sun pointing, and the noise-free single-point "
-        "error maps (figs. 3.1-3.2).")
+        "study", help="Monte Carlo study (O'Keefe ch. 3 experiments): envelopes, p99, time above 15/30 deg",
+        description="Run or resume a CSS Monte Carlo study (pipelines/css/okeefe2015/*.toml: "
+        "the thesis's experiments, thesis and robust variants side by side) and write "
+        "summary.json and a self-contained report.html: the 99th-percentile error level next "
+        "to the thesis's number, percentile envelopes against sunlit time, time above "
+        "15/30 deg per orbit. Finished runs are kept under DIR/runs and skipped on restart.")
     st.add_argument("pipeline", help="study TOML file")
     st.add_argument("--runs", type=number(1, 100000, integer=True), help="override the number of runs")
-    st.add_argument("--out", help="report folder (default <study name>-report)")
+    add_output(st, what="folder", help="output folder; finished runs are kept there and "
+               "skipped on restart (default <study name>-report)")
+    st.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
+    add_executors(st)
+    st.add_argument("--force", action="store_true",
+                    help="discard stored runs of a different study in the output folder")
+    add_quiet(st)
     st.set_defaults(func=_cmd_css_study)
 
     # --- calibration, fault detection, VMM/SMM, Sun models (handlers in
@@ -198,11 +250,13 @@ def register(sub) -> None:
     ca = css_sub.add_parser(
         "calibrate", help="on-orbit CSS calibration filters (full and reduced) on a simulated orbit",
         description="Simulate O'Keefe's §4.4 case (one orbit, tumbling, dual pyramid, scale "
-        "factors dispersed 30 %%, misalignments, albedo, gyro, star tracker) and run the full "
+        "factors dispersed 30 %, misalignments, albedo, gyro, star tracker) and run the full "
         "calibration ECKF (MRP, gyro bias, scale factors, misalignments, albedo model) and the "
         "reduced filter (albedo as a considered bias). Prints per-sensor errors and 3-sigma bounds.")
-    ca.add_argument("--filter", choices=("full", "reduced", "both"), default="both")
-    ca.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
+    ca.add_argument("--filter", choices=("full", "reduced", "both"), default="both",
+                    help="calibration filter: the full ECKF, the reduced one (albedo as a "
+                    "considered bias) or both (default both)")
+    add_seed(ca, default=0)
     ca.add_argument("--duration-s", type=number(10.0, 86400.0), default=None,
                     help="duration, s (default one 400 km orbit, 5553 s)")
     ca.add_argument("--dt-s", type=number(0.05, 10.0), default=1.0, help="step, s (default 1)")
@@ -216,7 +270,7 @@ def register(sub) -> None:
                     help="albedo of the truth: builtin, none, or a CERES CSV / TOMS .dat file")
     ca.add_argument("--albedo-filter", default=None,
                     help="albedo map of the full filter (default: the truth's map)")
-    ca.add_argument("--out", help="write the summary to this JSON file")
+    _output(ca, "write the summary to this JSON file")
     ca.set_defaults(func=_lazy("cmd_calibrate"))
 
     fa = css_sub.add_parser(
@@ -227,8 +281,8 @@ def register(sub) -> None:
         "confidently below the prior's smallest plausible value. Reports detection and false-alarm rates and times to detection.")
     fa.add_argument("--runs", type=number(1, 100000, integer=True), default=300,
                     help="runs per failure mode (default 300)")
-    fa.add_argument("--workers", type=number(1, 256, integer=True), default=1)
-    fa.add_argument("--seed", type=SEED, default=0)
+    add_workers(fa, default=1, help="local worker processes (default 1)")
+    add_seed(fa, default=0)
     fa.add_argument("--window", type=number(1, 100000, integer=True), default=50,
                     help="averaging window, valid samples (default 50)")
     fa.add_argument("--prob", type=number(0.0, 1.0, lo_open=True, hi_open=True), default=0.999999,
@@ -241,7 +295,8 @@ def register(sub) -> None:
                     "output stays at zero; catches off failures of never-calibrated sensors)")
     fa.add_argument("--star-period-s", type=number(0.0, 3600.0), default=10.0,
                     help="star-tracker period, s; 0 for none (default 10)")
-    fa.add_argument("--out", help="write the summary to this JSON file")
+    _output(fa, "write the summary to this JSON file")
+    add_quiet(fa, help="no progress bar")
     fa.set_defaults(func=_lazy("cmd_faults"))
 
     vm = css_sub.add_parser(
@@ -249,14 +304,17 @@ def register(sub) -> None:
         description="DiGregorio's comparison: MEKF with magnetometer, gyro and photodiodes, "
         "photodiodes used as a least-squares Sun vector (SMM) or as individual voltages (VMM); "
         "attitude errors grouped by the number of lit photodiodes, with a plot.")
-    vm.add_argument("--runs", type=number(1, 100000, integer=True), default=20)
-    vm.add_argument("--seed", type=SEED, default=0)
-    vm.add_argument("--duration-s", type=number(10.0, 86400.0), default=3000.0)
+    vm.add_argument("--runs", type=number(1, 100000, integer=True), default=20,
+                    help="Monte Carlo runs (default 20)")
+    add_seed(vm, default=0)
+    vm.add_argument("--duration-s", type=number(10.0, 86400.0), default=3000.0,
+                    help="duration of each run, s (default 3000)")
     vm.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=70.0,
                     help="photodiode FOV half angle, deg (cube; default 70)")
     vm.add_argument("--albedo", action="store_true", help="Earth albedo in the truth (unmodelled)")
-    vm.add_argument("--plot", help="write the figure to this PNG file")
-    vm.add_argument("--out", help="write the summary to this JSON file")
+    add_plot(vm, help="also write the figure: OUTPUT with the suffix .png (css-vmm.png without -o)")
+    _output(vm, "write the summary to this JSON file")
+    add_quiet(vm, help="no progress bar")
     vm.set_defaults(func=_lazy("cmd_vmm"))
 
     sm = css_sub.add_parser(

@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from ._args import add_model_options, add_output, add_quiet, add_seed, csv_list, number
+from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_list, naming_file,
+                    number)
 
 __all__ = ["register"]
 
@@ -39,12 +40,14 @@ def _cmd_diagnose(args) -> int:
             raise InputError("unknown cross-validation grouping", field="--cv", value=g,
                              allowed="auto, none, " + ", ".join(GROUPINGS))
     folds = None if groups[0] == "none" else groups[0]
-    d = diagnose_recording(args.recording, args.scenario, free=args.free,
-                           exclude=[e.strip() for e in (args.exclude or "").split(",") if e.strip()],
-                           folds=folds, n_folds=args.folds, cv_report=tuple(groups[1:]),
-                           progress=say, max_effects=args.max_effects, min_gain=args.min_gain,
-                           seed=args.seed, shape=args.shape, library_dirs=args.library,
-                           site_dirs=args.sites)
+    with naming_file(args.recording):
+        d = diagnose_recording(args.recording, args.scenario, free=args.free,
+                               exclude=[e.strip() for e in (args.exclude or "").split(",")
+                                        if e.strip()],
+                               folds=folds, n_folds=args.folds, cv_report=tuple(groups[1:]),
+                               progress=say, max_effects=args.max_effects,
+                               min_gain=args.min_gain, seed=args.seed, shape=args.shape,
+                               library_dirs=args.library, site_dirs=args.sites)
     jpath, hpath = write_report(d, args.output)
     js = d.summary()
     print(js["verdict_line"])
@@ -110,7 +113,7 @@ def register(sub) -> None:
                    help="number of cross-validation folds (default 5)")
     p.add_argument("--min-gain", type=number(0, None, lo_open=True), default=None,
                    help="held-out gain G needed to add an effect (default 10)")
-    add_seed(p, help="seed of the random fit starts")
-    add_quiet(p)
+    add_seed(p, default=0, help="seed of the random fit starts")
+    add_quiet(p, help="no progress messages")
     add_model_options(p)
     p.set_defaults(func=_cmd_diagnose)

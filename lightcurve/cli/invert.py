@@ -3,29 +3,77 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import fields
 from pathlib import Path
 
-from ._args import (SEED, add_model_options, csv_ints, csv_list, initial_omega_rad_s, initial_q,
-                    number)
+from ..acquisition.global_init import GlobalInitConfig
+from ..errors import InputError
+from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
+from ..studies.batch import expand_inputs, invert_files
+from ._args import (add_executors, add_model_options, add_output, add_plot, add_quiet, add_seed,
+                    add_variant, csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+                    refuse_inapplicable)
 
-__all__ = ["register"]
+__all__ = ["register", "configs_from_args"]
 
 
-def _cmd_invert(args) -> int:
-    from ..studies.batch import expand_inputs, invert_files
+#: options that only one filter uses (``--method``)
+METHOD_OPTIONS = {"particles": {"bpf"}, "roughening": {"bpf"}, "resampling": {"bpf"},
+                  "rejuvenation": {"bpf"}, "ess_threshold": {"bpf"}, "device": {"bpf"},
+                  "alpha": {"ukf"}, "beta": {"ukf"}, "kappa": {"ukf"}}
+#: options that only some reflection models use (``--reflection``)
+REFLECTION_OPTIONS = {"reflection_params": {"model3"}, "reflection_facets": {"model3"},
+                      "reflection_frac": {"random-walk", "model1", "model2", "model3"},
+                      "attitude_known": {"random-walk", "model1", "model2", "model3"}}
 
-    n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+
+def _refuse_inapplicable_options(args) -> None:
+    """An option the chosen filter, reflection model or gate ignores is an input error."""
+    refuse_inapplicable(args, "method", METHOD_OPTIONS)
+    refuse_inapplicable(args, "reflection", REFLECTION_OPTIONS)
+    refuse_inapplicable(args, "gate", {"gate_false_alarm": {"auto", "reject", "inflate"}})
+
+
+def configs_from_args(args):
+    """``(ProblemConfig, filter options dict)`` from the parsed ``invert`` options — the same
+    validated objects the Python API and the study TOML build."""
     start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
     if args.initial_q is not None:
         start["initial_q"] = initial_q(args.initial_q)
     if args.initial_omega_deg_s is not None:
         start["initial_omega"] = initial_omega_rad_s(args.initial_omega_deg_s)
-    if args.shape is not None:
-        start["shape"] = args.shape
-    if args.library:
-        start["library_dirs"] = tuple(args.library)
-    if args.sites:
-        start["site_dirs"] = tuple(args.sites)
+    if args.initial == "given" and args.initial_q is None:
+        raise InputError("--initial given needs --initial-q (and --initial-omega-deg-s)",
+                         field="--initial", value="given")
+    if args.global_particles is not None:
+        if args.initial not in ("global", "auto"):
+            raise InputError("--global-particles applies to the global initialisation only",
+                             field="--global-particles", allowed="--initial global or auto")
+        start["global_config"] = GlobalInitConfig(particles=args.global_particles)
+    problem = ProblemConfig(
+        seed=args.seed, sigma_theta_deg=args.sigma_theta_deg,
+        sigma_omega_deg_s=args.sigma_omega_deg_s, acs_mode=args.acs_mode,
+        pseudo_noise=args.pseudo_noise, reflection=args.reflection,
+        attitude="truth" if args.attitude_known else "estimate",
+        reflection_frac=args.reflection_frac,
+        reflection_kinds=tuple(csv_list(args.reflection_params, "--reflection-params")),
+        reflection_facets=(None if args.reflection_facets is None else
+                           tuple(csv_ints(args.reflection_facets, "--reflection-facets"))),
+        gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
+        shape=args.shape, library_dirs=tuple(args.library) if args.library else None,
+        site_dirs=tuple(args.sites) if args.sites else None, initial=args.initial, **start)
+    cls = filter_config_class(args.method)
+    names = [f.name for f in fields(cls)] if cls is not None else list(BPF_KEYWORDS)
+    opts = {n: getattr(args, n) for n in names if hasattr(args, n)}
+    if cls is not None:
+        opts = cls(**opts).as_options()    # validated here (InputError → exit 2)
+    return problem, opts
+
+
+def _cmd_invert(args) -> int:
+    _refuse_inapplicable_options(args)
+    n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
+    problem, filter_options = configs_from_args(args)
     bar = n_files > 1 and not args.quiet
 
     def report(text, kind="info"):
@@ -42,22 +90,7 @@ def _cmd_invert(args) -> int:
 
     res = invert_files(args.files, args.method, args.output, workers=args.workers,
                        scheduler=args.scheduler, dask_local=args.dask_local, progress=bar,
-                       plot=args.plot, report=report, seed=args.seed,
-                       sigma_theta_deg=args.sigma_theta_deg,
-                       sigma_omega_deg_s=args.sigma_omega_deg_s, particles=args.particles,
-                       roughening=args.roughening, resampling=args.resampling,
-                       rejuvenation=args.rejuvenation,
-                       ess_threshold=args.ess_threshold, acs_mode=args.acs_mode,
-                       pseudo_noise=args.pseudo_noise, alpha=args.alpha, beta=args.beta,
-                       kappa=args.kappa, reflection=args.reflection,
-                       attitude="truth" if args.attitude_known else "estimate",
-                       reflection_frac=args.reflection_frac,
-                       reflection_kinds=csv_list(args.reflection_params, "--reflection-params"),
-                       reflection_facets=(None if args.reflection_facets is None else
-                                          csv_ints(args.reflection_facets,
-                                                    "--reflection-facets")),
-                       gate={"mode": args.gate, "false_alarm": args.gate_false_alarm},
-                       **start)
+                       plot=args.plot, report=report, **problem.as_options(), **filter_options)
     out = Path(args.output)
     print(f"wrote {out / 'summary.json'} ({res['n_files']} file(s), {res['n_diverged']} diverged, "
           f"{res['n_input_errors']} rejected, {res['n_failed'] - res['n_input_errors']} failed)")
@@ -73,9 +106,11 @@ def register(sub) -> None:
         "HDF5 per input plus DIR/summary.json (per file: method, final RSS attitude and rate "
         "error, final 3-sigma bounds, whether every component ended inside 3 sigma, "
         "divergence flag, runtime; or the error of a file that failed — the others go on). "
-        "The initial estimate is the file's truth perturbed by --sigma-theta-deg / "
-        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or, for recordings without "
-        "truth, --initial-q / --initial-omega-deg-s with those sigmas as their uncertainty. "
+        "The initial estimate (--initial) is the file's truth perturbed by --sigma-theta-deg / "
+        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or --initial-q / "
+        "--initial-omega-deg-s with those sigmas as their uncertainty, or — for a recording "
+        "with neither — the global initialisation, which needs no first guess and reports every "
+        "attitude mode the data allow. "
         "The shape is the one the file carries unless --shape is given. Many files run in "
         "parallel on "
         "the executors of 'compare' (process pool, Dask); the results do not depend on the "
@@ -83,23 +118,28 @@ def register(sub) -> None:
     p.add_argument("files", nargs="+", metavar="FILE.h5",
                    help="lightcurve HDF5 file(s) or glob patterns (expanded here, so quoted "
                    "patterns work; a pattern matching nothing is an error)")
-    ex = p.add_mutually_exclusive_group()
-    ex.add_argument("--workers", type=number(1, 4096, integer=True), default=None,
-                    help="local process-pool size (default: one per CPU, at most one per file; "
-                    "1 runs in this process)")
-    ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
-    ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None, metavar="W",
-                    help="start a Dask LocalCluster with W worker processes")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_executors(p, workers_help="local process-pool size (default: one per CPU, at most one "
+                  "per file; 1 runs in this process)")
+    add_quiet(p, help="no progress bar")
     p.add_argument("--method", choices=("mekf", "ukf", "bpf"), default="ukf",
                    help="filter (default: ukf)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
+    add_output(p, what="folder", required=True)
+    add_seed(p, default=0, help="random seed of the initial-estimate perturbation and of the "
+             "particle filter")
     p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3)")
-    p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
-                   help="1-sigma initial rate error per axis, deg/s (default 0.02)")
+    p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
+                   help="1-sigma initial rate error per axis, deg/s, in (0, 360] (default 0.02)")
+    p.add_argument("--initial", choices=("auto", "truth", "given", "global"), default="auto",
+                   help="where the filter starts: truth = the file's truth perturbed by "
+                   "--sigma-theta-deg/--sigma-omega-deg-s (simulations, Bernard ch. 9); given = "
+                   "--initial-q/--initial-omega-deg-s; global = no first guess: attitude "
+                   "uniform over all rotations, rate from the spin-period analysis, a tempered "
+                   "Monte Carlo search for every attitude the data allow, then this filter "
+                   "from each (ambiguities are reported, not hidden). auto (default): given if "
+                   "--initial-q is set, else truth if the file has one, else global")
+    p.add_argument("--global-particles", type=number(100, 5_000_000, integer=True), default=None,
+                   metavar="N", help="particles of the global initialisation (default 20000)")
     p.add_argument("--initial-q", default=None, metavar="Q1,Q2,Q3,Q4",
                    help="initial attitude estimate (inertial->body quaternion, scalar first, "
                    "at the first epoch) instead of the file's perturbed truth; needed for "
@@ -112,10 +152,12 @@ def register(sub) -> None:
                    "value is negative")
     add_model_options(p)
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
-    p.add_argument("--roughening", type=number(0.0), default=0.2,
-                   help="BPF roughening constant G (Bernard table 7.9; used with --rejuvenation "
-                   "separate; default 0.2)")
-    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic")
+    p.add_argument("--roughening", type=number(0.0, 10.0), default=0.2,
+                   help="BPF roughening constant G in [0, 10] (Bernard table 7.9: sigma = G E "
+                   "N^(-1/n), E the spread of the cloud; used with --rejuvenation separate; "
+                   "default 0.2)")
+    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic",
+                   help="BPF resampling scheme (default systematic)")
     p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
                    help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
                    "the whole state with the Musso et al. (2001) bandwidth; separate = the "
@@ -125,11 +167,18 @@ def register(sub) -> None:
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
     p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default="random_walk",
                    help="controlled model: ACS noise as attitude random walk or jitter")
-    p.add_argument("--pseudo-noise", type=number(0.0), default=0.0,
-                   help="rate pseudo-noise PSD, (rad/s)^2/s (default 0)")
-    p.add_argument("--alpha", type=number(0.0, lo_open=True), default=1.0, help="UKF alpha (default 1)")
-    p.add_argument("--beta", type=number(), default=2.0, help="UKF beta (default 2)")
-    p.add_argument("--kappa", type=number(), default=0.0, help="UKF kappa (default 0)")
+    p.add_argument("--pseudo-noise", type=number(0.0, 1.0), default=0.0,
+                   help="rate pseudo-noise PSD, (rad/s)^2/s, in [0, 1] (1 already lets the rate "
+                   "wander by 1 rad/s in 1 s; default 0)")
+    add_variant(p)
+    p.add_argument("--alpha", type=number(1e-4, 1.0), default=1.0,
+                   help="UKF alpha in [1e-4, 1] (Bernard sec. 6: between 0 and 1; below 1e-4 "
+                   "the sigma-point weights lose all precision; default 1)")
+    p.add_argument("--beta", type=number(0.0, 100.0), default=2.0,
+                   help="UKF beta in [0, 100] (Bernard sec. 6: non-negative, 2 for a Gaussian "
+                   "prior; default 2)")
+    p.add_argument("--kappa", type=number(0.0, 100.0), default=0.0,
+                   help="UKF kappa in [0, 100] (Bernard sec. 6: kappa >= 0; default 0)")
     p.add_argument("--reflection", choices=("none", "random-walk", "model1", "model2", "model3"),
                    default="none",
                    help="states for uncertain reflection parameters (Bernard ch. 8): per-site "
@@ -146,7 +195,7 @@ def register(sub) -> None:
     p.add_argument("--reflection-facets", default=None, metavar="LIST",
                    help="model3: comma-separated facet indices (0-based, shape-file order) "
                    "whose parameters are estimated (default: every Cook-Torrance facet)")
-    p.add_argument("--reflection-frac", type=number(0.0, lo_open=True), default=0.1,
+    p.add_argument("--reflection-frac", type=number(0.0, 10.0, lo_open=True), default=0.1,
                    help="relative 1-sigma of the reflection parameters: prior of model3, "
                    "eq. 8.10 bias variance of model1/2 (default 0.1 = Bernard sec. 10.1)")
     p.add_argument("--attitude-known", action="store_true",
@@ -160,6 +209,6 @@ def register(sub) -> None:
     p.add_argument("--gate-false-alarm", type=number(0.0, 0.5, lo_open=True), default=1e-4,
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
-    p.add_argument("--plot", action="store_true", help="also write a PNG per file")
+    add_plot(p, help="also write the estimate figure (PNG) next to each result")
     p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
                    "listed in {output}/summary.json; run the command again on the others")

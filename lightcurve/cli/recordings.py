@@ -3,12 +3,13 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 import warnings
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import add_model_options, number
+from ._args import add_model_options, add_output, add_quiet, number
 
 __all__ = ["register", "output_paths", "find_passes"]
 
@@ -58,7 +59,7 @@ def output_paths(out, keys) -> dict:
         if out.is_dir():
             res[(obj, band)] = safe_output_path(out, name, ".h5", field="object")
         else:
-            stem = out.name[:-3] if out.name.endswith(".h5") else out.name
+            stem = out.name.removesuffix(".h5")
             res[(obj, band)] = safe_output_path(out.parent, f"{stem}.{name}", ".h5", field="object")
     if len(set(res.values())) != len(res):
         raise InputError("two objects give the same output file name", field="-o", value=str(out))
@@ -139,8 +140,17 @@ def _utc(text, option):
         raise InputError(exc.bare_message, field=option, value=text, allowed=exc.allowed) from None
 
 
+def _after(start, seconds) -> str:
+    """ISO UTC text of ``start + seconds`` (whole seconds)."""
+    from datetime import timedelta
+
+    return (start + timedelta(seconds=float(seconds))).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
 #: longest time span ``lightcurve passes`` searches (days)
 MAX_PASS_SPAN_DAYS = 31.0
+#: most samples evaluated in one pass (bounded memory: ~1 kB per sample in the geometry)
+MAX_PASS_SAMPLES = 1_000_000
 
 
 def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twilight_deg=-12.0,
@@ -153,7 +163,9 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
     at least partly sunlit (:func:`lightcurve.geometry.eclipse.lit_fraction` > 0, the
     package's conical shadow) and the Sun is below ``twilight_deg`` at the site. Passes with no
     visible sample are left out. A pass already in progress at ``start`` (or still at ``end``)
-    is cut there.
+    is cut there; an object above the limit during the whole span (no rise or set, e.g. a
+    geostationary one) is one pass from ``start`` to ``end``. More than
+    :data:`MAX_PASS_SAMPLES` samples in one pass is an InputError naming ``--step-s``.
 
     Returns
     -------
@@ -176,6 +188,10 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
         sat = es.satellite()
         times, events = sat.find_events(topos, t0, t1, altitude_degrees=float(min_elevation_deg))
         passes, cur = [], None
+        if len(events) == 0:  # no rise or set: above the limit all the time (e.g. GEO), or never
+            alt = (sat - topos).at(t0).altaz()[0].degrees
+            if alt >= min_elevation_deg:
+                passes.append({"rise": start, "culm": None, "set": end})
         for t, e in zip(times, events):
             if e == 0:
                 cur = {"rise": t.utc_datetime(), "culm": None}
@@ -196,6 +212,11 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
             dur = (ps["set"] - ps["rise"]).total_seconds()
             if dur <= 0:
                 continue
+            if dur / step_s > MAX_PASS_SAMPLES:
+                raise InputError(f"a pass of {es.label} lasts {dur:.0f} s: too many samples at "
+                                 f"this step", field="--step-s", value=step_s,
+                                 allowed=f">= {dur / MAX_PASS_SAMPLES:.3g} s "
+                                 f"(at most {MAX_PASS_SAMPLES} samples per pass)")
             tt = np.unique(np.concatenate([np.arange(0.0, dur, float(step_s)), [dur]]))
             epoch = ps["rise"].strftime("%Y-%m-%dT%H:%M:%S.%fZ")
             r, _ = es.positions(epoch, tt)
@@ -205,10 +226,8 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
             if not np.any(vis):
                 continue
             k = int(np.argmax(el))
-            from datetime import timedelta
-
             iv = np.flatnonzero(vis)
-            at = (lambda s: (ps["rise"] + timedelta(seconds=float(s))).strftime("%Y-%m-%dT%H:%M:%SZ"))
+            at = functools.partial(_after, ps["rise"])
             out.append({"object": es.name or str(es.norad), "norad": es.norad,
                         "rise_utc": at(0.0), "culmination_utc": at(tt[k]), "set_utc": at(dur),
                         "max_elevation_deg": round(float(el[k]), 2),
@@ -261,8 +280,8 @@ def _cmd_passes(args) -> int:
     else:
         sys.stdout.write(buf.getvalue())
         print(f"{len(rows)} visible pass(es) over {site.id} (object sunlit, Sun below "
-              f"{args.twilight_deg:g} deg at the site, elevation >= {args.min_elevation_deg:g} deg)",
-              file=sys.stderr)
+              f"{args.twilight_deg:g} deg at the site, elevation >= "
+              f"{args.min_elevation_deg:g} deg)", file=sys.stderr)
     return 0
 
 
@@ -276,9 +295,9 @@ def register(sub) -> None:
         "HDF5 per object and band, carrying the model scenario and its shape so that every "
         "later command works on it without further options.")
     p.add_argument("recording", metavar="RECORDING.csv", help="the CSV recording")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.h5",
-                   help="output file (one object and band), or the stem of OUT.<object>.h5 "
-                   "files (several), or an existing folder")
+    add_output(p, what="file", required=True,
+               help="output file OUT.h5 (one object and band), or the stem of "
+               "OUT.<object>.h5 files (several), or an existing folder")
     p.add_argument("--scenario", action="append", default=None, metavar="[OBJECT=]MODEL.toml",
                    help="model scenario (shape, attitude, sites, epoch, [recording] columns); "
                    "OBJECT=FILE gives one object its own (repeatable)")
@@ -293,8 +312,7 @@ def register(sub) -> None:
     p.add_argument("--unlit", choices=("skip", "keep"), default=None,
                    help="rows with the object in the Earth's shadow: skip (default) or keep "
                    "(default keep when the scenario ignores the eclipse)")
-    p.add_argument("-q", "--quiet", action="store_true", help="accepted for consistency; "
-                   "import prints one line per written file")
+    add_quiet(p, help="accepted for consistency (import prints one line per written file)")
     add_model_options(p)
     p.set_defaults(func=_cmd_import)
 
@@ -318,7 +336,7 @@ def register(sub) -> None:
                    help="the site is dark when the Sun is below this altitude, deg (default -12)")
     p.add_argument("--step-s", type=number(0.1, 600.0), default=10.0,
                    help="sampling step within a pass, s (default 10)")
-    p.add_argument("-o", "--output", default=None, metavar="FILE.csv", help="write CSV here")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_output(p, what="file", help="write the CSV to this file instead of stdout")
+    add_quiet(p)
     add_model_options(p, shape=False, library=False)
     p.set_defaults(func=_cmd_passes)

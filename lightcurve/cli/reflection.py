@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import SEED, add_model_options, csv_ints, csv_list, number, output_not_input
+from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_ints, csv_list,
+                    naming_file, number, output_not_input, refuse_inapplicable)
 
 __all__ = ["register"]
 
@@ -16,8 +17,10 @@ def _cmd_fit_reflection(args) -> int:
 
     from ..io.lightcurve_h5 import read_lightcurve
     from ..io.paths import safe_output_path
-    from ..studies.fit_reflection import ConvergenceError, fit_reflection
+    from ..errors import ConvergenceError
+    from ..studies.fit_reflection import fit_reflection
 
+    refuse_inapplicable(args, "attitude", {"estimate": {"estimate"}})
     if args.attitude == "estimate" and not args.estimate:
         raise InputError("--attitude estimate needs --estimate FILE.h5 (an 'invert' result)",
                          field="--estimate")
@@ -32,11 +35,13 @@ def _cmd_fit_reflection(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(args.file).stem
     try:
-        fit = fit_reflection(curve, shape=args.shape, attitude=args.attitude,
-                             estimate=args.estimate, facets=facets, kinds=kinds,
-                             prior_frac=args.prior_frac, walkers=args.walkers, seed=args.seed,
-                             max_steps=args.max_steps, tau_factor=args.tau_factor,
-                             progress=say, library_dirs=args.library)
+        with naming_file(args.file):
+            fit = fit_reflection(curve, shape=args.shape, attitude=args.attitude,
+                                 estimate=args.estimate, facets=facets, kinds=kinds,
+                                 prior_frac=args.prior_frac, walkers=args.walkers,
+                                 seed=args.seed, max_steps=args.max_steps,
+                                 tau_factor=args.tau_factor, progress=say,
+                                 library_dirs=args.library)
     except ConvergenceError as exc:
         from ..io.atomic import atomic_write_text
 
@@ -96,7 +101,8 @@ def register(sub) -> None:
                    help="step budget (default 40000)")
     p.add_argument("--tau-factor", type=number(1.0), default=50.0,
                    help="converged when steps >= factor x max autocorrelation time (default 50)")
-    p.add_argument("--seed", type=SEED, default=0, help="random seed (default 0)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    add_seed(p, default=0, help="random seed of the walkers")
+    add_output(p, what="folder", required=True,
+               help="output folder (STEM.reflection.json, corner and predictive plots)")
+    add_quiet(p, help="no progress lines")
     p.set_defaults(func=_cmd_fit_reflection)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import argparse
+
 from ..errors import InputError
+from ._args import add_library
 
 __all__ = ["register"]
 
@@ -10,7 +13,7 @@ __all__ = ["register"]
 def _cmd_shapes_list(args) -> int:
     from ..photometry.shapes_io import load_shape, shape_library
 
-    for name, path in shape_library(args.library).items():
+    for name, path in shape_library(_dirs(args)).items():
         try:
             desc = load_shape(path).description
         except InputError as exc:
@@ -22,14 +25,14 @@ def _cmd_shapes_list(args) -> int:
 def _cmd_shapes_show(args) -> int:
     from ..photometry.shapes_io import load_shape
 
-    print(load_shape(args.name, library_dirs=args.library).summary())
+    print(load_shape(args.name, library_dirs=_dirs(args)).summary())
     return 0
 
 
 def _cmd_shapes_validate(args) -> int:
     from ..photometry.shapes_io import validate_shape
 
-    problems = validate_shape(args.spec, library_dirs=args.library)
+    problems = validate_shape(args.spec, library_dirs=_dirs(args))
     for p in problems:
         print(p)
     if not problems:
@@ -40,6 +43,19 @@ def _cmd_shapes_validate(args) -> int:
     return 2 if any(NONCONVEX_NOTE not in p for p in problems) else 0
 
 
+def _sub_library(q) -> None:
+    """``--library`` after the action too (``shapes list --library DIR``); merged with the
+    folders given before it by :func:`_dirs`."""
+    q.add_argument("--library", action="append", metavar="DIR", default=argparse.SUPPRESS,
+                   dest="library_sub",
+                   help="extra shape library folder, searched before the bundled shapes/ "
+                   "(repeatable; also accepted before the action)")
+
+
+def _dirs(args):
+    return (args.library or []) + list(getattr(args, "library_sub", []) or []) or None
+
+
 def register(sub) -> None:
     p = sub.add_parser(
         "shapes",
@@ -47,13 +63,14 @@ def register(sub) -> None:
         description="Faceted shape library: bundled shapes/ plus folders given with --library. "
         "Shapes are TOML facet lists or OBJ/STL meshes with a TOML material map.",
     )
-    p.add_argument("--library", action="append", metavar="DIR", default=None,
-                   help="extra shape folder searched before the bundled library (repeatable)")
+    add_library(p)
     ssub = p.add_subparsers(title="shape commands", metavar="ACTION")
     pl = ssub.add_parser("list", help="list the shapes in the library")
+    _sub_library(pl)
     pl.set_defaults(func=_cmd_shapes_list)
     ps = ssub.add_parser("show", help="print a shape's facets, materials and mass properties")
     ps.add_argument("name", help="library name or path to a shape TOML")
+    _sub_library(ps)
     ps.set_defaults(func=_cmd_shapes_show)
     pv = ssub.add_parser(
         "validate", help="check a shape: degenerate facets, normals, material ranges, convexity",
@@ -61,5 +78,6 @@ def register(sub) -> None:
         "their ranges (xi in [0,1], a in (0,1), m in (0,1]) and non-convex shapes (self-shadowing "
         "is not modelled). Exit code 0: no problems (or only non-convexity); 2: problems.")
     pv.add_argument("spec", metavar="PATH_OR_NAME", help="library name or path to a shape TOML")
+    _sub_library(pv)
     pv.set_defaults(func=_cmd_shapes_validate)
     p.set_defaults(func=lambda a: (p.print_help(), 2)[1])

@@ -7,39 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..studies.scenario import SCENARIO_ALIASES, resolve_scenario
 from ._args import (add_model_options, add_output, add_plot, add_quiet, add_seed,
                     number, output_not_input)
 
 __all__ = ["register", "resolve_scenario", "SCENARIO_ALIASES"]
-
-#: ``--scenario`` short names of the bundled pipelines (``lightcurve demo --scenario thesis``)
-SCENARIO_ALIASES = {
-    "default": "default.toml",
-    "thesis": "thesis/leo-ic1-fast-spin-controlled-1site.toml",
-    "thesis-2site": "thesis/leo-ic1-fast-spin-controlled-2site.toml",
-}
-
-
-def resolve_scenario(spec) -> Path:
-    """A scenario path from ``--scenario``: a file, an alias (:data:`SCENARIO_ALIASES`) or a
-    bundled pipeline name relative to ``pipelines/`` (``thesis/geo-ic1-…``, ``.toml`` optional)."""
-    from .._paths import data_dir
-
-    p = Path(spec)
-    if p.is_file():
-        return p
-    base = data_dir("pipelines")
-    name = SCENARIO_ALIASES.get(str(spec), str(spec))
-    for cand in (base / name, base / f"{name}.toml"):
-        if cand.is_file() and base.resolve() in cand.resolve().parents:
-            return cand
-    if str(spec).endswith(".toml") or p.parent != Path("."):
-        return p  # a path: the loader names the missing file
-    raise InputError("scenario not found", field="--scenario", value=str(spec),
-                     allowed="a TOML file, " + ", ".join(SCENARIO_ALIASES)
-                     + ", or a name under the bundled pipelines/ (e.g. thesis/geo-ic1-fast-spin-controlled-1site)")
-
 
 def _cmd_simulate(args) -> int:
     import warnings
@@ -261,7 +233,7 @@ def register(sub) -> None:
     add_seed(p, default=None, help="random seed of the simulation and of the filter's start")
     p.add_argument("--sigma-theta-deg", type=number(0.0, 180.0, lo_open=True), default=3.0,
                    help="1-sigma initial attitude error per axis, deg (default 3, Bernard ch. 9)")
-    p.add_argument("--sigma-omega-deg-s", type=number(0.0, lo_open=True), default=0.02,
+    p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
     add_quiet(p, help="print nothing (files are still written)")
     p.set_defaults(func=_cmd_demo)

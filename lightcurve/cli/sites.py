@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from ._args import add_sites
+
 __all__ = ["register"]
 
 
@@ -38,12 +40,10 @@ def register(sub) -> None:
     )
     ssub = p.add_subparsers(title="sites commands", metavar="SUBCOMMAND")
     pl = ssub.add_parser("list", help="list all known sites")
-    pl.add_argument("--sites", action="append", metavar="DIR", default=None,
-                    help="extra folder of site TOML files (repeatable)")
+    add_sites(pl)
     pl.set_defaults(func=_cmd_sites_list)
     ps = ssub.add_parser("show", help="show one site")
     ps.add_argument("id", help="site id, e.g. socorro")
-    ps.add_argument("--sites", action="append", metavar="DIR", default=None,
-                    help="extra folder of site TOML files (repeatable)")
+    add_sites(ps)
     ps.set_defaults(func=_cmd_sites_show)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])

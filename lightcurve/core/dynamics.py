@@ -144,7 +144,8 @@ def _stage(q0, q1, q2, q3, w0, w1, w2, J, K, T, gg, wheels, ts):
 
 @njit(cache=True, inline="always")
 def rk4_step_xyz(q0, q1, q2, q3, w0, w1, w2, dt, J, K, T, gg, wheels):
-    """One classical RK4 step of ``[q, ω]`` over ``dt`` s (module docstring) → 7-tuple
+    """One classical RK4 step of ``[q, ω]`` (Bernard eq. 4.12–4.13; O'Keefe eq. B.1 with wheels)
+    over ``dt`` s (module docstring) → 7-tuple
     ``(q0, q1, q2, q3, ω0, ω1, ω2)``, the quaternion renormalised (sign kept).
 
     ``q`` scalar first, inertial→body; ``ω`` rad/s body axes; ``J``, ``K`` row-major 9-tuples
@@ -293,18 +294,6 @@ def _mm(A, B, out):
             s = 0.0
             for k in range(n):
                 s += A[i, k] * B[k, j]
-            out[i, j] = s
-
-
-@njit(cache=True)
-def _mmt(A, B, out):
-    """``out = A @ Bᵀ`` (square, no aliasing)."""
-    n = A.shape[0]
-    for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += A[i, k] * B[j, k]
             out[i, j] = s
 
 
@@ -496,7 +485,7 @@ def uncontrolled_transition_nb(w0, J, J_inv, eta_psd, dt, nsub):
         _mm(Ph, Phi, T1)
         Phi[:, :] = T1
         _mm(Ph, Qd, T1)
-        _mmt(T1, Ph, T2)
+        _mm(T1, Ph.T, T2)
         for i in range(6):
             for j in range(6):
                 Qd[i, j] = T2[i, j] + Qh[i, j]

@@ -180,7 +180,7 @@ def symmetrize_nb(P):
 
 @njit(cache=True)
 def kalman_gain_nb(P, H, R, nu, consider):
-    """Gain of a measurement update → ``(K (n,m), S (m,m), nis, ok)``.
+    """Gain of a measurement update → ``(K (n,m), S (m,m), nis, ok)`` (Bernard eq. 7.30, 6.13).
 
     ``S = H P Hᵀ + R`` (symmetrised), ``K = P Hᵀ S⁻¹`` through the Cholesky factor of S, rows
     of ``consider`` states (bool (n,)) zeroed (Schmidt), ``nis = νᵀ S⁻¹ ν``. ``ok`` False (K
@@ -215,7 +215,8 @@ def kalman_gain_nb(P, H, R, nu, consider):
 
 @njit(cache=True)
 def joseph_apply_nb(x, P, nu, H, R, K):
-    """``x⁺ = x + K ν`` and ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` (symmetrised) for any gain
+    """``x⁺ = x + K ν`` and ``P⁺ = (I − K H) P (I − K H)ᵀ + K R Kᵀ`` (Bernard eq. 7.31, 7.33;
+    symmetrised) for any gain
     → ``(x⁺, P⁺, ok)``; ``ok`` False (prior copies returned) when the posterior is not finite."""
     n = x.shape[0]
     IKH = np.eye(n) - K @ H
@@ -233,8 +234,9 @@ def joseph_apply_nb(x, P, nu, H, R, K):
 
 @njit(cache=True)
 def joseph_update_nb(x, P, nu, H, R, consider):
-    """Kalman measurement update, Joseph-form covariance, optional Schmidt consider states
-    (:func:`kalman_gain_nb` then :func:`joseph_apply_nb`).
+    """Kalman measurement update, Joseph-form covariance (Bernard eq. 7.30–7.33), optional
+    Schmidt consider states (O'Keefe §3.2.2) — :func:`kalman_gain_nb` then
+    :func:`joseph_apply_nb`.
 
     Parameters
     ----------
@@ -258,7 +260,8 @@ def joseph_update_nb(x, P, nu, H, R, consider):
 
 @njit(cache=True)
 def joseph_scalar_nb(P, H, R, nu, dx, Pn):
-    """Joseph-form update of ONE scalar measurement from a zero prior error state, in O(n²).
+    """Joseph-form update (Bernard eq. 7.30–7.33) of ONE scalar measurement from a zero prior
+    error state, in O(n²).
 
     P (n,n) prior covariance, H (n,) measurement row, R > 0 noise variance, ``nu = y − ŷ``.
     ``S = H P Hᵀ + R``, ``K = P Hᵀ / S``, ``δx⁺ = K ν`` into ``dx`` (n,) and

@@ -42,7 +42,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .rotations import qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
+from .rotations import qrot_xyz_nb
 
 __all__ = [
     "LAMBERT", "COOK_TORRANCE", "PHONG", "ASHIKHMIN_SHIRLEY", "COOK_TORRANCE_THESIS",
@@ -352,7 +352,8 @@ def nchunks_nb(N):
 
 @nb.njit(cache=True, parallel=True)
 def mag_kernel_nb(Q, s, o, normals, areas, ids, params, offset):
-    """Apparent magnitudes (S,) of attitudes Q (S,4) at one epoch (module docstring).
+    """Apparent magnitudes (S,) of attitudes Q (S,4) at one epoch (Bernard eq. 5.2–5.6 in the
+    consistent form of the module docstring).
 
     ``m = offset − 2.5 log10 Φ(q)``; s, o (3,) unit ECI object→Sun / object→observer; +inf
     where no light is reflected to the observer. Parallel over chunks of attitudes.

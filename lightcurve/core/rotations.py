@@ -315,7 +315,7 @@ def grp2q_nb(p, a, f):
 
 @njit(cache=True)
 def grp_rel_nb(Q, qref, a, f):
-    """GRP (N,3) of the error ``δq_i = Q[i] ⊗ qref⁻¹`` (Bernard eq. 3.28, 7.67–7.70) with the
+    """GRP (N,3) of the error ``δq_i = Q[i] ⊗ qref⁻¹`` (Bernard eq. 3.28, 7.71) with the
     sign of δq chosen so that ``δq1 ≥ 0`` (the short rotation)."""
     N = Q.shape[0]
     out = np.empty((N, 3))
@@ -331,7 +331,7 @@ def grp_rel_nb(Q, qref, a, f):
 @njit(cache=True)
 def from_grp_rel_nb(P, qref, a, f):
     """Unit quaternions (N,4) ``normalise(grp2q(P[i]) ⊗ qref)`` — the inverse of
-    :func:`grp_rel_nb` (Bernard eq. 7.60–7.66); the sign of the product is kept."""
+    :func:`grp_rel_nb` (Bernard eq. 3.29–3.30, 7.65–7.67); the sign of the product is kept."""
     N = P.shape[0]
     out = np.empty((N, 4))
     for i in range(N):

@@ -22,7 +22,8 @@ __all__ = ["unscented_weights_nb", "sigma_offsets_nb", "weighted_mean_cov_nb"]
 
 @njit(cache=True)
 def unscented_weights_nb(n, alpha, beta, kappa):
-    """``(λ, Wᵐ (2n+1,), Wᶜ (2n+1,))`` of the scaled unscented transform (module docstring).
+    """``(λ, Wᵐ (2n+1,), Wᶜ (2n+1,))`` of the scaled unscented transform (module docstring;
+    λ of Bernard eq. 7.64).
 
     The caller checks ``n ≥ 1``, ``α > 0`` and ``n + λ > 0``.
     """
@@ -37,7 +38,8 @@ def unscented_weights_nb(n, alpha, beta, kappa):
 
 @njit(cache=True)
 def sigma_offsets_nb(P, c):
-    """Offsets (2n, n) ``±σᵢ``, σᵢ the columns of chol(c P) with ``c = n + λ`` → ``(off, ok)``.
+    """Offsets (2n, n) ``±σᵢ``, σᵢ the columns of chol(c P) with ``c = n + λ`` → ``(off, ok)``
+    (Bernard eq. 7.51–7.53, 7.62–7.63).
 
     ``ok`` False (offsets zero) when ``c P`` is not positive definite (:func:`cholesky_nb`).
     ``P`` is symmetrised first (only its lower triangle is read after that).

@@ -67,7 +67,8 @@ import numpy as np
 from ..estimation.kalman import joseph_update_nb
 from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
-from .albedo import AlbedoMap, builtin_albedo_map, cell_irradiance_nb, earth_rotation_angle
+from .albedo import (AlbedoCells, AlbedoMap, albedo_vectors_nb, builtin_albedo_map,
+                     earth_rotation_angle, r3_nb)
 from .attitude_ekf import (mrp_dcm_nb, mrp_dcm_vec_jac_nb, mrp_propagate_nb,
                            mrp_switch_cov_nb, mtv3_nb, mv3_nb, star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
@@ -76,123 +77,6 @@ __all__ = ["AlbedoCells", "CalibrationParams", "CalibrationResult", "run_calibra
            "calibration_measurement_nb", "calibration_update_nb", "albedo_vectors_nb",
            "CalibrationCase", "simulate_calibration_case", "state_layout", "acceptance_summary",
            "r3_nb", "albedo_grid_error"]
-
-
-# ---------------------------------------------------------------------------------------
-# albedo grid with row/column structure (window search)
-# ---------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class AlbedoCells:
-    """Earth-fixed cell geometry of a regular albedo map, kept on its (nlat, nlon) grid.
-
-    centers_m (nlat·nlon, 3) m, normals (nlat·nlon, 3) unit geodetic normals, rho_area_m2
-    (nlat·nlon,) = ρ A (m²), lat_c (nlat,) rad cell-centre latitudes, lon_w0 rad west edge of
-    column 0, dlon rad column width, dlat_max rad largest row height.
-    """
-
-    centers_m: np.ndarray
-    normals: np.ndarray
-    rho_area_m2: np.ndarray
-    lat_c: np.ndarray
-    nlat: int
-    nlon: int
-    lon_w0: float
-    dlon: float
-    dlat_max: float
-    source: str = "map"
-
-    @classmethod
-    def from_map(cls, amap: AlbedoMap) -> "AlbedoCells":
-        from .albedo import cell_areas_m2, cell_centers_ecef
-
-        lat_e, lon_e = np.asarray(amap.lat_edges_rad), np.asarray(amap.lon_edges_rad)
-        # cell centres at the authalic-latitude midpoint, as AlbedoGrid (the truth model)
-        centers, normals, lat_c, lon_c = cell_centers_ecef(lat_e, lon_e)
-        ra = (cell_areas_m2(lat_e, lon_e) * amap.values).reshape(-1)
-        dlon = float(np.mean(np.diff(lon_e)))
-        if not np.allclose(np.diff(lon_e), dlon):
-            raise ValueError("AlbedoCells needs equal-width longitude columns")
-        return cls(np.ascontiguousarray(centers), np.ascontiguousarray(normals),
-                   np.ascontiguousarray(ra), lat_c, lat_c.size, lon_c.size, float(lon_e[0]),
-                   dlon, float(np.max(np.diff(lat_e))), amap.source)
-
-    @classmethod
-    def none(cls) -> "AlbedoCells":
-        """An empty grid (no albedo)."""
-        z = np.zeros((0, 3))
-        return cls(z, z.copy(), np.zeros(0), np.zeros(0), 0, 0, -np.pi, 2 * np.pi, np.pi, "none")
-
-    def args(self):
-        return (self.centers_m, self.normals, self.rho_area_m2, self.lat_c, self.nlat, self.nlon,
-                self.lon_w0, self.dlon, self.dlat_max)
-
-
-@numba.njit(cache=True)
-def r3_nb(theta, v):
-    """R3(θ) v: ECI → Earth-fixed for the Earth rotation angle θ (rad)."""
-    c = np.cos(theta)
-    s = np.sin(theta)
-    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
-
-
-@numba.njit(cache=True)
-def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
-                      r_E, s_E, nE, cos_fov, hE, edge_m):
-    """Per-sensor albedo vector sums V_κ = Σ a_j ĉ_j (Earth-fixed, (N,3)) over the cells that
-    are sunlit, in view of the spacecraft and inside sensor κ's FOV (normals nE (N,3),
-    structure-horizon normals hE (N,3), Earth-fixed).  Only rows/columns of the cap visible
-    from r_E (m) are visited.  ``edge_m`` (N,): cosine margin about each FOV cut-off; the
-    irradiance Σ a_j c_j of the cells inside that band (whose membership is uncertain) is
-    returned as ``A_edge``.  Returns (V (N,3), A_edge (N,), number of cells evaluated)."""
-    N = nE.shape[0]
-    V = np.zeros((N, 3))
-    Aedge = np.zeros(N)
-    if nlat == 0:
-        return V, Aedge, 0
-    rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
-    lam0 = np.arccos(min(1.0, 6356752.0 / rn))  # visible cap half angle (polar radius: safe)
-    phi = np.arcsin(r_E[2] / rn)
-    lon = np.arctan2(r_E[1], r_E[0])
-    lo = phi - lam0 - dlat_max
-    hi = phi + lam0 + dlat_max
-    full_lon = hi >= 0.5 * np.pi - dlat_max or lo <= -0.5 * np.pi + dlat_max
-    if full_lon:
-        c0 = 0
-        ncol = nlon
-    else:
-        # longitude half-width of a spherical cap of radius λ centred at latitude φ (not
-        # containing a pole): asin(sin λ / cos φ); λ widened by one row for the cell size
-        half = np.arcsin(min(1.0, np.sin(lam0 + dlat_max) / np.cos(phi))) + dlon
-        c0 = int(np.floor((lon - half - lon_w0) / dlon))
-        ncol = int(np.ceil(2.0 * half / dlon)) + 2
-        if ncol > nlon:
-            ncol = nlon
-            c0 = 0
-    count = 0
-    for i in range(nlat):
-        if lat_c[i] < lo or lat_c[i] > hi:
-            continue
-        for cc in range(ncol):
-            jc = (c0 + cc) % nlon
-            j = i * nlon + jc
-            if rho_area[j] <= 0.0:
-                continue
-            count += 1
-            a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_E, s_E)
-            if a == 0.0:
-                continue
-            for k in range(N):
-                c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
-                if c > 0.0 and abs(c - cos_fov[k]) < edge_m[k]:
-                    Aedge[k] += a * c
-                if c < cos_fov[k] or c <= 0.0:
-                    continue
-                if hE[k, 0] * ux + hE[k, 1] * uy + hE[k, 2] * uz < 0.0:
-                    continue
-                V[k, 0] += a * ux
-                V[k, 1] += a * uy
-                V[k, 2] += a * uz
-    return V, Aedge, count
 
 
 # ---------------------------------------------------------------------------------------
@@ -751,7 +635,8 @@ def simulate_calibration_case(rng, *, css: CSSArray | None = None, duration_s=No
     from .truth import Dispersions, Scenario, simulate
 
     g = as_generator(rng)
-    css = dual_pyramid() if css is None else css
+    # our robust calibration set-up (70° FOV, no structure horizon), not the thesis ch. 4 one
+    css = dual_pyramid(fov_half_angle_deg=70.0) if css is None else css
     dur = ORBIT_PERIOD_400KM_S if duration_s is None else float(duration_s)
     alb = None if albedo_truth == "builtin" else albedo_truth
     disp = Dispersions(rate_sigma_deg_s=rate_sigma_deg_s, css_scale_common_sigma=0.0,

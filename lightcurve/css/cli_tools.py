@@ -62,8 +62,8 @@ def cmd_calibrate(args) -> int:
         report[name] = {k: (v.tolist() if isinstance(v, np.ndarray) else v)
                         for k, v in s.items() if k not in ("attitude_err_deg", "bias_err")}
         report[name]["acceptance_met"] = ok
-    if args.out:
-        _write_json(args.out, report)
+    if args.output:
+        _write_json(args.output, report)
     return 0
 
 
@@ -73,8 +73,14 @@ def cmd_faults(args) -> int:
 
     det = AveragedNISDetector(window=args.window, prob=args.prob, t_start_s=args.start_s)
     dark = None if getattr(args, "no_dark", False) else DarkSensorDetector(t_start_s=args.start_s)
-    out = fault_study(args.runs, seed=args.seed, workers=args.workers, detector=det, dark=dark,
-                      t_fail_s=args.fail_s, star_period_s=getattr(args, "star_period_s", 10.0))
+    from ..cli._args import progress_bar
+
+    with progress_bar(total=4 * args.runs, desc="css faults", quiet=args.quiet,
+                      unit="run") as bar:
+        out = fault_study(args.runs, seed=args.seed, workers=args.workers, detector=det,
+                          dark=dark, t_fail_s=args.fail_s,
+                          star_period_s=getattr(args, "star_period_s", 10.0),
+                          progress=bar.update)
     d = out["detector"]
     print(f"averaged-NIS detector: window {d['window']}, threshold {d['threshold']:.3f} "
           f"(two-sided chi2 interval, prob {d['prob']}), decisions after {d['t_start_s']:g} s")
@@ -92,8 +98,8 @@ def cmd_faults(args) -> int:
               f"{v['false_alarm_rate']:11.4f}  "
               f"{f(v.get('wrong_sensor_rate'), '12.3f')}  {f(v.get('ttd_median_s'), '12.0f')}  "
               f"{f(v.get('ttd_p90_s'), '9.0f')}")
-    if args.out:
-        _write_json(args.out, out)
+    if args.output:
+        _write_json(args.output, out)
     return 0
 
 
@@ -101,18 +107,24 @@ def cmd_vmm(args) -> int:
     """VMM vs SMM Monte Carlo with a plot."""
     from .vmm import plot_vmm_study, vmm_study
 
-    r = vmm_study(args.runs, seed=args.seed, duration_s=args.duration_s,
-                  fov_half_angle_deg=args.fov_deg, albedo=args.albedo)
+    from ..cli._args import progress_bar
+
+    with progress_bar(total=args.runs, desc="css vmm", quiet=args.quiet, unit="run") as bar:
+        r = vmm_study(args.runs, seed=args.seed, duration_s=args.duration_s,
+                      fov_half_angle_deg=args.fov_deg, albedo=args.albedo, progress=bar.update)
     print(f"{r['runs']} runs; median / RMS attitude error (deg) by number of lit photodiodes:")
     for k, v in list(r["by_n_lit"].items()) + [("1-2", r["lt3"])]:
         if v["samples"]:
             print(f"  {k:>3s}: {v['samples']:7d} samples  SMM {v['smm_median_deg']:.3f} / "
                   f"{v['smm_rms_deg']:.3f}   VMM {v['vmm_median_deg']:.3f} / {v['vmm_rms_deg']:.3f}")
     if args.plot:
-        plot_vmm_study(r, args.plot)
-        print(f"wrote {args.plot}")
-    if args.out:
-        _write_json(args.out, {k: v for k, v in r.items() if k != "example"})
+        from pathlib import Path
+
+        png = Path(args.output).with_suffix(".png") if args.output else Path("css-vmm.png")
+        plot_vmm_study(r, png)
+        print(f"wrote {png}")
+    if args.output:
+        _write_json(args.output, {k: v for k, v in r.items() if k != "example"})
     return 0
 
 

@@ -30,30 +30,30 @@ from .sensors import CSSArray, azel_to_normal
 __all__ = ["DEFAULT_FOV_HALF_ANGLE_DEG", "DUAL_PYRAMID_AZEL_DEG", "CUBE_AZEL_DEG", "dual_pyramid", "cube", "from_azel_deg",
            "load_configuration", "configuration_by_name"]
 
-# O'Keefe table 2.1, offset dual pyramid: four sensors tilted 45 deg up from the x-y plane at
-# azimuths 0/90/180/270 deg and four tilted 45 deg down whose azimuths are rotated by 45 deg
-# (so that the two pyramids do not share planes).  The 45 deg tilt is the one used by the
-# Basilisk sun-line filter unit tests written alongside the thesis (normals (±0.5, ±0.5, 0.707)
-# about the pyramid axis).
+# O'Keefe table 2.1 (columns: azimuth, elevation ±45°, "angled 45° from the body z axis",
+# §2.2.1) with §2.2.1's offset: "the −z facing sensors are rotated by 45° about the z axis ...
+# adding 45° to the azimuth angles for sensors 5 to 8 ... the configuration used in this
+# research".
 DUAL_PYRAMID_AZEL_DEG = np.array([
     [0.0, 45.0], [90.0, 45.0], [180.0, 45.0], [270.0, 45.0],
     [45.0, -45.0], [135.0, -45.0], [225.0, -45.0], [315.0, -45.0],
 ])
 
-# O'Keefe table 2.2, cube: one sensor on each face.  The thesis prints the azimuth of sensor 4
-# as "20"; that is a typo for 270 deg (the -y face): with 20 deg two sensors would almost
-# coincide and the -y face would be blind, contradicting the cube described in the text.
+# O'Keefe table 2.2, cube: one sensor on each face.  Table 2.2 prints its columns in the other
+# order from table 2.1 (elevation first: 0, 0, 0, 0, 90, 270 = −90), and the azimuth of
+# sensor 4 as "20", a slip for 270° (the −y face): with 20° two sensors would almost coincide
+# and the −y face would be blind, contradicting "one sensor on each of the six faces" (§2.2).
 CUBE_AZEL_DEG = np.array([
     [0.0, 0.0], [90.0, 0.0], [180.0, 0.0], [270.0, 0.0],  # sensor 4: 270 (thesis typo "20")
     [0.0, 90.0], [0.0, -90.0],
 ])
 
 
-# Default FOV half angle of the bundled configurations.  The thesis' exact value is not
-# reproduced here; 70 deg makes the dual pyramid "partially underdetermined" (44 % of the
-# sphere of Sun directions sees fewer than three sensors, 0 % with a 90 deg FOV), which is the
-# situation the thesis studies.  Pass another value to change it.
-DEFAULT_FOV_HALF_ANGLE_DEG = 70.0
+# Default FOV half angle of the bundled configurations: O'Keefe §2.1.3, "the CSS 120°
+# edge-to-edge field of view" (§2.2.1: the dual pyramid's sensors have "120° edge-to-edge
+# fields of view").  The thesis's structure horizon of the dual pyramid (§2.2.1) is added by
+# lightcurve.css.experiments.thesis_css.
+DEFAULT_FOV_HALF_ANGLE_DEG = 60.0
 
 
 def from_azel_deg(azel_deg, fov_half_angle_deg=90.0, *, noise_sigma=0.0, name="css",

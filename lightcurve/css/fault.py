@@ -320,7 +320,7 @@ def _worker(arg):
 
 
 def fault_study(n_runs=300, modes=FAULT_MODES + (None,), *, seed=0, workers=1,
-                return_runs=False, **kw) -> dict:
+                return_runs=False, progress=None, **kw) -> dict:
     """Monte Carlo of :func:`run_fault_case`: ``n_runs`` per mode (None = fault-free).
 
     Returns per mode: runs, detection rate over all runs, over the runs whose failure was
@@ -329,7 +329,8 @@ def fault_study(n_runs=300, modes=FAULT_MODES + (None,), *, seed=0, workers=1,
     detector flagged first; the time-to-detection distribution (s: 10/25/50/75/90th
     percentiles and max) overall and for the observable runs; plus the detector settings.
     Seeds: run i of mode m uses ``(seed, index of m, i)``.  ``return_runs``: also return the
-    per-run records (list of dicts) under "runs".
+    per-run records (list of dicts) under "runs". ``progress``: callable called with no
+    argument after each finished run (a progress bar), or None.
     """
     jobs = []
     for mi, m in enumerate(modes):
@@ -339,9 +340,17 @@ def fault_study(n_runs=300, modes=FAULT_MODES + (None,), *, seed=0, workers=1,
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(workers) as ex:
-            runs = list(ex.map(_worker, jobs, chunksize=4))
+            runs = []
+            for r in ex.map(_worker, jobs, chunksize=4):
+                runs.append(r)
+                if progress is not None:
+                    progress()
     else:
-        runs = [_worker(j) for j in jobs]
+        runs = []
+        for j in jobs:
+            runs.append(_worker(j))
+            if progress is not None:
+                progress()
     det = kw.get("detector", AveragedNISDetector())
     dk = kw.get("dark", DarkSensorDetector())
     out = {"detector": {"window": det.window, "prob": det.prob, "threshold": det.limit(),

@@ -21,10 +21,13 @@ Farrenkopf noise is added::
 All rates are body-axes rad/s.  The output noise is what a perfectly synchronised gyro
 integrating over Δt would deliver (ARW converted to a per-sample rate noise σ_v/√Δt).
 
-Grades (table 2.3 of the thesis lists typical rate-, tactical- and navigation-grade
-performance; the numbers in :data:`GYRO_GRADES` are representative values of those classes
-in SI units — ARW in rad/√s, RRW in rad/s^{3/2}, initial bias 1σ in rad/s, scale factor 1σ
-dimensionless, misalignment 1σ in rad).
+Grades (:data:`GYRO_GRADES`): the four of O'Keefe (2015) Table 2.3 — "inertial",
+"intermediate", "moderate", "low" — with ARW σ_v = the table's rate noise σ_ω, the initial
+bias 1σ = its bias stability σ_ωr and RRW σ_u = σ_ωd = √(2/τ) σ_ωr, τ = 1000 s (§2.3.3, §2.4);
+the table gives no scale-factor or misalignment errors (zero).  Three further classes
+("rate", "tactical", "navigation") are generic commercial-catalogue values of our own, not
+from the thesis (ARW in rad/√s, RRW in rad/s^{3/2}, bias 1σ rad/s, scale factor 1σ,
+misalignment 1σ rad).
 """
 
 from __future__ import annotations
@@ -62,7 +65,20 @@ class GyroSpec:
                 raise ValueError(f"GyroSpec.{k} must be finite and >= 0, got {v}")
 
 
+def _table_2_3(name):
+    from .okeefe2015 import gyro_sigmas
+
+    sw, sr, sd = gyro_sigmas(name)
+    return GyroSpec(name, sw, sd, sr)
+
+
 GYRO_GRADES = {
+    # O'Keefe (2015) Table 2.3
+    "inertial": _table_2_3("inertial"),
+    "intermediate": _table_2_3("intermediate"),
+    "moderate": _table_2_3("moderate"),
+    "low": _table_2_3("low"),
+    # generic catalogue classes (not from the thesis)
     # rate grade (MEMS): ARW 0.5 deg/sqrt(h), bias 100 deg/h, 1000 ppm, 1 mrad
     "rate": GyroSpec("rate", 0.5 * _ARW, 2.0e-6, 100.0 * _BIAS, 1e-3, 1e-3),
     # tactical grade: ARW 0.1 deg/sqrt(h), bias 1 deg/h, 100 ppm, 0.1 mrad
@@ -73,7 +89,8 @@ GYRO_GRADES = {
 
 
 def gyro_grade(name: str) -> GyroSpec:
-    """The :class:`GyroSpec` of a grade name ('rate', 'tactical', 'navigation')."""
+    """The :class:`GyroSpec` of a grade name (Table 2.3: 'inertial', 'intermediate',
+    'moderate', 'low'; generic: 'rate', 'tactical', 'navigation')."""
     try:
         return GYRO_GRADES[name]
     except KeyError:

@@ -79,7 +79,7 @@ from .single_point import lsmn_nb
 __all__ = ["FilterParams", "FILTER_KINDS", "run_filter", "run_filter_nb", "ekf_propagate_nb",
            "ekf_update_nb", "ekf_update_albedo_nb", "albedo_measurement_nb",
            "filter_step_albedo_nb", "phi_state_size", "eckf_propagate_nb", "eckf_update_nb", "successive_rate_nb",
-           "rotation_step_nb"]
+           "rotation_step_nb", "gyroless_params"]
 
 FILTER_KINDS = ("ekf", "eckf")
 
@@ -134,7 +134,7 @@ class FilterParams:
     rate_max: float = 0.1
     norm_sigma: float = 0.0
     use_dark_sensors: bool = False
-    fov_half_angle_deg: float = 70.0
+    fov_half_angle_deg: float = 60.0
     reset_after_s: float = 60.0
     albedo_model: bool = True
     albedo_rel_sigma: float = 0.3
@@ -724,3 +724,12 @@ def run_filter(kind: str, t, Y, normals, gyro=None, params: FilterParams | None 
     n = np.linalg.norm(D, axis=1, keepdims=True)
     s = np.divide(D, n, out=np.zeros_like(D), where=n > 0)
     return {"d": D, "s_hat": s, "p_diag": Pd, "n_active": nact, "omega": Wu}
+
+
+def gyroless_params(base: FilterParams | None = None) -> FilterParams:
+    """Robust-filter tuning for gyro-less operation (eq. 3.67 rates): larger process noise,
+    a slower rate low-pass and a larger considered rate error."""
+    from dataclasses import replace
+
+    b = base or FilterParams()
+    return replace(b, q_proc=1e-3, rate_alpha=0.95, sigma_meas=0.1, consider_sigma=2e-3)

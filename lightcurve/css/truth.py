@@ -1,10 +1,9 @@
 """Closed-loop truth simulation for the CSS studies (O'Keefe 2015, §2.4).
 
-Spacecraft (§2.4): 100 kg, inertia diag(10.5, 8.0, 7.5) kg m² (total, wheels included),
-four reaction wheels with spin-axis inertia J_s = 0.001 kg m² and 30 mN m motor torque
-limit, in a 400 km circular polar orbit.  Wheel spin axes G_s: a symmetric pyramid, the
-four axes at azimuths 45/135/225/315° and 35.26° (arctan(1/√2)) elevation — §2.4's printed
-matrix could not be consulted; this is the common four-wheel pyramid, full rank 3.
+Spacecraft (:class:`Spacecraft`, defaults §2.4): inertia diag(10.5, 8.0, 7.5) kg m² (total,
+wheels included), four reaction wheels with the spin axes G_s printed in §2.4
+(:data:`~lightcurve.css.okeefe2015.WHEEL_AXES`), spin-axis inertia J_s = 0.001 kg m², motor
+torque limit 30 mN m.
 
 Dynamics (Schaub & Junkins §4.5, reaction wheels; SI units, body axes)::
 
@@ -12,14 +11,28 @@ Dynamics (Schaub & Junkins §4.5, reaction wheels; SI units, body axes)::
     Ω̇ = u_s / J_s − G_sᵀ ω̇,       q̇ = ½ [0, ω] ⊗ q   (q inertial→body, scalar first)
     L_gg = 3 μ/|r|⁵  r_B × ([I] r_B)                  (gravity gradient)
 
-integrated with fixed-step RK4 (motor torques held over a step).  The sensors (CSS with
-albedo, gyro), the estimator and the controller run once per step inside one numba loop.
+integrated with fixed-step RK4 (motor torques held over a step).  Time grid: CSS samples every
+``dt_s`` (§2.4: 2 Hz), each split into ``substeps`` propagation steps at which the gyro is
+sampled, the sequential estimators are propagated and the controller runs (§2.4: gyro at
+10 Hz, so ``substeps = 5`` in the thesis set-up).
 
-Dispersions (§2.4, as implemented — see :class:`Dispersions`): uniformly random initial
-attitude; initial body rates N(0, σ_ω²) per axis; right ascension of the ascending node
-uniform; start point uniform among sunlit orbit positions; CSS common scale factor,
-individual scale factors and misalignment angles normal about their nominal values; gyro
-bias, scale factors and misalignments from the grade (:mod:`lightcurve.css.gyro`).
+Orbit: circular at ``altitude_m``, inclination, RAAN (``raan_deg``; None draws it uniformly),
+true anomaly uniform (§2.4 "initial true anomaly ... uniformly distributed amongst all possible
+values"; ``start_sunlit`` redraws it until the start is sunlit); ``perturbations`` adds EGM2008
+J2–J6, drag (exponential atmosphere, C_D A/m of the spacecraft) and solar radiation pressure
+(§2.4) through :func:`lightcurve.geometry.orbits.propagate_orbit`, otherwise Keplerian.
+
+Sensors: the CSS outputs of eq. 2.21 with albedo (:func:`~lightcurve.css.albedo.albedo_vectors_nb`
+over the cap visible from the spacecraft, the truth map given as an :class:`AlbedoMap` or as a
+TOMS (mean, std) pair drawn once per run, :func:`~lightcurve.css.albedo.draw_albedo_map`), noise
+added before (``noise_in_scale``, eq. 2.21: ``V = C C_κ (V_d + V_α + ν_V)``) or after the
+scale factors, clipped at zero ("negative measurements are not possible", §3.2.2.2, §4.2); the
+gyro of :mod:`lightcurve.css.gyro` (eq. 2.50).
+
+Random numbers: each run draws, from child generators of its seed in a fixed order, the orbit
+and attitude, the CSS errors and noise, the albedo realisation and the gyro bias and noise —
+whether or not a gyro or albedo is used — so that every estimator, gyro grade and control
+option of a study flies the same spacecraft (common random numbers).
 """
 
 from __future__ import annotations
@@ -32,49 +45,57 @@ import numpy as np
 from ..estimation.rng import as_generator
 from ..rotations import qmul_nb, qnormalize_nb, qrot_inv_nb, qrot_nb
 from ._linalg import inv_nb
-from .albedo import (AlbedoMap, albedo_on_sensors_nb, albedo_sun_frame_nb, builtin_albedo_map,
-                     earth_rotation_angle, sun_nadir_axis_nb)
-from .control import ControlParams, mrp_control_nb
-from .gyro import GyroSpec, draw_gyro_errors, gyro_grade, gyro_step_nb
+from .albedo import (AlbedoCells, AlbedoMap, albedo_sun_frame_nb, albedo_vectors_nb,
+                     builtin_albedo_map, cell_areas_m2, earth_rotation_angle, r3_nb,
+                     sun_nadir_axis_nb)
+from .control import ControlParams, mrp_control_nb, sun_pointing_mrp_nb
+from .gyro import GyroSpec, gyro_grade, gyro_step_nb
+from .okeefe2015 import SPACECRAFT, WHEEL_AXES
 from .sensors import CSSArray
 from .single_point import lsmn_nb, wavg_nb
 from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
+from .sunline_thesis import thesis_init_nb, thesis_propagate_nb, thesis_update_nb
 
-__all__ = ["Spacecraft", "Dispersions", "Scenario", "SimResult", "simulate", "ESTIMATORS",
-           "wheel_pyramid", "MU_EARTH", "R_EARTH_M"]
+__all__ = ["Spacecraft", "Dispersions", "Scenario", "SimResult", "simulate", "simulate_cases",
+           "ESTIMATORS",
+           "VARIANTS", "MU_EARTH", "R_EARTH_M", "truth_loop_nb"]
 
 MU_EARTH = 3.986004418e14
 R_EARTH_M = 6378137.0
 ESTIMATORS = ("ekf", "eckf", "wavg", "lsmn", "wlsmn")
-
-
-def wheel_pyramid(elevation_rad=np.arctan(1 / np.sqrt(2))) -> np.ndarray:
-    """G_s (3×4): unit spin axes at azimuths 45/135/225/315° and the given elevation."""
-    az = np.radians([45.0, 135.0, 225.0, 315.0])
-    c = np.cos(elevation_rad)
-    return np.vstack([c * np.cos(az), c * np.sin(az), np.full(4, np.sin(elevation_rad))])
+VARIANTS = ("thesis", "robust")
+P_SUN_N_M2 = 4.56e-6   # solar radiation pressure at 1 au (Vallado 2013, eq. 8-43), N/m²
 
 
 @dataclass(frozen=True)
 class Spacecraft:
-    """Mass properties and wheels (§2.4). inertia kg m²; wheel_axes (3,n); J_s kg m²;
-    torque limit N m; wheel speed limit rad/s (relative to the body)."""
+    """Mass properties, wheels and surfaces (§2.4). inertia kg m²; wheel_axes (3,n); J_s
+    kg m²; torque limit N m; wheel speed limit rad/s relative to the body (§2.4 gives none:
+    unlimited by default); drag and SRP areas m², C_D, C_R (see okeefe2015.SPACECRAFT)."""
 
-    mass_kg: float = 100.0
+    mass_kg: float = SPACECRAFT["mass_kg"]
     inertia: tuple = ((10.5, 0.0, 0.0), (0.0, 8.0, 0.0), (0.0, 0.0, 7.5))
-    wheel_axes: np.ndarray = field(default_factory=wheel_pyramid)
-    wheel_inertia: float = 0.001
-    wheel_max_torque: float = 0.030
-    wheel_max_speed_rad_s: float = 628.0  # 6000 rpm (our assumption; 0.63 N m s per wheel)
+    wheel_axes: np.ndarray = field(default_factory=lambda: WHEEL_AXES.copy())
+    wheel_inertia: float = SPACECRAFT["wheel_inertia_kg_m2"]
+    wheel_max_torque: float = SPACECRAFT["wheel_max_torque_nm"]
+    wheel_max_speed_rad_s: float = np.inf
+    drag_area_m2: float = SPACECRAFT["drag_area_m2"]
+    drag_coefficient: float = SPACECRAFT["drag_coefficient"]
+    srp_area_m2: float = SPACECRAFT["srp_area_m2"]
+    srp_cr: float = SPACECRAFT["srp_cr"]
 
 
 @dataclass(frozen=True)
 class Dispersions:
-    """Monte Carlo dispersions (§2.4 as implemented; angles in degrees at this edge).
+    """Monte Carlo dispersions (angles in degrees at this edge).
 
-    rate_sigma_deg_s: initial body-rate 1σ per axis; css_scale_common_sigma and
-    css_scale_sigma: 1σ of C and C_κ about 1; css_misalignment_sigma_deg: 1σ of each
-    misalignment angle; css_noise_sigma: output noise (full scale 1).
+    Initial body rates: uniform in ±``rate_max_deg_s`` per axis when that is set (§2.4: 2°/s),
+    else N(0, ``rate_sigma_deg_s``²).  Common CSS scale factor: ``1 + U(0,
+    css_scale_common_max)`` when that is set (§2.4: 0–50 %), else N(1, ``css_scale_common_sigma``²);
+    individual C_κ ~ N(1, ``css_scale_sigma``²); misalignment angles N(0,
+    ``css_misalignment_sigma_deg``²); output noise 1σ ``css_noise_sigma``.  The defaults are
+    the package's generic test set-up; the thesis's values are built by
+    :func:`lightcurve.css.experiments.thesis_dispersions`.
     """
 
     rate_sigma_deg_s: float = 1.0
@@ -82,17 +103,24 @@ class Dispersions:
     css_scale_sigma: float = 0.02
     css_misalignment_sigma_deg: float = 1.0
     css_noise_sigma: float = 0.017
+    rate_max_deg_s: float | None = None
+    css_scale_common_max: float | None = None
 
 
 @dataclass
 class Scenario:
     """One CSS simulation case.
 
-    css: nominal sensor set; estimator: one of ESTIMATORS; gyro: grade name, a GyroSpec, or
-    None (gyro-less); controlled: run the eq. 3.64 controller; albedo: an AlbedoMap, None for
-    the built-in 10° zonal model, or False to switch albedo off (truth); filter_albedo: the
-    albedo model of the sun-line filters, same choices (used only when
-    ``filter_params.albedo_model`` is on).
+    css: nominal sensor set; estimator: one of ESTIMATORS; variant: "thesis" (O'Keefe's
+    estimators and controller, :mod:`.sunline_thesis`, eq. 3.64 with its integral term) or
+    "robust" (:mod:`.sunline_ekf` with its albedo model, :mod:`.control` without integral
+    term); gyro: grade name, a GyroSpec, or None (gyro-less); controlled: run the controller;
+    duration_s; dt_s: CSS sample period; substeps: propagation/gyro/control steps per CSS
+    sample; albedo: an AlbedoMap, a (mean, std) pair of AlbedoMaps (drawn per run), None for
+    the built-in 10° zonal model, or False (off); filter_albedo: the albedo model of the
+    robust filters, same choices except pairs; thesis_params: parameter array of the thesis
+    filter (:func:`lightcurve.css.sunline_thesis.thesis_params`); thesis_control: (K, P, K_I,
+    deadband rad) of eq. 3.64; noise_in_scale: eq. 2.21's noise inside the scale factors.
     """
 
     css: CSSArray
@@ -101,9 +129,12 @@ class Scenario:
     controlled: bool = False
     duration_s: float = 1800.0
     dt_s: float = 0.5
+    substeps: int = 1
     epoch_utc: str = "2015-03-01T00:00:00Z"
     altitude_m: float = 400e3
     inclination_deg: float = 90.0
+    raan_deg: float | None = None
+    perturbations: bool = False
     spacecraft: Spacecraft = field(default_factory=Spacecraft)
     dispersions: Dispersions = field(default_factory=Dispersions)
     filter_params: FilterParams = field(default_factory=FilterParams)
@@ -112,24 +143,36 @@ class Scenario:
     filter_albedo: object = None
     gravity_gradient: bool = True
     start_sunlit: bool = True
+    variant: str = "robust"
+    thesis_params: np.ndarray | None = None
+    thesis_control: tuple = (0.041, 0.5, 0.001, float(np.radians(1.0)))
+    noise_in_scale: bool = False
+    gyroless: dict = field(default_factory=lambda: {"rate_limit_deg_s": 10.0,
+                                                    "lowpass_hz": 10.0, "sigma_s": 1.0})
 
     def __post_init__(self):
         if self.estimator not in ESTIMATORS:
             raise ValueError(f"unknown estimator {self.estimator!r}; allowed: {', '.join(ESTIMATORS)}")
+        if self.variant not in VARIANTS:
+            raise ValueError(f"unknown variant {self.variant!r}; allowed: {', '.join(VARIANTS)}")
         if not (self.dt_s > 0 and self.duration_s > self.dt_s):
             raise ValueError("need dt_s > 0 and duration_s > dt_s")
+        if int(self.substeps) < 1:
+            raise ValueError("substeps must be >= 1")
 
 
 @dataclass
 class SimResult:
-    """Time histories of one run (K samples at t, s).
+    """Time histories of one run at the CSS samples (K samples at t, s).
 
     q (K,4) true attitude (inertial→body); omega (K,3) true rate rad/s; s_true (K,3) true
     unit Sun direction in body axes; s_hat (K,3) estimate (zeros when none); y (K,N) CSS
-    outputs; lit (K,); n_active (K,); omega_used (K,3) rate fed to estimator/controller;
-    wheel_speed (K,4) rad/s; error_deg (K,) angle between s_hat and s_true (180 when none);
-    p_cov (K,3,3) and d_hat (K,3): the sun-line filter's covariance and scaled Sun vector
-    after each update (EKF/ECKF only, zeros before the filter starts; None otherwise).
+    outputs; lit (K,); direct (K,) number of sensors truly lit by the Sun (noise-free direct
+    term > 0, the thesis's "valid direct Sun measurement"); n_active (K,); omega_used (K,3)
+    rate fed to estimator/controller; wheel_speed (K,n) rad/s; error_deg (K,) angle between
+    s_hat and s_true (180 when none); p_cov (K,3,3) and d_hat (K,3): the sun-line filter's
+    covariance and scaled Sun vector (EKF/ECKF only, zeros before the filter starts);
+    nis (K,) the filter's NIS (NaN without an update).
     """
 
     t: np.ndarray
@@ -146,6 +189,8 @@ class SimResult:
     info: dict
     p_cov: np.ndarray | None = None
     d_hat: np.ndarray | None = None
+    direct: np.ndarray | None = None
+    nis: np.ndarray | None = None
 
 
 # ---------------------------------------------------------------------------------------
@@ -177,26 +222,88 @@ def _rk4(q, w, Om, u, I, IRW_inv, G, Js, Lext, h):
 
 
 @numba.njit(cache=True)
-def _r3(theta, v):
-    c = np.cos(theta)
-    s = np.sin(theta)
-    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+def _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint, dw0, gains, umax,
+                       axis, dt):
+    """Eq. 3.64 with ω_R = ω̇_R = 0 and L = 0: G_s u_s = Kσ + PΔω + P K_I z + [K_I z]× H,
+    H = [I]ω + G_s h_s, z = K∫σ dt + [I](Δω − Δω₀) (integral feedback of ref. 90); σ of
+    eq. 3.66 is zero inside the deadband.  Updates ``zint`` in place; returns u_s (n,)."""
+    K, P, KI, deadband = gains[0], gains[1], gains[2], gains[3]
+    sig = np.zeros(3)
+    if valid:
+        s, phi = sun_pointing_mrp_nb(s_est, axis)
+        if phi >= deadband:
+            sig = s
+    for i in range(3):
+        zint[i] += K * sig[i] * dt
+    z = zint + I @ (w_ctrl - dw0)
+    kz = KI * z
+    H = I @ w_ctrl + G @ h_abs
+    rhs = K * sig + P * w_ctrl + P * kz + np.cross(kz, H)
+    u = G_pinv @ rhs
+    for i in range(u.shape[0]):
+        if u[i] > umax:
+            u[i] = umax
+        elif u[i] < -umax:
+            u[i] = -umax
+    return u
 
 
 @numba.njit(cache=True)
-def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra, falb_c, falb_n, falb_ra,
-                n_true, cos_fov, gains, horizon, n_nom, css_noise,
-                use_gyro, gM, gbias0, arw, rrw, g_nu, g_nv,
-                I, G, Js, umax, om_max, mu_gg,
-                q0, w0, Om0,
-                est_kind, fprm, controlled, kK, kP, deadband, h_axis):
-    """The whole closed loop (see module docstring); est_kind 0 EKF, 1 ECKF, 2 WAVG, 3 LSMN,
-    4 WLSMN.  ``alb_*``: the truth albedo grid (empty: no albedo); ``falb_*``: the sun-line
-    filters' own albedo model grid (used when ``fprm`` switches the albedo model on; it sees
-    the known position and Sun, never the true attitude).
-    Returns q, ω, s_true, s_hat, y, n_active, ω_used, Ω (wheel speeds)."""
+def _rate_from_estimates_nb(a, b, dt, rate_max, per_axis):
+    """Eq. 3.67: ω̄ = (d̂_k × d̂_{k−1})/|d̂_k × d̂_{k−1}| arccos(...)/Δt, bounded per axis
+    (``per_axis``, §3.3.3) or in norm."""
+    w = np.zeros(3)
+    na = np.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+    nb = np.sqrt(b[0] ** 2 + b[1] ** 2 + b[2] ** 2)
+    if na == 0.0 or nb == 0.0 or dt <= 0.0:
+        return w
+    ua = a / na
+    ub = b / nb
+    c = np.cross(ua, ub)
+    sn = np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
+    if sn < 1e-15:
+        return w
+    ang = np.arctan2(sn, ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2])
+    w = c / sn * ang / dt
+    if per_axis:
+        for i in range(3):
+            w[i] = min(rate_max, max(-rate_max, w[i]))
+    else:
+        nw = np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+        if nw > rate_max:
+            w *= rate_max / nw
+    return w
+
+
+@numba.njit(cache=True)
+def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, noise_in_scale,
+                  gyro, body, init, est, ctrl, alb_pre):
+    """The whole closed loop (module docstring).
+
+    t (K,) CSS sample times; ``sub`` propagation steps per sample; r_I (K*sub+1... see
+    :func:`simulate`) positions at every propagation step (rows k*sub + j); sun_I, lit, theta
+    at the CSS samples; ``cells`` = AlbedoCells.args() of the truth (with the run's ρA);
+    css_true = (normals, cos_fov, gains, horizon); css_noise (K,N) standard normals × σ;
+    gyro = (use, arw, rrw, bias0 (3), n_u (K*sub,3), n_v (K*sub,3), lowpass_alpha,
+    rate_max, sigma_s_gyroless); body = (I, G, Js, umax, om_max, mu_gg); init = (q0, w0);
+    est = (kind, variant, thesis prm, robust prm, normals, az, el, cos_fov, horizon,
+    falb cells tuple (centers, normals, rho_area)); ctrl = (controlled, thesis gains (4,),
+    robust gains (3,), axis).  kind −1: no estimator.  ``alb_pre`` (K,N): the albedo part of
+    every output when already known (an uncontrolled run repeated with another estimator flies
+    the same attitude), else an empty array.
+    Returns Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB at the K samples.
+    """
     K = t.shape[0]
+    n_true, cos_fov_t, gains_t, horizon_t = css_true
     N = n_true.shape[0]
+    use_gyro, arw, rrw, gbias0, g_nu, g_nv, lp_alpha, rate_max, sig_s_nogyro = gyro
+    I, G, Js, umax, om_max, mu_gg = body
+    q0, w0 = init
+    kind, variant, tprm, fprm, n_nom, az_nom, el_nom, cosf_nom, hor_nom, falb = est
+    controlled, tgains, rgains, h_axis = ctrl
+    falb_c, falb_n, falb_ra = falb
+    cc, cn, cra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max = cells
+    thesis = variant == 0
     nw = G.shape[1]
     IRW = I - Js * (G @ G.T)
     IRW_inv, _ = inv_nb(IRW)
@@ -212,142 +319,250 @@ def sim_loop_nb(t, r_I, sun_I, lit, theta_E, alb_c, alb_n, alb_ra, falb_c, falb_
     OM = np.zeros((K, nw))
     PC = np.zeros((K, 3, 3))
     DH = np.zeros((K, 3))
+    DIR = np.zeros(K, dtype=np.int64)
+    NIS = np.full(K, np.nan)
+    ALB = np.zeros((K, N))
+    have_pre = alb_pre.shape[0] == K
     q = q0.copy()
     w = w0.copy()
-    Om = Om0.copy()
+    Om = np.zeros(nw)
     bias = gbias0.copy()
-    thr = fprm[2]
-    alpha, rmax = fprm[9], fprm[10]
+    # ---- estimator state ----------------------------------------------------------------
     d = np.zeros(3)
     P = np.eye(3)
+    Lb = np.zeros((3, 6))
+    Lam = np.zeros((3, 4 * N))
+    Beta = np.zeros((6, 6))
+    Bnu = np.zeros(4 * N)
     Pxc = np.zeros((3, 3))
     started = False
+    have_prev = False
     d_prev = np.zeros(3)
     om_f = np.zeros(3)
-    w_meas_prev = np.zeros(3)
+    s_est = np.zeros(3)
+    valid = False
+    shadow = True
     dark = 0.0
-    n_nadir = np.zeros((N, 3))
-    h_nadir = np.zeros((N, 3))
-    have_alb = alb_c.shape[0] > 0
-    f_alb = est_kind <= 1 and fprm[15] > 0.5 and falb_c.shape[0] > 0
+    w_acc = np.zeros(3)
+    n_acc = 0
+    thr_r = fprm[2]
+    alpha_r, rmax_r = fprm[9], fprm[10]
+    f_alb = (not thesis) and kind <= 1 and fprm[15] > 0.5 and falb_c.shape[0] > 0
+    phi_state = np.zeros(7 + int(fprm[17])) if (f_alb and fprm[18] > 0.5) else np.zeros(0)
     fa_coords = np.zeros((0, 3))
     fa_ratio = np.zeros(0)
     fa_m = 0
-    phi_state = np.zeros(7 + int(fprm[17])) if (f_alb and fprm[18] > 0.5) else np.zeros(0)
     e2_I = np.zeros(3)
+    zint = np.zeros(3)
+    dw0 = np.zeros(3)
+    ctrl_started = False
+    u = np.zeros(nw)
+    u_f = np.zeros(nw)
+    y_f = np.zeros(N)
+    w_meas = np.zeros(3)
+    sig_w_t = tprm[3] if use_gyro else 0.0
+    sig_s_t = tprm[2] if use_gyro else sig_s_nogyro
+    nE = np.empty((N, 3))
+    hE = np.empty((N, 3))
+    eye3 = np.eye(3)
+    zeros_edge = np.zeros(N)
     for k in range(K):
+        # ================= CSS sample ====================================================
         Q[k] = q
         Wt[k] = w
         OM[k] = Om
         s_b = qrot_nb(q, sun_I[k])
         St[k] = s_b
-        # ---- CSS outputs (eq. 2.21) -------------------------------------------------
         alb = np.zeros(N)
-        if have_alb:
-            th = theta_E[k]
-            rE = _r3(th, r_I[k])
-            sE = _r3(th, sun_I[k])
+        if have_pre:
+            alb[:] = alb_pre[k]
+        elif nlat > 0 and lit[k] > 0.0:
+            th = theta[k]
+            rE = r3_nb(th, r_I[k * sub])
+            sE = r3_nb(th, sun_I[k])
             for j in range(N):
-                n_nadir[j] = _r3(th, qrot_inv_nb(q, n_true[j]))
-                h_nadir[j] = _r3(th, qrot_inv_nb(q, horizon[j]))
-            alb = albedo_on_sensors_nb(alb_c, alb_n, alb_ra, rE, sE, n_nadir, cos_fov, h_nadir)
+                nE[j] = r3_nb(th, qrot_inv_nb(q, n_true[j]))
+                hE[j] = r3_nb(th, qrot_inv_nb(q, horizon_t[j]))
+            V, _, _ = albedo_vectors_nb(cc, cn, cra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                                        rE, sE, nE, cos_fov_t, hE, zeros_edge)
+            for j in range(N):
+                alb[j] = nE[j, 0] * V[j, 0] + nE[j, 1] * V[j, 1] + nE[j, 2] * V[j, 2]
+        nd_lit = 0
         for j in range(N):
             c = n_true[j, 0] * s_b[0] + n_true[j, 1] * s_b[1] + n_true[j, 2] * s_b[2]
             r = 0.0
-            if lit[k] > 0.0 and c >= cos_fov[j] and c > 0.0:
-                if (horizon[j, 0] * s_b[0] + horizon[j, 1] * s_b[1] + horizon[j, 2] * s_b[2]) >= 0.0:
+            if lit[k] > 0.0 and c >= cos_fov_t[j] and c > 0.0:
+                if (horizon_t[j, 0] * s_b[0] + horizon_t[j, 1] * s_b[1]
+                        + horizon_t[j, 2] * s_b[2]) >= 0.0:
                     r = lit[k] * c
-            v = gains[j] * (r + alb[j]) + css_noise[k, j]
-            Y[k, j] = v if v > 0.0 else 0.0
-        # ---- gyro ---------------------------------------------------------------------
-        w_meas = np.zeros(3)
-        if use_gyro:
-            dtg = t[1] - t[0] if k == 0 else t[k] - t[k - 1]
-            w_meas = gyro_step_nb(w, bias, gM, arw, rrw, dtg, g_nu[k], g_nv[k])
-        # ---- estimator ----------------------------------------------------------------
-        s_est = np.zeros(3)
-        valid = False
-        if est_kind <= 1:
-            if not started:
-                d, P, Pxc, ok = filter_init_nb(Y[k], n_nom, fprm)
-                if ok:
-                    started = True
-                    d_prev[:] = d
+                    nd_lit += 1
+            if noise_in_scale:
+                v = gains_t[j] * (r + alb[j] + css_noise[k, j])
             else:
-                dt = t[k] - t[k - 1]
-                om = w_meas_prev if use_gyro else om_f
-                lit_now = False
+                v = gains_t[j] * (r + alb[j]) + css_noise[k, j]
+            Y[k, j] = v if v > 0.0 else 0.0
+        DIR[k] = nd_lit
+        ALB[k] = alb
+        ymax = 0.0
+        for j in range(N):
+            if Y[k, j] > ymax:
+                ymax = Y[k, j]
+        # ================= estimator update ==============================================
+        if kind >= 0:
+            dt_c = t[1] - t[0] if k == 0 else t[k] - t[k - 1]
+            if kind <= 1 and thesis:
+                shadow = ymax < tprm[8]
+                if not started:
+                    if thesis_init_nb(Y[k], n_nom, tprm, d, P, Lb, Lam, Beta, Bnu):
+                        started = True
+                        valid = True
+                else:
+                    m, nis = thesis_update_nb(d, P, Lb, Lam, Beta, Bnu, Y[k], n_nom, az_nom,
+                                              el_nom, cosf_nom, hor_nom, tprm)
+                    NA[k] = m
+                    NIS[k] = nis
+                if started:
+                    if not use_gyro and not shadow:
+                        if have_prev:
+                            wr = _rate_from_estimates_nb(d, d_prev, dt_c, rate_max, True)
+                            om_f = lp_alpha * om_f + (1.0 - lp_alpha) * wr
+                        d_prev[:] = d
+                        have_prev = True
+                    elif not use_gyro:
+                        have_prev = False
+                    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+                    if nd > 0:
+                        s_est = d / nd
+                        valid = True
+                    PC[k] = P
+                    DH[k] = d
+            elif kind <= 1:
+                # robust sun-line filters (sunline_ekf.py), propagated over the sample period
+                if not started:
+                    d, P, Pxc, ok = filter_init_nb(Y[k], n_nom, fprm)
+                    if ok:
+                        started = True
+                        d_prev[:] = d
+                else:
+                    om = w_acc / max(n_acc, 1) if use_gyro else om_f
+                    lit_now = False
+                    for j in range(N):
+                        if Y[k, j] > thr_r:
+                            lit_now = True
+                    reset = lit_now and fprm[14] > 0 and dark >= fprm[14]
+                    if f_alb:
+                        th = theta[k]
+                        fa_coords, fa_ratio, fa_m = albedo_sun_frame_nb(
+                            falb_c, falb_n, falb_ra, r3_nb(th, r_I[k * sub]), r3_nb(th, sun_I[k]))
+                        e2_I = sun_nadir_axis_nb(r_I[k * sub], sun_I[k])
+                    m, nis, infl = filter_step_albedo_nb(kind, d, P, Pxc, om, dt_c, Y[k], n_nom,
+                                                         fprm, reset, fa_coords, fa_ratio, fa_m,
+                                                         cosf_nom, hor_nom, phi_state, e2_I,
+                                                         sun_I[k])
+                    dark = 0.0 if lit_now else dark + dt_c
+                    NA[k] = m
+                    NIS[k] = nis if m > 0 else np.nan
+                    if not use_gyro:
+                        om_f = successive_rate_nb(d, d_prev, dt_c, om_f, alpha_r, rmax_r)
+                    d_prev[:] = d
+                if started:
+                    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+                    if nd > 0:
+                        s_est = d / nd
+                        valid = True
+                    PC[k] = P
+                    DH[k] = d
+            else:
+                yk = Y[k]
+                thr_sp = 0.0 if thesis else thr_r
+                if thesis and not use_gyro:
+                    # §3.3.3: CSS measurements low-pass filtered for the single-point methods
+                    for j in range(N):
+                        y_f[j] = lp_alpha * y_f[j] + (1.0 - lp_alpha) * Y[k, j] if k > 0 else Y[k, j]
+                    yk = y_f
+                if kind == 2:
+                    s_new = wavg_nb(yk, n_nom, thr_sp)
+                else:
+                    s_new = lsmn_nb(yk, n_nom, thr_sp, kind == 4)
+                ok = (s_new[0] ** 2 + s_new[1] ** 2 + s_new[2] ** 2) > 0
+                shadow = ymax < tprm[8]
+                cnt = 0
                 for j in range(N):
-                    if Y[k, j] > thr:
-                        lit_now = True
-                reset = lit_now and fprm[14] > 0 and dark >= fprm[14]
-                if f_alb:
-                    # the filter's albedo model from the known position and Sun (Earth-fixed)
-                    th = theta_E[k]
-                    fa_coords, fa_ratio, fa_m = albedo_sun_frame_nb(
-                        falb_c, falb_n, falb_ra, _r3(th, r_I[k]), _r3(th, sun_I[k]))
-                    e2_I = sun_nadir_axis_nb(r_I[k], sun_I[k])
-                m, nis, infl = filter_step_albedo_nb(est_kind, d, P, Pxc, om, dt, Y[k], n_nom,
-                                                     fprm, reset, fa_coords, fa_ratio, fa_m,
-                                                     cos_fov, horizon, phi_state, e2_I,
-                                                     sun_I[k])
-                dark = 0.0 if lit_now else dark + dt
-                NA[k] = m
-                Wu[k] = om
+                    if yk[j] > thr_sp:
+                        cnt += 1
+                NA[k] = cnt
                 if not use_gyro:
-                    om_f = successive_rate_nb(d, d_prev, dt, om_f, alpha, rmax)
-                d_prev[:] = d
-            if started:
+                    if ok and have_prev and not (thesis and shadow):
+                        if thesis:
+                            wr = _rate_from_estimates_nb(s_new, d_prev, dt_c, rate_max, True)
+                            om_f = lp_alpha * om_f + (1.0 - lp_alpha) * wr
+                        else:
+                            om_f = successive_rate_nb(s_new, d_prev, dt_c, om_f, alpha_r, rmax_r)
+                    if ok:
+                        d_prev[:] = s_new
+                        have_prev = True
+                if ok:
+                    s_est = s_new
+                    valid = True
+                else:
+                    valid = False
+        Sh[k] = s_est if valid else np.zeros(3)
+        w_acc[:] = 0.0
+        n_acc = 0
+        if k == K - 1:
+            Wu[k] = w_meas if use_gyro else om_f
+            break
+        # ================= propagation steps =============================================
+        h = (t[k + 1] - t[k]) / sub
+        for j in range(sub):
+            ks = k * sub + j
+            if use_gyro:
+                w_meas = gyro_step_nb(w, bias, eye3, arw, rrw, h, g_nu[ks], g_nv[ks])
+            else:
+                # the truth still draws the gyro's random numbers (common random numbers)
+                gyro_step_nb(w, bias, eye3, arw, rrw, h, g_nu[ks], g_nv[ks])
+            if j == 0:
+                Wu[k] = w_meas if use_gyro else om_f
+            w_acc += w_meas
+            n_acc += 1
+            suspended = thesis and (not use_gyro) and shadow
+            if kind <= 1 and kind >= 0 and thesis and started and not suspended:
+                om = w_meas if use_gyro else om_f
+                thesis_propagate_nb(d, P, Lb, Lam, Beta, om, h, tprm, sig_s_t, sig_w_t)
                 nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
                 if nd > 0:
                     s_est = d / nd
-                    valid = True
-        else:
-            if est_kind == 2:
-                s_est = wavg_nb(Y[k], n_nom, thr)
-            else:
-                s_est = lsmn_nb(Y[k], n_nom, thr, est_kind == 4)
-            valid = (s_est[0] ** 2 + s_est[1] ** 2 + s_est[2] ** 2) > 0
-            cnt = 0
-            for j in range(N):
-                if Y[k, j] > thr:
-                    cnt += 1
-            NA[k] = cnt
-            if not use_gyro and k > 0:
-                dt = t[k] - t[k - 1]
-                if valid and (d_prev[0] ** 2 + d_prev[1] ** 2 + d_prev[2] ** 2) > 0:
-                    om_f = successive_rate_nb(s_est, d_prev, dt, om_f, alpha, rmax)
-                Wu[k] = om_f
-            if valid:
-                d_prev[:] = s_est
-        Sh[k] = s_est
-        if est_kind <= 1 and started:
-            PC[k] = P
-            DH[k] = d
-        if use_gyro:
-            Wu[k] = w_meas
-        w_meas_prev[:] = w_meas
-        # ---- control (eq. 3.64) -------------------------------------------------------
-        u = np.zeros(nw)
-        if controlled:
-            w_ctrl = w_meas if use_gyro else om_f
-            h_w = Js * (G.T @ w_ctrl + Om)
-            u = mrp_control_nb(s_est, valid, w_ctrl, I, G, h_w, G_pinv, kK, kP, deadband,
-                               umax, h_axis, use_gyro)
-            for i in range(nw):
-                # wheel speed limit: the motor cannot spin a saturated wheel further up
-                if (Om[i] >= om_max and u[i] > 0.0) or (Om[i] <= -om_max and u[i] < 0.0):
-                    u[i] = 0.0
-        # ---- propagate truth ------------------------------------------------------------
-        if k < K - 1:
-            h = t[k + 1] - t[k]
+            # ---- control ------------------------------------------------------------
+            u[:] = 0.0
+            if controlled and kind >= 0:
+                w_ctrl = w_meas if use_gyro else om_f
+                if thesis:
+                    if not suspended:
+                        if not ctrl_started:
+                            dw0[:] = w_ctrl
+                            ctrl_started = True
+                        h_abs = Js * (G.T @ w_ctrl + Om)
+                        u = _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint,
+                                               dw0, tgains, umax, h_axis, h)
+                        if not use_gyro and kind >= 2:
+                            # §3.3.3: wheel torques low-pass filtered for single-point methods
+                            u_f[:] = lp_alpha * u_f + (1.0 - lp_alpha) * u
+                            u = u_f.copy()
+                else:
+                    h_w = Js * (G.T @ w_ctrl + Om)
+                    u = mrp_control_nb(s_est, valid, w_ctrl, I, G, h_w, G_pinv, rgains[0],
+                                       rgains[1], rgains[2], umax, h_axis, use_gyro)
+                for i in range(nw):
+                    if (Om[i] >= om_max and u[i] > 0.0) or (Om[i] <= -om_max and u[i] < 0.0):
+                        u[i] = 0.0
+            # ---- truth --------------------------------------------------------------
             Lext = np.zeros(3)
             if mu_gg > 0.0:
-                rb = qrot_nb(q, r_I[k])
+                rb = qrot_nb(q, r_I[ks])
                 rn = np.sqrt(rb[0] ** 2 + rb[1] ** 2 + rb[2] ** 2)
                 Lext = 3.0 * mu_gg / rn ** 5 * np.cross(rb, I @ rb)
             q, w, Om = _rk4(q, w, Om, u, I, IRW_inv, G, Js, Lext, h)
-    return Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH
+    return Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB
 
 
 # ---------------------------------------------------------------------------------------
@@ -359,7 +574,7 @@ def _random_quat(g):
     return q if q[0] >= 0 else -q
 
 
-def _orbit(alt, inc, raan, u0, t):
+def _kepler_orbit(alt, inc, raan, u0, t):
     a = R_EARTH_M + alt
     n = np.sqrt(MU_EARTH / a ** 3)
     u = u0 + n * t
@@ -369,96 +584,183 @@ def _orbit(alt, inc, raan, u0, t):
                                 np.sin(u) * si])
 
 
-_ALBEDO_CACHE: dict = {}
+def _perturbed_orbit(sc: Scenario, raan, u0, t, sun_dir0):
+    """J2–J6 + drag + SRP (§2.4) from the circular state at argument of latitude u0."""
+    from ..dynamics.atmosphere import density_kg_m3
+    from ..geometry.frames import earth_pole_gcrs
+    from ..geometry.orbits import coe_to_rv, propagate_orbit
+
+    a = R_EARTH_M + sc.altitude_m
+    r0, v0 = coe_to_rv(a, 0.0, np.radians(sc.inclination_deg), raan, 0.0, u0)
+    scf = sc.spacecraft
+    bd = scf.drag_coefficient * scf.drag_area_m2 / scf.mass_kg
+    bs = P_SUN_N_M2 * scf.srp_cr * scf.srp_area_m2 / scf.mass_kg
+    we = np.array([0.0, 0.0, 7.292115e-5])
+    s = np.asarray(sun_dir0, float)
+
+    def accel(_t, r, v):
+        rn = np.linalg.norm(r)
+        vr = v - np.cross(we, r)
+        out = -0.5 * density_kg_m3(max(rn - R_EARTH_M, 0.0)) * bd * np.linalg.norm(vr) * vr
+        rs = r @ s
+        if rs > 0 or np.linalg.norm(r - rs * s) > R_EARTH_M:   # cylindrical shadow
+            out = out - bs * s
+        return out
+
+    pole = earth_pole_gcrs(sc.epoch_utc, 0.0)[0]
+    r, _ = propagate_orbit(r0, v0, t, gravity="J6", pole=pole, accel=accel, rtol=1e-10,
+                           atol_m=1e-3)
+    return r
 
 
-def _albedo_grid(spec):
+_CELLS_CACHE: dict = {}
+
+
+def _cells_for(spec, rng):
+    """(AlbedoCells.args() with this run's ρA, label) of a truth/filter albedo spec."""
+    if spec is False:
+        c = AlbedoCells.none()
+        return c.args(), "none"
+    pair = isinstance(spec, tuple)
+    base = spec[0] if pair else (builtin_albedo_map(10.0) if spec is None else spec)
+    key = id(base) if spec is not None else "builtin10"
+    if key not in _CELLS_CACHE:
+        if not isinstance(base, AlbedoMap):
+            raise ValueError("albedo must be an AlbedoMap, a (mean, std) pair, None (built-in) "
+                             "or False (off)")
+        cells = AlbedoCells.from_map(base)
+        area = cell_areas_m2(base.lat_edges_rad, base.lon_edges_rad).reshape(-1)
+        _CELLS_CACHE[key] = (cells, area, base)
+    cells, area, base = _CELLS_CACHE[key]
+    args = list(cells.args())
+    if pair:
+        mean, std = spec
+        v = np.clip(mean.values + std.values * rng.standard_normal(mean.values.shape), 0.0, 1.0)
+        args[2] = np.ascontiguousarray(area * v.reshape(-1))
+    return tuple(args), base.source
+
+
+def _grid_for_robust(spec):
     if spec is False:
         z = np.zeros((0, 3))
         return z, z.copy(), np.zeros(0)
-    amap = builtin_albedo_map(10.0) if spec is None else spec
-    key = id(amap) if spec is not None else "builtin10"
-    if key not in _ALBEDO_CACHE:
-        if not isinstance(amap, AlbedoMap):
-            raise ValueError("albedo must be an AlbedoMap, None (built-in) or False (off)")
+    amap = builtin_albedo_map(10.0) if spec is None else (spec[0] if isinstance(spec, tuple) else spec)
+    key = ("grid", id(amap) if spec is not None else "builtin10")
+    if key not in _CELLS_CACHE:
         g = amap.grid()
-        _ALBEDO_CACHE[key] = (g.centers_m, g.normals, g.rho_area_m2)
-    return _ALBEDO_CACHE[key]
+        _CELLS_CACHE[key] = (g.centers_m, g.normals, g.rho_area_m2)
+    return _CELLS_CACHE[key]
 
 
-def simulate(sc: Scenario, rng) -> SimResult:
-    """Draw the §2.4 dispersions and run one closed-loop (or open-loop tumbling) case.
+def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
+    """Draw the dispersions and run one closed-loop (or open-loop tumbling) case.
 
-    ``rng`` is a numpy Generator or seed; a given seed reproduces the run bit for bit.
+    ``rng`` is a numpy Generator or seed; a given seed reproduces the run bit for bit, and
+    two scenarios that differ only in estimator, variant, gyro or control see the same
+    spacecraft, orbit, albedo and noise (module docstring).
     """
     from ..geometry.eclipse import lit_fraction
     from ..geometry.time import sun_position_gcrs
 
     g = as_generator(rng)
+    g_orb, g_css, g_alb, g_gyro = g.spawn(4)
     disp = sc.dispersions
+    sub = int(sc.substeps)
     t = np.arange(0.0, sc.duration_s + 0.5 * sc.dt_s, sc.dt_s)
     K = t.size
-    # orbit: RAAN uniform, start point uniform among sunlit positions
+    tf = (np.arange((K - 1) * sub + 1) * (sc.dt_s / sub))
+    # ---- orbit and attitude --------------------------------------------------------------
     sun0 = sun_position_gcrs(sc.epoch_utc, np.array([0.0]))[0]
     inc = np.radians(sc.inclination_deg)
-    raan = g.uniform(0, 2 * np.pi)
+    raan = g_orb.uniform(0, 2 * np.pi) if sc.raan_deg is None else np.radians(sc.raan_deg)
     for _ in range(1000):
-        u0 = g.uniform(0, 2 * np.pi)
-        r0 = _orbit(sc.altitude_m, inc, raan, u0, np.array([0.0]))
+        u0 = g_orb.uniform(0, 2 * np.pi)
+        r0 = _kepler_orbit(sc.altitude_m, inc, raan, u0, np.array([0.0]))
         if not sc.start_sunlit or lit_fraction(r0, sun0[None, :])[0] > 0.999:
             break
-    r_I = _orbit(sc.altitude_m, inc, raan, u0, t)
-    # the Sun moves ~0.04 deg/h: sample it every 60 s and interpolate
+    q0 = _random_quat(g_orb)
+    if disp.rate_max_deg_s is not None:
+        w0 = np.radians(g_orb.uniform(-disp.rate_max_deg_s, disp.rate_max_deg_s, 3))
+    else:
+        w0 = np.radians(g_orb.normal(0.0, disp.rate_sigma_deg_s, 3))
+    if sc.perturbations:
+        r_f = _perturbed_orbit(sc, raan, u0, tf, sun0 / np.linalg.norm(sun0))
+    else:
+        r_f = _kepler_orbit(sc.altitude_m, inc, raan, u0, tf)
+    r_f = np.ascontiguousarray(r_f)
+    r_I = r_f[::sub]
     tc = np.arange(0.0, t[-1] + 60.0, 60.0)
     sun_c = sun_position_gcrs(sc.epoch_utc, tc)
     sun_m = np.column_stack([np.interp(t, tc, sun_c[:, i]) for i in range(3)])
     lit = lit_fraction(r_I, sun_m)
-    sun_hat = sun_m / np.linalg.norm(sun_m, axis=1, keepdims=True)
+    sun_hat = np.ascontiguousarray(sun_m / np.linalg.norm(sun_m, axis=1, keepdims=True))
     theta = earth_rotation_angle(sc.epoch_utc, t)
-    alb_c, alb_n, alb_ra = _albedo_grid(sc.albedo)
-    falb_c, falb_n, falb_ra = _albedo_grid(sc.filter_albedo)
-    # CSS dispersions
+    # ---- CSS errors and noise ----------------------------------------------------------
     css = sc.css
     N = css.n_sensors
+    if disp.css_scale_common_max is not None:
+        c_common = 1.0 + g_css.uniform(0.0, disp.css_scale_common_max)
+    else:
+        c_common = max(0.05, 1.0 + g_css.normal(0, disp.css_scale_common_sigma))
     true_css = css.with_errors(
-        scale_common=max(0.05, 1.0 + g.normal(0, disp.css_scale_common_sigma)),
-        scale_individual=np.maximum(0.05, 1.0 + g.normal(0, disp.css_scale_sigma, N)),
-        misalignment_rad=np.radians(g.normal(0, disp.css_misalignment_sigma_deg, (N, 2))),
+        scale_common=c_common,
+        scale_individual=np.maximum(0.05, 1.0 + g_css.normal(0, disp.css_scale_sigma, N)),
+        misalignment_rad=np.radians(g_css.normal(0, disp.css_misalignment_sigma_deg, (N, 2))),
         noise_sigma=disp.css_noise_sigma)
     n_true, cos_fov, gains, horizon = true_css.kernel_args()
-    css_noise = g.normal(0.0, disp.css_noise_sigma, (K, N))
-    # gyro
+    css_noise = g_css.normal(0.0, disp.css_noise_sigma, (K, N))
+    cells, alb_label = _cells_for(sc.albedo, g_alb)
+    # ---- gyro (always drawn) ------------------------------------------------------------
     spec = None if sc.gyro is None else (sc.gyro if isinstance(sc.gyro, GyroSpec) else gyro_grade(sc.gyro))
+    zb = g_gyro.standard_normal(3)
+    g_nu = g_gyro.standard_normal((K * sub, 3))
+    g_nv = g_gyro.standard_normal((K * sub, 3))
     if spec is not None:
-        err = draw_gyro_errors(spec, g, detailed=True)
-        gM, gb0, arw, rrw = err.M, err.bias0, spec.arw, spec.rrw
-        g_nu = g.standard_normal((K, 3))
-        g_nv = g.standard_normal((K, 3))
+        gb0, arw, rrw = zb * spec.bias_sigma, spec.arw, spec.rrw
     else:
-        gM, gb0, arw, rrw = np.eye(3), np.zeros(3), 0.0, 0.0
-        g_nu = np.zeros((K, 3))
-        g_nv = np.zeros((K, 3))
+        gb0, arw, rrw = np.zeros(3), 0.0, 0.0
+    # ---- estimator ----------------------------------------------------------------------
     fparams = sc.filter_params.for_css(css)
     if spec is not None:
         fparams = fparams.for_gyro(spec)
-    q0 = _random_quat(g)
-    w0 = np.radians(g.normal(0.0, disp.rate_sigma_deg_s, 3))
+    thesis = sc.variant == "thesis"
+    if thesis and sc.thesis_params is None and sc.estimator in ("ekf", "eckf"):
+        raise ValueError("variant 'thesis' needs thesis_params (lightcurve.css.experiments)")
+    tprm = (np.asarray(sc.thesis_params, float) if sc.thesis_params is not None
+            else np.zeros(17))
+    if tprm[8] == 0.0:
+        tprm = tprm.copy()
+        tprm[8] = 0.25
+    from .sensors import normal_to_azel
+
+    az0, el0 = normal_to_azel(css.normals)
+    falb = (_grid_for_robust(sc.filter_albedo) if (not thesis and sc.estimator in ("ekf", "eckf")
+                                                   and sc.filter_params.albedo_model)
+            else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))
+    est_kind = ESTIMATORS.index(sc.estimator)
+    gl = sc.gyroless
+    lp_dt = sc.dt_s  # the eq. 3.67 rate is formed at the CSS samples
+    lp_alpha = float(np.exp(-2.0 * np.pi * gl["lowpass_hz"] * lp_dt)) if thesis else 0.0
     scf = sc.spacecraft
     I = np.asarray(scf.inertia, dtype=float)
     G = np.ascontiguousarray(scf.wheel_axes, dtype=float)
-    Om0 = np.zeros(G.shape[1])
     axis = np.asarray(sc.control.axis, dtype=float)
     axis = axis / np.linalg.norm(axis)
-    out = sim_loop_nb(
-        t, r_I, sun_hat, lit, theta, alb_c, alb_n, alb_ra, falb_c, falb_n, falb_ra,
-        n_true, cos_fov, gains, horizon, css.normals.copy(), css_noise,
-        spec is not None, gM, gb0, arw, rrw, g_nu, g_nv,
-        I, G, float(scf.wheel_inertia), float(scf.wheel_max_torque),
-        float(scf.wheel_max_speed_rad_s), MU_EARTH if sc.gravity_gradient else 0.0,
-        q0, w0, Om0,
-        ESTIMATORS.index(sc.estimator), fparams.as_array(), bool(sc.controlled),
-        float(sc.control.k_gain), float(sc.control.p_gain), float(sc.control.deadband_rad), axis)
-    Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH = out
+    out = truth_loop_nb(
+        t, sub, r_f, sun_hat, lit, theta, cells,
+        (n_true, cos_fov, gains, horizon), css_noise, bool(sc.noise_in_scale),
+        (spec is not None, float(arw), float(rrw), gb0, g_nu, g_nv, lp_alpha,
+         float(np.radians(gl["rate_limit_deg_s"])), float(gl["sigma_s"])),
+        (I, G, float(scf.wheel_inertia), float(scf.wheel_max_torque),
+         float(scf.wheel_max_speed_rad_s), MU_EARTH if sc.gravity_gradient else 0.0),
+        (q0, w0),
+        (est_kind, 0 if thesis else 1, tprm, fparams.as_array(), css.normals.copy(),
+         np.ascontiguousarray(az0), np.ascontiguousarray(el0),
+         np.cos(css.fov_half_angle_rad), np.ascontiguousarray(css.horizon_normals), falb),
+        (bool(sc.controlled), np.asarray(sc.thesis_control, float),
+         np.array([sc.control.k_gain, sc.control.p_gain, sc.control.deadband_rad]), axis),
+        _albedo_cache if _albedo_cache is not None else np.zeros((0, N)))
+    Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB = out
     if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(Wt))):
         from ..errors import ConvergenceError
 
@@ -473,7 +775,25 @@ def simulate(sc: Scenario, rng) -> SimResult:
             "css_misalignment_rad": true_css.misalignment_rad,
             "css_noise_sigma": disp.css_noise_sigma,
             "gyro": None if spec is None else spec.name, "r_I_m": r_I, "sun_I_hat": sun_hat,
-            "pointing_axis": axis}
+            "pointing_axis": axis, "albedo": alb_label, "variant": sc.variant,
+            "albedo_outputs": ALB}
     is_filter = sc.estimator in ("ekf", "eckf")
     return SimResult(t, Q, Wt, St, Sh, Y, lit, NA, Wu, OM, err_deg, info,
-                     PC if is_filter else None, DH if is_filter else None)
+                     PC if is_filter else None, DH if is_filter else None, DIR, NIS)
+
+
+def simulate_cases(scenarios, seed) -> list[SimResult]:
+    """Run several scenarios that differ only in estimator, variant or gyro on the same
+    dispersed spacecraft (seed).  Uncontrolled scenarios fly the same attitude whatever the
+    estimator, so the truth albedo (the costly part) is computed once and reused.  ``seed``:
+    an int or a sequence of ints (the entropy of a :class:`numpy.random.SeedSequence`)."""
+    out = []
+    cache = None
+    for sc in scenarios:
+        reuse = cache if (not sc.controlled and cache is not None) else None
+        # a fresh SeedSequence per scenario: spawning children advances a SeedSequence
+        r = simulate(sc, np.random.SeedSequence(seed), _albedo_cache=reuse)
+        if not sc.controlled and cache is None:
+            cache = r.info["albedo_outputs"]
+        out.append(r)
+    return out

@@ -26,7 +26,7 @@ Truth: the torque-free/gravity-gradient tumbling of :mod:`lightcurve.css.truth` 
 orbit), photodiodes of the cube configuration (table 2.2, 90° FOV by default, so that one to
 three diodes are lit), Farrenkopf gyro, a tilted-dipole geomagnetic field (dipole moment
 7.94e22 A m², pole at 80.65° N, 72.68° W — IGRF-2015 first-degree terms, rounded; our choice:
-the paper's field model could not be consulted).  Earth albedo is off by default (neither
+the DiGregorio slides give no field model, only 'zero-mean Gaussian noise' on the truth).  Earth albedo is off by default (neither
 filter models it); ``albedo=True`` switches the built-in model on in the truth.
 """
 
@@ -266,12 +266,14 @@ def run_vmm_smm(case: VMMCase, params: VMMParams = VMMParams(), *, rng=None):
     return out
 
 
-def vmm_study(n_runs=20, *, seed=0, settle_s=300.0, params: VMMParams = VMMParams(), **kw):
+def vmm_study(n_runs=20, *, seed=0, settle_s=300.0, params: VMMParams = VMMParams(),
+              progress=None, **kw):
     """Monte Carlo of :func:`run_vmm_smm`.  Errors are pooled over samples after
     ``settle_s`` and grouped by the number of lit photodiodes (0, 1, 2, ≥3).
 
     Returns ``{"by_n_lit": {n: {"samples", "smm_median_deg", "vmm_median_deg",
     "smm_rms_deg", "vmm_rms_deg"}}, "lt3": {...}, "runs": n_runs, "example": one run}``.
+    ``progress``: callable called with no argument after each run, or None.
     """
     ss = np.random.SeedSequence(int(seed)).spawn(int(n_runs))
     es, ev, nl = [], [], []
@@ -286,6 +288,8 @@ def vmm_study(n_runs=20, *, seed=0, settle_s=300.0, params: VMMParams = VMMParam
         nl.append(r["n_lit"][m])
         if example is None:
             example = r
+        if progress is not None:
+            progress()
     es, ev, nl = np.concatenate(es), np.concatenate(ev), np.concatenate(nl)
 
     def stats(mask):

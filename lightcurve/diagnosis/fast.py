@@ -56,7 +56,7 @@ class CachedEarthshine(Earthshine):
         return h.hexdigest()
 
     def _geometry(self, ctx, st):
-        from ..css.albedo import earth_rotation_angle
+        from ..earth.albedo import earth_rotation_angle
 
         key = self._key(ctx, st)
         if key not in self._cells:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import rotations as rot
+
 UNIT_VEC_TOL = 1e-6
 
 
@@ -68,3 +70,19 @@ def per_facet(x, F: int, name: str, lo: float = 0.0, hi: float = 1.0) -> np.ndar
     if not np.all(np.isfinite(a)) or np.any(a < lo) or np.any(a > hi):
         raise ValueError(f"{name}: values must lie in [{lo}, {hi}]")
     return a
+
+
+def single_quat(q, name="q") -> np.ndarray:
+    """One unit quaternion of shape (4,) (ValueError naming ``name`` otherwise)."""
+    q = rot.check_unit_quat(q, name)
+    if q.shape != (4,):
+        raise ValueError(f"{name}: expected a single quaternion of shape (4,), got {q.shape}")
+    return q
+
+
+def single_vec(v, name) -> np.ndarray:
+    """One finite 3-vector of shape (3,) (ValueError naming ``name`` otherwise)."""
+    v = vec3(v, name)
+    if v.shape != (3,):
+        raise ValueError(f"{name}: expected shape (3,), got {v.shape}")
+    return v

@@ -1,4 +1,6 @@
-"""Linearised attitude error dynamics ``F`` (Bernard 2021 eq. 7.24, 7.37 and appendix A).
+"""Linearised attitude error dynamics ``F`` (Bernard 2021 eq. 7.24, 7.37 and appendix A); the
+torques' attitude partials are defined next to the torques (:mod:`lightcurve.dynamics.torques`)
+and re-exported here.
 
 Error state ``δx = [δθ (3), δω (3)]``: ``δθ`` is the small rotation (rad, body axes) with
 ``q_true = δq(δθ) ⊗ q̂``, ``δq ≈ [1, δθ/2]`` (so ``A(q_true) ≈ (I − [δθ×]) A(q̂)``), and
@@ -34,13 +36,13 @@ derivative of the lit/wetted set is returned.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import expm
 
 from .. import rotations as rot
 from ..core.dynamics import error_F_nb
 from . import _checks as ck
-from .atmosphere import altitude_m, density_kg_m3
 from .rigid_body import check_inertia, euler_omega_dot
-from .torques import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU, _srp_inputs, drag_relative_velocity
+from .torques import drag_torque_jacobian, gravity_gradient_jacobian, srp_torque_jacobian
 
 __all__ = [
     "gravity_gradient_jacobian",
@@ -56,86 +58,13 @@ __all__ = [
 ]
 
 
-def _single_quat(q, name="q"):
-    q = rot.check_unit_quat(q, name)
-    if q.shape != (4,):
-        raise ValueError(f"{name}: expected a single quaternion of shape (4,), got {q.shape}")
-    return q
-
-
-def _single_vec(v, name):
-    v = ck.vec3(v, name)
-    if v.shape != (3,):
-        raise ValueError(f"{name}: expected shape (3,), got {v.shape}")
-    return v
-
-
-def gravity_gradient_jacobian(r_eci_m, q, J, mu: float = MU_EARTH) -> np.ndarray:
-    """``∂T_gg/∂δθ`` (N m/rad, 3×3) of the gravity-gradient torque (Bernard appendix A).
-
-    ``k ([u×] J − [(J u)×]) [u×]`` with ``u = A(q) r̂``, ``k = 3μ/|r|³``. Inputs as in
-    :func:`lightcurve.dynamics.torques.gravity_gradient_torque` (single state).
-    """
-    r = _single_vec(r_eci_m, "r_eci_m")
-    q = _single_quat(q)
-    J = check_inertia(J)
-    mu = ck.finite_scalar(mu, "mu", positive=True)
-    rn = np.linalg.norm(r)
-    if rn == 0:
-        raise ValueError("r_eci_m: zero position vector")
-    u = rot.quat_rotate(q, r / rn)
-    U = rot.skew(u)
-    return 3.0 * mu / rn**3 * (U @ J - rot.skew(J @ u)) @ U
-
-
-def srp_torque_jacobian(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, *,
-                        c_abs=None, lit_fraction=1.0, sun_distance_m=AU_M,
-                        p_sun_1au: float = P_SUN_1AU) -> np.ndarray:
-    """``∂T_srp/∂δθ`` (N m/rad, 3×3); arguments as :func:`~lightcurve.dynamics.torques.srp_torque`."""
-    q = _single_quat(q)
-    A, n, c, cs, cd, s_b, P = _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
-                                          c_spec, c_diff, c_abs, lit_fraction, sun_distance_m, p_sun_1au)
-    if s_b.shape != (3,):
-        raise ValueError("sun_dir_eci: expected a single vector of shape (3,)")
-    P = float(P)
-    S = rot.skew(s_b)
-    out = np.zeros((3, 3))
-    cos = n @ s_b
-    for i in np.nonzero(cos > 0)[0]:
-        x = cos[i]
-        dF = -P * A[i] * ((1.0 - cs[i]) * (np.outer(s_b, n[i]) + x * np.eye(3))
-                          + 2.0 * (2.0 * cs[i] * x + cd[i] / 3.0) * np.outer(n[i], n[i]))
-        out += rot.skew(c[i]) @ dF @ S
-    return out
-
-
-def drag_torque_jacobian(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *,
-                         Cd: float = 2.2, density_fn=density_kg_m3,
-                         omega_earth: float = OMEGA_EARTH) -> np.ndarray:
-    """``∂T_drag/∂δθ`` (N m/rad, 3×3); arguments as :func:`~lightcurve.dynamics.torques.drag_torque`."""
-    q = _single_quat(q)
-    r = _single_vec(r_eci_m, "r_eci_m")
-    v = _single_vec(v_eci_m_s, "v_eci_m_s")
-    A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
-    Cd = ck.finite_scalar(Cd, "Cd", nonneg=True)
-    rho = float(density_fn(altitude_m(r)))
-    v_b = rot.quat_rotate(q, drag_relative_velocity(r, v, omega_earth))
-    V = rot.skew(v_b)
-    out = np.zeros((3, 3))
-    cos = n @ v_b
-    for i in np.nonzero(cos > 0)[0]:
-        dF = -0.5 * rho * Cd * A[i] * (np.outer(v_b, n[i]) + cos[i] * np.eye(3))
-        out += rot.skew(c[i]) @ dF @ V
-    return out
-
-
 def controlled_F(omega) -> np.ndarray:
     """6×6 error-dynamics matrix of the controlled (constant-rate) model (Bernard eq. 7.24).
 
     ``[[−[ω×], I], [0, 0]]`` for the state ``[δθ, δω]``; ``omega`` is the body rate (rad/s, body
     axes). The attitude-only model (rate known) is the upper-left block ``−[ω×]``.
     """
-    w = _single_vec(omega, "omega")
+    w = ck.single_vec(omega, "omega")
     F = np.empty((6, 6))
     error_F_nb(np.ascontiguousarray(w), np.eye(3), np.eye(3), False, F)
     return F
@@ -156,7 +85,7 @@ def uncontrolled_F(omega, J, dT_dtheta=None, dT_domega=None, J_inv=None) -> np.n
     dT_domega : array (3, 3), optional
         Rate partial of the torque, N m s/rad; default zero.
     """
-    w = _single_vec(omega, "omega")
+    w = ck.single_vec(omega, "omega")
     J = check_inertia(J)
     Ji = np.linalg.inv(J) if J_inv is None else np.asarray(J_inv, dtype=float)
     F = np.empty((6, 6))
@@ -170,7 +99,7 @@ def uncontrolled_F(omega, J, dT_dtheta=None, dT_domega=None, J_inv=None) -> np.n
 
 def uncontrolled_F_models(t, q, omega, J, torque_models=()) -> np.ndarray:
     """:func:`uncontrolled_F` with ``∂T/∂δθ`` summed from torque models' ``dtheta(t, q, omega)``."""
-    q = _single_quat(q)
+    q = ck.single_quat(q)
     dT = np.zeros((3, 3))
     for m in torque_models:
         dT = dT + np.asarray(m.dtheta(t, q, omega), dtype=float)
@@ -187,8 +116,8 @@ def nonlinear_error_rate(dx, q_hat, omega_hat, J=None, torque_fn=None, t: float 
     Returns ``[ṗ (3), δω̇ (3)]``.
     """
     dx = np.asarray(dx, dtype=float)
-    q_hat = _single_quat(q_hat, "q_hat")
-    w_hat = _single_vec(omega_hat, "omega_hat")
+    q_hat = ck.single_quat(q_hat, "q_hat")
+    w_hat = ck.single_vec(omega_hat, "omega_hat")
     q = rot.quat_mult(rot.rotvec_to_quat(dx[:3]), q_hat)
     w = w_hat + dx[3:]
 
@@ -208,8 +137,6 @@ def nonlinear_error_rate(dx, q_hat, omega_hat, J=None, torque_fn=None, t: float 
 
 def transition_matrix(F, dt: float) -> np.ndarray:
     """Discrete state-transition matrix ``Φ = exp(F Δt)`` (``F`` held constant over ``Δt`` s)."""
-    from scipy.linalg import expm
-
     F = np.asarray(F, dtype=float)
     if F.ndim != 2 or F.shape[0] != F.shape[1] or not np.all(np.isfinite(F)):
         raise ValueError(f"F: expected a finite square matrix, got shape {F.shape}")

@@ -21,7 +21,9 @@ from ..core.dynamics import quat_rate_batch_nb
 __all__ = ["quat_derivative", "propagate_constant_rate"]
 
 
-def _check_omega(omega, name="omega"):
+def check_omega(omega, name="omega"):
+    """``omega`` as a float array of shape (..., 3); ValueError naming ``name`` for a wrong
+    shape or NaN/inf."""
     w = np.asarray(omega, dtype=float) if not isinstance(omega, np.ndarray) else omega.astype(float)
     if w.ndim == 0 or w.shape[-1] != 3:
         raise ValueError(f"{name}: expected shape (..., 3), got {np.shape(omega)}")
@@ -45,7 +47,7 @@ def quat_derivative(q, omega):
     array (..., 4)
     """
     q = rot.check_unit_quat(q, "q")
-    w = _check_omega(omega)
+    w = check_omega(omega)
     shape = np.broadcast_shapes(q.shape[:-1], w.shape[:-1])
     Q = np.ascontiguousarray(np.broadcast_to(q, shape + (4,))).reshape(-1, 4)
     W = np.ascontiguousarray(np.broadcast_to(w, shape + (3,))).reshape(-1, 3)
@@ -71,7 +73,7 @@ def propagate_constant_rate(q, omega, dt):
     array (..., 4) unit quaternion(s) (sign continuous with ``q``, not forced to ``q1 >= 0``).
     """
     q = rot.check_unit_quat(q, "q")
-    w = _check_omega(omega)
+    w = check_omega(omega)
     dt = np.asarray(dt, dtype=float)
     if not np.all(np.isfinite(dt)):
         raise ValueError("dt: contains NaN or infinite values")

@@ -31,6 +31,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.frames import itrs_rotation
+from ..geometry.sites import itrs_to_geodetic
+from ..rotations import dcm_to_quat, quat_inv, quat_mult, quat_normalize, quat_to_rotvec
+
 __all__ = ["LAWS", "attitude_law", "law_body_rates", "geodetic_up_itrs", "nadir_sun_yaw_dcm"]
 
 #: Names accepted by :func:`attitude_law` (and by ``[attitude] law = ...``).
@@ -45,23 +49,10 @@ def _unit_rows(x):
 def geodetic_up_itrs(r_itrs_m) -> np.ndarray:
     """Unit WGS84 ellipsoid normal (geodetic "up", ITRS) through point(s) ``r_itrs_m`` (m).
 
-    ``(N, 3)`` → ``(N, 3)``. Geodetic latitude by fixed-point iteration
-    ``φ = atan2(z, p (1 − e² N/(N + h)))`` (converges to < 1e-12 rad in a few steps for any
-    point above the Earth's centre region); up = (cos φ cos λ, cos φ sin λ, sin φ).
+    ``(N, 3)`` → ``(N, 3)``: up = (cos φ cos λ, cos φ sin λ, sin φ) with the geodetic latitude
+    φ and longitude λ of :func:`lightcurve.geometry.sites.itrs_to_geodetic`.
     """
-    from ..geometry.sites import WGS84_A_M, WGS84_F
-
-    r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
-    e2 = WGS84_F * (2.0 - WGS84_F)
-    p = np.hypot(r[:, 0], r[:, 1])
-    z = r[:, 2]
-    lat = np.arctan2(z, p * (1.0 - e2))
-    for _ in range(10):
-        n = WGS84_A_M / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
-        # h from the robust form (valid at all latitudes)
-        h = p * np.cos(lat) + z * np.sin(lat) - n * (1.0 - e2 * np.sin(lat) ** 2)
-        lat = np.arctan2(z, p * (1.0 - e2 * n / (n + h)))
-    lon = np.arctan2(r[:, 1], r[:, 0])
+    lat, lon, _ = itrs_to_geodetic(r_itrs_m)
     cl = np.cos(lat)
     return np.stack([cl * np.cos(lon), cl * np.sin(lon), np.sin(lat)], axis=-1)
 
@@ -114,9 +105,6 @@ def attitude_law(name: str, r_obj_eci_m, r_sun_eci_m, epoch_utc, t_s) -> np.ndar
     ValueError
         Unknown law, mismatched shapes, non-finite input.
     """
-    from ..geometry.frames import itrs_rotation
-    from ..rotations import dcm_to_quat, quat_normalize
-
     if name not in LAWS:
         raise ValueError(f"unknown attitude law {name!r}; known: {', '.join(LAWS)}")
     r = np.atleast_2d(np.asarray(r_obj_eci_m, dtype=float))
@@ -154,8 +142,6 @@ def law_body_rates(q, t_s) -> np.ndarray:
     differences inside, one-sided at the ends; samples with equal times share the rate of their
     neighbours. One sample (or all at one time) → zeros.
     """
-    from ..rotations import quat_inv, quat_mult, quat_to_rotvec
-
     q = np.atleast_2d(np.asarray(q, dtype=float))
     t = np.atleast_1d(np.asarray(t_s, dtype=float))
     if q.shape != (t.size, 4):

@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import rotations as rot
 from ..core.dynamics import omega_dot_batch_nb, quat_rate_batch_nb
-from .kinematics import _check_omega
+from .kinematics import check_omega
 
 __all__ = [
     "check_inertia",
@@ -68,9 +68,9 @@ def euler_omega_dot(omega, J, torque=None, J_inv=None):
         Precomputed inverse of ``J`` (not re-validated).
     """
     J = check_inertia(J)
-    w = _check_omega(omega)
+    w = check_omega(omega)
     Ji = np.linalg.inv(J) if J_inv is None else np.asarray(J_inv, dtype=float)
-    T = np.zeros(3) if torque is None else _check_omega(torque, "torque")
+    T = np.zeros(3) if torque is None else check_omega(torque, "torque")
     w, T = np.broadcast_arrays(w, T)
     lead = w.shape[:-1]
     out = np.empty((int(np.prod(lead, dtype=int)), 3))
@@ -113,12 +113,12 @@ def state_derivative(t, x, J, torque_fn=None, J_inv=None):
 def angular_momentum_inertial(q, omega, J):
     """Inertial angular momentum ``H_I = A(q)ᵀ J ω`` (kg m²/s, inertial axes); stacks allowed."""
     J = check_inertia(J)
-    w = _check_omega(omega)
+    w = check_omega(omega)
     return rot.quat_rotate_inv(q, w @ J.T)
 
 
 def rotational_energy(omega, J):
     """Rotational kinetic energy ``½ ωᵀ J ω`` (J); stacks allowed."""
     J = check_inertia(J)
-    w = _check_omega(omega)
+    w = check_omega(omega)
     return 0.5 * np.sum(w * (w @ J.T), axis=-1)

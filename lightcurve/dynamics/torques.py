@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from scipy.interpolate import CubicSpline
 
 from .. import rotations as rot
 from ..core.constants import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU
@@ -46,6 +47,9 @@ __all__ = [
     "OMEGA_EARTH",
     "gravity_gradient_torque",
     "gravity_gradient_torque_nb",
+    "gravity_gradient_jacobian",
+    "srp_torque_jacobian",
+    "drag_torque_jacobian",
     "srp_torque",
     "srp_facet_forces",
     "drag_torque",
@@ -107,8 +111,11 @@ def gravity_gradient_torque_nb(q, r_eci_m, J, mu):
 # ----------------------------------------------------------------------------------------
 # solar radiation pressure
 # ----------------------------------------------------------------------------------------
-def _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, c_abs,
-                lit_fraction, sun_distance_m, p_sun_1au):
+def srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, c_abs,
+               lit_fraction, sun_distance_m, p_sun_1au):
+    """Validated SRP inputs shared by :func:`srp_torque` and its Jacobian: ``(A, n̂, c, C_s, C_d,
+    ŝ_b, P)`` — facet areas, normals, centres, specular/diffuse coefficients, the body-frame
+    Sun direction and the pressure ``P = P_1au (au/d)² · lit`` (N/m²)."""
     A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
     F = A.shape[0]
     cs = ck.per_facet(c_spec, F, "c_spec")
@@ -171,7 +178,7 @@ def srp_torque(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c
     p_sun_1au : float
         Radiation pressure at 1 au, N/m² (default 4.56e-6).
     """
-    A, n, c, cs, cd, s_b, P = _srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
+    A, n, c, cs, cd, s_b, P = srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
                                           c_spec, c_diff, c_abs, lit_fraction, sun_distance_m, p_sun_1au)
     Fi = srp_facet_forces(s_b, P, A, n, cs, cd)
     return np.sum(np.cross(c, Fi), axis=-2)
@@ -221,6 +228,68 @@ def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *
 # ----------------------------------------------------------------------------------------
 # time-dependent torque models for the truth simulators
 # ----------------------------------------------------------------------------------------
+# ----------------------------------------------------------------------------------------
+# attitude partials of the torques (Bernard appendix A; lightcurve.dynamics.jacobians)
+# ----------------------------------------------------------------------------------------
+def gravity_gradient_jacobian(r_eci_m, q, J, mu: float = MU_EARTH) -> np.ndarray:
+    """``∂T_gg/∂δθ`` (N m/rad, 3×3) of the gravity-gradient torque (Bernard appendix A).
+
+    ``k ([u×] J − [(J u)×]) [u×]`` with ``u = A(q) r̂``, ``k = 3μ/|r|³``. Inputs as in
+    :func:`lightcurve.dynamics.torques.gravity_gradient_torque` (single state).
+    """
+    r = ck.single_vec(r_eci_m, "r_eci_m")
+    q = ck.single_quat(q)
+    J = check_inertia(J)
+    mu = ck.finite_scalar(mu, "mu", positive=True)
+    rn = np.linalg.norm(r)
+    if rn == 0:
+        raise ValueError("r_eci_m: zero position vector")
+    u = rot.quat_rotate(q, r / rn)
+    U = rot.skew(u)
+    return 3.0 * mu / rn**3 * (U @ J - rot.skew(J @ u)) @ U
+
+
+def srp_torque_jacobian(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c_diff, *,
+                        c_abs=None, lit_fraction=1.0, sun_distance_m=AU_M,
+                        p_sun_1au: float = P_SUN_1AU) -> np.ndarray:
+    """``∂T_srp/∂δθ`` (N m/rad, 3×3); arguments as :func:`~lightcurve.dynamics.torques.srp_torque`."""
+    q = ck.single_quat(q)
+    A, n, c, cs, cd, s_b, P = srp_inputs(q, sun_dir_eci, areas_m2, normals_body, centers_body_m,
+                                          c_spec, c_diff, c_abs, lit_fraction, sun_distance_m, p_sun_1au)
+    if s_b.shape != (3,):
+        raise ValueError("sun_dir_eci: expected a single vector of shape (3,)")
+    P = float(P)
+    S = rot.skew(s_b)
+    out = np.zeros((3, 3))
+    cos = n @ s_b
+    for i in np.nonzero(cos > 0)[0]:
+        x = cos[i]
+        dF = -P * A[i] * ((1.0 - cs[i]) * (np.outer(s_b, n[i]) + x * np.eye(3))
+                          + 2.0 * (2.0 * cs[i] * x + cd[i] / 3.0) * np.outer(n[i], n[i]))
+        out += rot.skew(c[i]) @ dF @ S
+    return out
+
+
+def drag_torque_jacobian(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *,
+                         Cd: float = 2.2, density_fn=density_kg_m3,
+                         omega_earth: float = OMEGA_EARTH) -> np.ndarray:
+    """``∂T_drag/∂δθ`` (N m/rad, 3×3); arguments as :func:`~lightcurve.dynamics.torques.drag_torque`."""
+    q = ck.single_quat(q)
+    r = ck.single_vec(r_eci_m, "r_eci_m")
+    v = ck.single_vec(v_eci_m_s, "v_eci_m_s")
+    A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
+    Cd = ck.finite_scalar(Cd, "Cd", nonneg=True)
+    rho = float(density_fn(altitude_m(r)))
+    v_b = rot.quat_rotate(q, drag_relative_velocity(r, v, omega_earth))
+    V = rot.skew(v_b)
+    out = np.zeros((3, 3))
+    cos = n @ v_b
+    for i in np.nonzero(cos > 0)[0]:
+        dF = -0.5 * rho * Cd * A[i] * (np.outer(v_b, n[i]) + cos[i] * np.eye(3))
+        out += rot.skew(c[i]) @ dF @ V
+    return out
+
+
 def as_time_function(x, name: str):
     """Turn ``x`` into a function of time ``t (s) -> array``.
 
@@ -230,8 +299,6 @@ def as_time_function(x, name: str):
     if callable(x):
         return x
     if isinstance(x, tuple) and len(x) == 2:
-        from scipy.interpolate import CubicSpline
-
         t = np.asarray(x[0], dtype=float)
         vals = np.asarray(x[1], dtype=float)
         if t.ndim != 1 or vals.shape[0] != t.shape[0] or t.shape[0] < 2:
@@ -284,8 +351,6 @@ class GravityGradientTorque:
 
     def dtheta(self, t, q, omega=None):
         """``∂T/∂δθ`` (N m/rad, 3×3) for ``q_true = δq(δθ) ⊗ q``."""
-        from .jacobians import gravity_gradient_jacobian
-
         return gravity_gradient_jacobian(self.position(t), q, self.J, self.mu)
 
     __call__ = torque
@@ -331,8 +396,6 @@ class SRPTorque:
 
     def dtheta(self, t, q, omega=None):
         """``∂T/∂δθ`` (N m/rad, 3×3)."""
-        from .jacobians import srp_torque_jacobian
-
         s, lit, d = self._args(t)
         return srp_torque_jacobian(q, s, self.areas, self.normals, self.centers, self.c_spec,
                                    self.c_diff, lit_fraction=lit, sun_distance_m=d,
@@ -368,8 +431,6 @@ class DragTorque:
 
     def dtheta(self, t, q, omega=None):
         """``∂T/∂δθ`` (N m/rad, 3×3)."""
-        from .jacobians import drag_torque_jacobian
-
         return drag_torque_jacobian(q, self.position(t), self.velocity(t), self.areas, self.normals,
                                     self.centers, Cd=self.Cd, density_fn=self.density_fn,
                                     omega_earth=self.omega_earth)

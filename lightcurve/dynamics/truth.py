@@ -57,10 +57,15 @@ def _truth_rhs_nb(x, T, J, Ji, eta):
     return out
 
 
+from scipy.interpolate import CubicSpline
+
+from ..geometry.eclipse import lit_fraction
+from ..geometry.time import sun_position_gcrs
 from . import _checks as ck
 from .integrators import integrate_truth
-from .kinematics import _check_omega
+from .kinematics import check_omega
 from .rigid_body import check_inertia
+from .torques import DragTorque, GravityGradientTorque, SRPTorque
 
 __all__ = ["ControlledTruth", "UncontrolledTruth", "srp_coefficients_from_materials"]
 
@@ -138,7 +143,7 @@ def _single_q(q, name):
 
 
 def _single_w(w, name):
-    w = _check_omega(w, name)
+    w = check_omega(w, name)
     if w.shape != (3,):
         raise ValueError(f"{name}: expected shape (3,), got {w.shape}")
     return w.copy()
@@ -293,10 +298,6 @@ class UncontrolledTruth:
 
         Called by :meth:`simulate`; returns the list of torque model objects.
         """
-        from scipy.interpolate import CubicSpline
-
-        from .torques import DragTorque, GravityGradientTorque, SRPTorque
-
         if not self.named_torques:
             self._named_fns = []
             return []
@@ -316,9 +317,6 @@ class UncontrolledTruth:
             sh = self.shape
             models.append(DragTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, pos, vel))
         if "srp" in self.named_torques:
-            from ..geometry.eclipse import lit_fraction
-            from ..geometry.time import sun_position_gcrs
-
             sh = self.shape
             rs = np.asarray(sun_position_gcrs(self.epoch_utc, tg), dtype=float)
             rel = rs - r

@@ -2,16 +2,16 @@
 
 Modules (one concept each):
 
-* :mod:`~lightcurve.estimation.kalman` — prediction, Joseph-form / standard / consider
-  (Schmidt) updates, symmetrisation, Cholesky with a failure flag, numba kernels;
+* :mod:`~lightcurve.estimation.kalman` — prediction, Joseph-form / consider (Schmidt)
+  updates, symmetrisation, Cholesky with a failure flag (the arithmetic: :mod:`lightcurve.core`);
 * :mod:`~lightcurve.estimation.sigma_points` — scaled unscented weights and sigma points,
   unscented transform and update, augmented-state helpers (USQUE style);
 * :mod:`~lightcurve.estimation.particles` — log weights, log-sum-exp, effective sample size,
   systematic / stratified / multinomial resampling (numba), roughening, weighted moments;
 * :mod:`~lightcurve.estimation.consistency` — NEES, NIS, NMEE, chi-square intervals,
   sliding-window NIS divergence detection;
-* :mod:`~lightcurve.estimation.protocols` — dynamics / measurement model interfaces;
-* :mod:`~lightcurve.estimation.linear` — linear-Gaussian reference models, simulator, EKF run;
+* :mod:`~lightcurve.estimation.protocols` — the state-space model the filters drive
+  (attitude dynamics, measurement model);
 * :mod:`~lightcurve.estimation.jacobians` — complex-step and central-difference Jacobians;
 * :mod:`~lightcurve.estimation.rng` — seeds and Generators (reproducibility).
 """
@@ -39,13 +39,6 @@ from .kalman import (
     safe_cholesky,
     symmetrize,
 )
-from .linear import (
-    FilterRun,
-    LinearGaussianDynamics,
-    LinearGaussianMeasurement,
-    run_ekf,
-    simulate,
-)
 from .particles import (
     RESAMPLING_METHODS,
     effective_sample_size,
@@ -62,12 +55,7 @@ from .particles import (
     update_log_weights,
     weighted_mean_cov,
 )
-from .protocols import (
-    DifferentiableMeasurementModel,
-    DynamicsModel,
-    LinearizableDynamicsModel,
-    MeasurementModel,
-)
+from .protocols import AttitudeDynamics, MeasurementModel
 from .rng import as_generator
 from .sigma_points import (
     UnscentedWeights,
@@ -102,8 +90,6 @@ __all__ = [
     "nmee", "nmee_interval", "ConsistencyResult", "chi2_consistency", "windowed_average",
     "NISDivergenceDetector",
     # interfaces and helpers
-    "MeasurementModel", "DifferentiableMeasurementModel", "DynamicsModel",
-    "LinearizableDynamicsModel", "LinearGaussianDynamics", "LinearGaussianMeasurement",
-    "simulate", "FilterRun", "run_ekf", "complex_step_jacobian",
+    "AttitudeDynamics", "MeasurementModel", "complex_step_jacobian",
     "central_difference_jacobian", "as_generator",
 ]

@@ -166,7 +166,8 @@ def sample_until_converged(log_prob, p0, *, seed=0, block=500, max_steps=20_000,
         else:
             raise ValueError(f"moves must be 'de', 'stretch' or emcee moves, got {moves!r}")
     sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=vectorize, moves=moves)
-    sampler._random = np.random.RandomState(int(seed) % (2**32))  # emcee 3 has no seed argument
+    # emcee 3 has no seed argument: seed the sampler's own generator through its public setter
+    sampler.random_state = np.random.RandomState(int(seed) % (2**32)).get_state()
     state = emcee.State(p0, log_prob=np.asarray(lp0, float), random_state=sampler.random_state)
     tau_prev = None
     diag = None

@@ -2,10 +2,12 @@
 
 Public API::
 
-    invert(curve, method="mekf"|"ukf"|"bpf", seed=…, sigma_theta_deg=…, sigma_omega_deg_s=…,
-           particles=…, roughening=…, …) -> Estimate
-    build_problem(curve, …) -> FilterProblem          # model + dynamics + initial estimate
-    run_mekf(problem, …), run_ukf(problem, …), run_bpf(problem, …), run_bpf_numpy(problem, …)
+    invert(curve, MEKFConfig(...) | UKFConfig(...) | "mekf"|"ukf"|"bpf",
+           problem=ProblemConfig(seed=…, sigma_theta_deg=…, …)) -> Estimate
+    invert(curve, "ukf", seed=…, sigma_theta_deg=…, alpha=…, …)   # the same, keyword form
+    build_problem(curve, ProblemConfig(...)) -> FilterProblem    # model + dynamics + initial estimate
+    run_mekf(problem, MEKFConfig), run_ukf(problem, UKFConfig), run_bpf(problem, …),
+    run_bpf_numpy(problem, …)
     Estimate (per-epoch q̂, ω̂, 1σ bounds, innovations, NEES, N_eff, flags; .write(), .summary())
     read_estimate(path) -> Estimate
     MagnitudeModel, ControlledDynamics, UncontrolledDynamics
@@ -17,6 +19,7 @@ body axes (rad/s); error state [δθ, δω] with q_true = δq(δθ) ⊗ q̂; deg
 
 from ._common import FilterProblem
 from .bpf import run_bpf, run_bpf_numpy
+from .config import VARIANTS, MEKFConfig, ProblemConfig, UKFConfig, register_filter_config
 from .gating import GateConfig, set_gate
 from .invert import METHODS, build_problem, invert
 from .mekf import run_mekf
@@ -31,5 +34,6 @@ __all__ = [
     "run_bpf_numpy", "Estimate", "read_estimate", "MagnitudeModel", "ControlledDynamics",
     "UncontrolledDynamics", "FLAG_NAN", "FLAG_REFUSED", "FLAG_INVISIBLE", "FLAG_COLLAPSE",
     "FLAG_RESAMPLED", "FLAG_NIS", "FLAG_OUTLIER", "FLAG_INFLATED", "FLAG_GATE_RELEASED",
-    "FLAG_UNLIT", "FLAG_BELOW_HORIZON", "GateConfig", "set_gate",
+    "FLAG_UNLIT", "FLAG_BELOW_HORIZON", "GateConfig", "set_gate", "ProblemConfig", "MEKFConfig",
+    "UKFConfig", "VARIANTS", "register_filter_config",
 ]

@@ -136,6 +136,23 @@ class Recorder:
         if nref and nref >= max(1, nupd // 2):
             diverged = True
             reasons.append(f"{nref} of {nupd} updates refused (numerical failure)")
+        # Kalman filters: a gap the attitude cannot be carried across — the 1σ rate
+        # uncertainty before it, times its length, is more than half a turn — after which
+        # the attitude 1σ is under 90°: one magnitude cannot determine an attitude that is
+        # unknown, so the filter claims what it cannot know (a 10⁸ s gap before the last
+        # epochs used to end the MEKF 158° off with no flag). The particle filter is not
+        # flagged: its cloud spreads over the gap and re-acquires, or not, on later evidence.
+        t = np.asarray(p.model.t, float)
+        if t.size > 1 and self.method in ("mekf", "ukf"):
+            spread = np.sqrt(d[:-1, 3:].max(axis=1)) * np.diff(t)
+            after = np.sqrt(att_var[1:].max(axis=1))
+            lost = np.flatnonzero((spread > np.pi) & (after < 0.5 * np.pi))
+            if lost.size:
+                k = int(lost[0])
+                diverged = True
+                reasons.append(f"attitude lost across a {t[k + 1] - t[k]:.3g} s gap after epoch "
+                               f"{k} (1-sigma rate uncertainty x gap = {np.degrees(spread[k]):.3g} "
+                               f"deg, attitude 1-sigma after it {np.degrees(after[k]):.3g} deg)")
         if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.w))
                 and np.all(np.isfinite(self.P))):
             # never expected (every step guards), but never return silent NaN either

@@ -47,11 +47,16 @@ import math
 import numba as nb
 import numpy as np
 
+from ..core.photometry import (
+    COOK_TORRANCE,
+    brdf_product_nb,
+    facet_flux_nb,
+    magnitude_partials_q_nb,
+)
 from ..errors import InputError
-from ..core.photometry import COOK_TORRANCE, brdf_product_nb, magnitude_partials_q_nb
-from ..photometry.partials import kernel_capable
+from ..photometry.magnitude import apparent_magnitude
+from ..photometry.partials import kernel_capable, magnitude_partials
 from ..rotations import qrot_xyz_nb
-from ._kernels import _fill_facet_arrays, _flux
 
 __all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
            "dp_dz", "mag_states_nb", "mag_z_states_nb", "partials_z_nb"]
@@ -128,6 +133,28 @@ def mag_states_nb(Q, s, o, normals, areas, ids, params, offset):
     return out
 
 
+@nb.njit(cache=True, inline="always")
+def fill_facet_arrays_nb(z, facet, kind_col, logit, areas0, params0, ar, pr):
+    """Facet areas ``ar`` (F,) m² and BRDF parameters ``pr`` (F,P) of one Model 3 state z (D,).
+
+    Starts from the nominal ``areas0``/``params0`` and overwrites the estimated entries with
+    ``p = 1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``; ``kind_col[d] == 3`` is an area, otherwise
+    the BRDF parameter column of facet ``facet[d]``.
+    """
+    F, P = params0.shape
+    for f in range(F):
+        ar[f] = areas0[f]
+        for j in range(P):
+            pr[f, j] = params0[f, j]
+    for d in range(z.shape[0]):
+        zz = z[d]
+        v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+        if kind_col[d] == 3:
+            ar[facet[d]] = v
+        else:
+            pr[facet[d], kind_col[d]] = v
+
+
 @nb.njit(cache=True)
 def mag_z_states_nb(Q, s, o, normals, areas0, ids, params0, offset, Z, kind_col, facet, logit):
     """Apparent magnitudes (S,) of S (attitude, Model 3 state) pairs at one epoch.
@@ -141,12 +168,9 @@ def mag_z_states_nb(Q, s, o, normals, areas0, ids, params0, offset, Z, kind_col,
     out = np.empty(S)
     areas = np.empty(F)
     params = np.empty(params0.shape)
-    sb = np.empty(3)
-    ob = np.empty(3)
     for i in range(S):
-        # the BPF's per-particle fill and the attitude-only flux loop (filters._kernels)
-        _fill_facet_arrays(Z[i], facet, kind_col, logit, areas0, params0, areas, params)
-        acc = _flux(Q[i], s, o, normals, areas, ids, params, sb, ob)
+        fill_facet_arrays_nb(Z[i], facet, kind_col, logit, areas0, params0, areas, params)
+        acc = facet_flux_nb(Q[i], s, o, normals, areas, ids, params)
         out[i] = offset - 2.5 * math.log10(acc) if acc > 0.0 else np.inf
     return out
 
@@ -166,7 +190,7 @@ def partials_z_nb(q, s, o, normals, areas0, ids, params0, offset, z, kind_col, f
     F = normals.shape[0]
     areas = np.empty(F)
     params = np.empty(params0.shape)
-    _fill_facet_arrays(z, facet, kind_col, logit, areas0, params0, areas, params)
+    fill_facet_arrays_nb(z, facet, kind_col, logit, areas0, params0, areas, params)
     D = z.shape[0]
     dp = np.empty(D)          # dp/dz: p(1−p) (logit) or p (log), as dp_dz
     for d in range(D):
@@ -394,8 +418,6 @@ class FacetParameterStates:
                                    self._areas0, self._ids, self._params0,
                                    float(model.offset[k]), np.ascontiguousarray(Z),
                                    self.kind_col, self.facet, self.logit)
-        from ..photometry.magnitude import apparent_magnitude
-
         out = np.empty(Q.shape[0])
         with np.errstate(divide="ignore"):
             for i in range(Q.shape[0]):
@@ -427,8 +449,6 @@ class FacetParameterStates:
     def partials_numpy(self, model, q, z, k):
         """:meth:`partials` by :func:`lightcurve.photometry.magnitude_partials` (NumPy
         backend) on a copy of the shape with p(z) — any BRDF; the reference of the kernel."""
-        from ..photometry.partials import magnitude_partials
-
         z = np.asarray(z, float).reshape(self.dim)
         q = np.asarray(q, float).reshape(4)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -439,6 +459,16 @@ class FacetParameterStates:
         dm_dp = np.array([cols[c][f] for c, f in zip(self.kind_col, self.facet)])
         m = float(mp.m[0]) + float(model.lit_offset[k])
         return m, np.asarray(mp.dm_dtheta[0], float), dm_dp * self.jacobian(z)
+
+    @property
+    def areas0(self) -> np.ndarray:
+        """Nominal facet areas (F,), m² — the shape's, before any state is applied."""
+        return self._areas0
+
+    @property
+    def params0(self) -> np.ndarray:
+        """Nominal packed BRDF rows (F, 7) of the shape (:mod:`lightcurve.core.photometry`)."""
+        return self._params0
 
     # -- metadata ---------------------------------------------------------------------------
     def describe(self) -> dict:

@@ -1,9 +1,8 @@
 """Per-measurement screening of the attitude filters: innovation (outlier) gate and epochs the
 model cannot explain (object unlit or below the horizon).
 
-One place for the rules, called from the update step of the MEKF, the UKF and the BPF
-(issue 11, "Measurements": bad measurements are "rejected or skipped with counts in the
-result, never silently used").
+One place for the rules, called from the update step of the MEKF, the UKF and the BPF: bad
+measurements are rejected or skipped with counts in the result, never silently used.
 
 Innovation gate
 ---------------
@@ -19,10 +18,9 @@ the estimate has not converged yet.
 
 Particle filter: the weighted mean and variance summarise a cloud that may be multimodal
 while the filter has not converged (from a 60° prior the cloud splits into several attitude
-hypotheses; the acceptance runs of ``benchmarks/filters_acceptance.py`` with the moment test
-alone rejected 203 good measurements and 7 of 10 runs lost the attitude). So the particle
-filter flags a measurement only when, in addition, no particle explains it: every particle's
-own ``(y − m(q_i))²/R`` exceeds γ. A gross outlier is outside every particle's prediction;
+hypotheses), so the moment test alone rejects good measurements (docs/measurements.md). The
+particle filter flags a measurement only when, in addition, no particle explains it: every
+particle's own ``(y − m(q_i))²/R`` exceeds γ. A gross outlier is outside every particle's prediction;
 an informative measurement that the mean does not expect but some hypotheses do is used. For
 the particle filter α is therefore an upper bound of the false-alarm rate.
 
@@ -30,15 +28,9 @@ Modes (:class:`GateConfig`):
 
 * ``"auto"`` (default): ``"reject"`` in the UKF (consistent: its NIS can be trusted),
   ``"inflate"`` in the MEKF and the particle filter, which are over-confident, so good
-  measurements exceed the gate more often than α says. Measured with
-  ``benchmarks/filters_acceptance.py``: the converged particle cloud (σθ = 60°, 10,000
-  particles; only ~4/10 runs end inside their own 3σ, the open point of issue 5) was kept on a
-  biased attitude by hard rejection (seed 3: final error 5.87° against 3.42° without the gate,
-  9/10 runs below 5° instead of 10/10; inflation 3.81°, 10/10); the MEKF (σθ = 3°, linearised
-  S too small while the 3° error is being corrected, NEES ≈ 28 against a band of 4.8–7.3 even
-  without a gate) flagged ≈ 1.9 good magnitudes per run: rejecting them raised its NEES to 40
-  (73/100 inside 3σ), inflating them lowered it to 19.8 (74/100, none diverged; 72/100 and 3
-  diverged without the gate). Inflation keeps the direction of a surprising good measurement,
+  measurements exceed the gate more often than α says (hard rejection kept the particle cloud
+  on a biased attitude and raised the MEKF's NEES; the measurements behind this choice are in
+  docs/measurements.md). Inflation keeps the direction of a surprising good measurement,
   while a gross outlier, whose noise is widened to |ν|/√γ, barely moves the estimate.
 * ``"reject"``: the flagged measurement is not used (no update; the prior is kept, the
   epoch gets :data:`~lightcurve.filters.result.FLAG_OUTLIER`); its ν and S are still stored in
@@ -47,7 +39,7 @@ Modes (:class:`GateConfig`):
 * ``"inflate"``: the measurement is used with its noise variance inflated so that its NIS equals
   γ — ``R' = R + ν²/γ − S``, hence ``S' = ν²/γ`` (the gain shrinks in proportion; a robust
   "soft" gate). Flag :data:`~lightcurve.filters.result.FLAG_INFLATED`.
-* ``"off"``: no gate (the filters of session 1).
+* ``"off"``: no gate.
 
 Release (our choice, documented): a gate that rejects ``max_consecutive`` measurements in a row
 is more likely facing a lost filter (or a model mismatch) than a burst of outliers; the next
@@ -56,8 +48,7 @@ flagged measurement is then used as it is (flag
 or be caught by the sliding-window NIS divergence test instead of silently coasting on its
 prior. ``warmup`` (default 0) leaves the first ``warmup`` measurement updates ungated; it is 0
 by default because S already carries the prior spread and a warm-up would let early outliers
-through. Measured in the acceptance runs (σθ = 3°, 100 runs): the UKF's gate flagged 2 of
-7,300 good magnitudes; the MEKF's flags fall mostly in the first 20 epochs (see "auto").
+through.
 
 Epoch screening
 ---------------
@@ -83,8 +74,15 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
+from scipy.stats import chi2
 
-from .result import FLAG_BELOW_HORIZON, FLAG_GATE_RELEASED, FLAG_INFLATED, FLAG_OUTLIER, FLAG_UNLIT
+from .result import (
+    FLAG_BELOW_HORIZON,
+    FLAG_GATE_RELEASED,
+    FLAG_INFLATED,
+    FLAG_OUTLIER,
+    FLAG_UNLIT,
+)
 
 __all__ = ["GateConfig", "InnovationGate", "GATE_MODES", "set_gate", "nis_threshold"]
 
@@ -96,8 +94,6 @@ _USED, _REJECTED, _INFLATED, _RELEASED, _UNLIT, _BELOW = 0, 1, 2, 3, 4, 5
 
 def nis_threshold(false_alarm: float, dof: int = 1) -> float:
     """χ² threshold γ with ``P(χ²_dof > γ) = false_alarm`` (dimensionless)."""
-    from scipy.stats import chi2
-
     return float(chi2.isf(float(false_alarm), int(dof)))
 
 

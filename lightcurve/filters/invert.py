@@ -23,32 +23,65 @@ import numpy as np
 from .. import rotations as rot
 from ..errors import InputError
 from ..io.lightcurve_h5 import Lightcurve
+from ..io.tomlio import Section, loads_toml
+from ..studies.scenario import scenario_from_lightcurve
+from . import bpf as _bpf
 from ._common import FilterProblem
+from .config import (ATTITUDE_MODES, BPF_KEYWORDS, INITIAL_MODES, METHOD_NAMES, ConfigBase,
+                     ProblemConfig, filter_config_class, split_options)
+from .facet_states import FacetParameterStates
+from .gating import set_gate
+from .mekf import run_mekf
 from .models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
+from .reflection import SiteBias
 from .result import Estimate
+from .ukf import run_ukf
 
-__all__ = ["invert", "build_problem", "METHODS", "ATTITUDE_MODES"]
+__all__ = ["invert", "build_problem", "initial_mode", "METHODS", "ATTITUDE_MODES",
+           "INITIAL_MODES"]
 
-METHODS = ("mekf", "ukf", "bpf")
-#: ``invert(attitude=…)``: estimate attitude and rate, or hold them at the file's truth (§10.7)
-ATTITUDE_MODES = ("estimate", "truth")
+METHODS = METHOD_NAMES
+"""Filter methods: "mekf", "ukf", "bpf"."""
+
+_RUNNERS = {"mekf": run_mekf, "ukf": run_ukf, "bpf": _bpf.run_bpf}
+#: memory of the particle filter per particle (all working arrays; measured 420 B with the
+#: 7-element attitude-and-rate state on the default scenario, rounded up for extra states)
+BPF_BYTES_PER_PARTICLE = 512
 
 
 def _scenario_attitude(curve, shape=None, library_dirs=None, site_dirs=None):
-    """The ``[attitude]`` of the scenario stored in the file, through the validated scenario
-    loader (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as
-    the resolved shape): keys ``dynamics``, ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and
-    ``inertia_kg_m2`` when the scenario sets it. ``{}`` when the file has no scenario."""
-    if not (getattr(curve, "scenario_toml", "") or "").strip():
-        return {}
-    from ..studies.scenario import scenario_from_lightcurve
+    """The ``[attitude]`` of the scenario stored in the file, validated: keys ``dynamics``,
+    ``acs_sigma_deg``, ``eta_sigma_deg_s2`` and ``inertia_kg_m2`` when set. ``{}`` when the
+    file has no scenario.
 
-    at = scenario_from_lightcurve(curve, (curve.attrs or {}).get("file"), shape=shape,
-                                  library_dirs=library_dirs, site_dirs=site_dirs).attitude
-    out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
-           "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
-    if at.inertia_kg_m2 is not None:
-        out["inertia_kg_m2"] = at.inertia_kg_m2
+    A complete scenario (a ``[scenario]`` table with its ``epoch_utc``, as ``simulate`` and
+    ``import`` store) goes through the scenario loader
+    (:func:`lightcurve.studies.scenario.scenario_from_lightcurve`, with ``shape`` as the
+    resolved shape); any other text (synthetic test curves holding only an ``[attitude]``
+    table) has those four keys validated with the loader's ranges. Invalid content is an
+    :class:`InputError`, never silently ignored.
+    """
+    text = getattr(curve, "scenario_toml", "") or ""
+    if not text.strip():
+        return {}
+    src = (curve.attrs or {}).get("file") or "<lightcurve>"
+    doc = loads_toml(text, file=f"{src}:scenario")
+    if isinstance(doc.get("scenario"), dict) and "epoch_utc" in doc["scenario"]:
+        at = scenario_from_lightcurve(curve, src, shape=shape, library_dirs=library_dirs,
+                                      site_dirs=site_dirs).attitude
+        out = {"dynamics": at.dynamics, "acs_sigma_deg": at.acs_sigma_deg,
+               "eta_sigma_deg_s2": at.eta_sigma_deg_s2}
+        if at.inertia_kg_m2 is not None:
+            out["inertia_kg_m2"] = at.inertia_kg_m2
+        return out
+    sec = Section(doc.get("attitude", {}), file=f"{src}:scenario", name="attitude")
+    out = {"dynamics": sec.str("dynamics", "controlled",
+                               choices=("controlled", "uncontrolled", "law")),
+           "acs_sigma_deg": sec.float("acs_sigma_deg", 0.0, min=0.0, max=30.0),
+           "eta_sigma_deg_s2": sec.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0)}
+    J = sec.matrix("inertia_kg_m2", None, shape=(3, 3))
+    if J is not None:
+        out["inertia_kg_m2"] = J
     return out
 
 
@@ -79,227 +112,253 @@ def _check_curve(curve):
                          allowed="> 0")
 
 
-def build_problem(curve, *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
-                  initial_q=None, initial_omega=None, shape=None, dynamics=None,
-                  acs_sigma_deg=None, acs_mode="random_walk", pseudo_noise=0.0,
-                  eta_sigma_deg_s2=None, inertia_kg_m2=None, substep_s=0.5,
-                  attitude="estimate", library_dirs=None, site_dirs=None) -> FilterProblem:
+def _check_curve(curve):
+    if not isinstance(curve, Lightcurve):
+        raise InputError("invert needs a lightcurve.io.Lightcurve", field="curve",
+                         value=type(curve).__name__)
+    n = len(curve)
+    t = np.asarray(curve.t, float)
+    for name in ("mag", "mag_sigma"):
+        v = np.asarray(getattr(curve, name))
+        if v.shape != (n,):
+            raise InputError("inconsistent shapes", field=name, value=v.shape, allowed=f"({n},)")
+    for name in ("r_obj_eci_m", "r_site_eci_m", "r_sun_eci_m"):
+        v = np.asarray(getattr(curve, name))
+        if v.shape != (n, 3):
+            raise InputError("inconsistent shapes", field=name, value=v.shape,
+                             allowed=f"({n}, 3)")
+    if n == 0 or not np.any(np.isfinite(curve.mag)):
+        raise InputError("the lightcurve has no visible (finite) magnitude to filter",
+                         field="mag", value=f"{n} rows, 0 finite")
+    if np.any(np.diff(t) < 0):
+        raise InputError("times must be non-decreasing", field="t")
+    fin = np.isfinite(curve.mag)
+    sig = np.asarray(curve.mag_sigma, float)
+    if np.any(~(sig[fin] > 0)):
+        raise InputError("mag_sigma must be > 0 where a magnitude is given", field="mag_sigma",
+                         allowed="> 0")
+
+
+def build_problem(curve, config: ProblemConfig | None = None, **options) -> FilterProblem:
     """Build the :class:`FilterProblem` (model, dynamics, initial estimate) for ``invert``.
 
-    Parameters mirror :func:`invert`; ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` /
-    ``dynamics`` default to the scenario stored in the lightcurve file (ACS 0 and
-    "controlled" when the file has none). ``attitude="truth"`` sets
-    ``FilterProblem.attitude_known`` (needs truth in the file). The shape is
+    ``config``: a :class:`~lightcurve.filters.config.ProblemConfig`; keyword ``options`` (its
+    field names, as :func:`invert` takes them) build one or change the given one.
+    ``acs_sigma_deg`` / ``eta_sigma_deg_s2`` / ``dynamics`` default to the scenario stored in
+    the lightcurve file (ACS 0 and "controlled" when the file has none). ``attitude="truth"``
+    sets ``FilterProblem.attitude_known`` (needs truth in the file). The shape is
     :meth:`Lightcurve.resolve_shape` (``shape`` > the file's stored shape > its
-    ``attrs["shape"]`` from the library, with ``library_dirs``).
+    ``attrs["shape"]`` from the library, with ``library_dirs``). The reflection settings and
+    ``initial`` are not used here (:func:`invert` handles them).
     """
+    if config is None:
+        cfg = ProblemConfig(**options)
+    else:
+        cfg = config.replace(**options) if options else config
     _check_curve(curve)
-    if attitude not in ATTITUDE_MODES:
-        raise InputError("unknown attitude mode", field="attitude", value=attitude,
-                         allowed=", ".join(ATTITUDE_MODES))
-    if attitude == "truth" and not curve.has_truth:
+    if cfg.attitude == "truth" and not curve.has_truth:
         raise InputError("attitude known (truth) needs a lightcurve with truth_q and "
-                         "truth_omega_rad_s", field="attitude", value=attitude)
-    shape = curve.resolve_shape(shape, library_dirs=library_dirs)
-    at = _scenario_attitude(curve, shape, library_dirs=library_dirs, site_dirs=site_dirs)
-    dyn_kind = dynamics or at.get("dynamics", "controlled")
+                         "truth_omega_rad_s", field="attitude", value=cfg.attitude)
+    shape = curve.resolve_shape(cfg.shape, library_dirs=cfg.library_dirs)
+    at = _scenario_attitude(curve, shape, library_dirs=cfg.library_dirs,
+                            site_dirs=cfg.site_dirs)
+    dyn_kind = cfg.dynamics or at.get("dynamics", "controlled")
     if dyn_kind not in ("controlled", "uncontrolled"):
         raise InputError("unknown dynamics", field="dynamics", value=dyn_kind,
                          allowed="controlled, uncontrolled")
     if dyn_kind == "controlled":
-        acs = float(at.get("acs_sigma_deg", 0.0)) if acs_sigma_deg is None else float(acs_sigma_deg)
+        acs = float(at.get("acs_sigma_deg", 0.0)) if cfg.acs_sigma_deg is None \
+            else cfg.acs_sigma_deg
         if not (acs >= 0 and np.isfinite(acs)):
             raise InputError("ACS sigma must be >= 0", field="acs_sigma_deg", value=acs)
-        dyn = ControlledDynamics(np.radians(acs), acs_mode=acs_mode, pseudo_noise=pseudo_noise)
+        dyn = ControlledDynamics(np.radians(acs), acs_mode=cfg.acs_mode,
+                                 pseudo_noise=cfg.pseudo_noise)
     else:
-        J = inertia_kg_m2
+        J = cfg.inertia_kg_m2
         if J is None:
             J = at.get("inertia_kg_m2")
         if J is None:
             J = shape.inertia_kg_m2
-        eta = float(at.get("eta_sigma_deg_s2", 0.0)) if eta_sigma_deg_s2 is None \
-            else float(eta_sigma_deg_s2)
-        dyn = UncontrolledDynamics(J, eta_psd=np.radians(eta) ** 2, substep_s=substep_s,
-                                   pseudo_noise=pseudo_noise)
+        eta = float(at.get("eta_sigma_deg_s2", 0.0)) if cfg.eta_sigma_deg_s2 is None \
+            else cfg.eta_sigma_deg_s2
+        dyn = UncontrolledDynamics(J, eta_psd=np.radians(eta) ** 2, substep_s=cfg.substep_s,
+                                   pseudo_noise=cfg.pseudo_noise)
     model = MagnitudeModel(shape, curve)
 
-    st = float(sigma_theta_deg)
-    sw = float(sigma_omega_deg_s)
-    if not (st > 0 and np.isfinite(st)):
-        raise InputError("must be > 0", field="sigma_theta_deg", value=st)
-    if not (sw > 0 and np.isfinite(sw)):
-        raise InputError("must be > 0", field="sigma_omega_deg_s", value=sw)
+    st, sw = cfg.sigma_theta_deg, cfg.sigma_omega_deg_s
     st_r, sw_r = np.radians(st), np.radians(sw)
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x1A77]))
+    rng = np.random.default_rng(np.random.SeedSequence([int(cfg.seed), 0x1A77]))
     dth = rng.standard_normal(3) * st_r
     dw = rng.standard_normal(3) * sw_r
-    if initial_q is None:
+    if cfg.initial_q is None:
         if not curve.has_truth:
             # truth-free data (a recording): the filter needs a starting attitude from the user
-            # (or from a global initialisation step, when one exists)
+            # (or from the global initialisation, invert(initial="global"))
             raise InputError("the lightcurve has no truth attitude to start from: give an "
                              "initial estimate (initial_q, initial_omega; CLI --initial-q "
                              "Q1,Q2,Q3,Q4 --initial-omega-deg-s WX,WY,WZ)", field="initial_q")
         q0 = rot.quat_mult(rot.rotvec_to_quat(dth), rot.quat_normalize(curve.truth_q[0]))
     else:
-        q0 = np.asarray(initial_q, float).reshape(4)
-        if not np.all(np.isfinite(q0)) or abs(np.linalg.norm(q0) - 1) > 1e-6:
-            raise InputError("initial_q must be a finite unit quaternion", field="initial_q",
-                             value=q0.tolist())
-    if initial_omega is None:
+        q0 = np.asarray(cfg.initial_q, float)
+    if cfg.initial_omega is None:
         if curve.truth_omega_rad_s is None:
             raise InputError("the lightcurve has no truth rate to start from: give "
                              "initial_omega (CLI --initial-omega-deg-s WX,WY,WZ)",
                              field="initial_omega")
         w0 = curve.truth_omega_rad_s[0] + dw
     else:
-        w0 = np.asarray(initial_omega, float).reshape(3)
-        if not np.all(np.isfinite(w0)):
-            raise InputError("initial_omega must be finite", field="initial_omega")
+        w0 = np.asarray(cfg.initial_omega, float)
     P0 = np.diag([st_r ** 2] * 3 + [sw_r ** 2] * 3)
-    meta = {"seed": int(seed), "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
+    meta = {"seed": int(cfg.seed), "sigma_theta_deg": st, "sigma_omega_deg_s": sw,
             "dynamics": dyn_kind, "acs_sigma_deg": float(np.degrees(dyn.acs_sigma)),
-            "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", ""),
-            "epoch_utc": curve.epoch_utc}
-    if attitude == "truth":
+            "acs_mode": dyn.acs_mode, "shape": getattr(shape, "name", "")}
+    if cfg.attitude == "truth":
         meta["attitude"] = "truth"
     return FilterProblem(model=model, dynamics=dyn, q0=q0, omega0=w0, P0=P0,
                          truth_q=curve.truth_q, truth_omega=curve.truth_omega_rad_s, meta=meta,
-                         attitude_known=attitude == "truth")
+                         attitude_known=cfg.attitude == "truth")
 
 
-def invert(curve, method="mekf", *, seed=0, sigma_theta_deg=3.0, sigma_omega_deg_s=0.02,
-           particles=10_000, roughening=0.2, resampling="systematic", ess_threshold=0.5,
-           initial_q=None, initial_omega=None, shape=None, dynamics=None, acs_sigma_deg=None,
-           acs_mode="random_walk", pseudo_noise=0.0, eta_sigma_deg_s2=None, inertia_kg_m2=None,
-           alpha=1.0, beta=2.0, kappa=0.0, error="grp", jacobian="analytic",
-           keep_clouds=(), reflection="none", reflection_frac=0.1, attitude="estimate",
-           reflection_process_noise=0.0, reflection_facets=None,
-           reflection_kinds=("xi", "a", "m", "A"), gate=None,
-           rejuvenation="auto", library_dirs=None, site_dirs=None) -> Estimate:
+def _extra_states(problem, cfg: ProblemConfig):
+    """The reflection states of ``cfg.reflection`` (Bernard ch. 8): ``(SiteBias | None,
+    FacetParameterStates | None)``."""
+    if cfg.reflection == "none":
+        return None, None
+    if cfg.reflection == "model3":
+        return None, FacetParameterStates(problem.model.shape, facets=cfg.reflection_facets,
+                                          kinds=cfg.reflection_kinds,
+                                          prior_frac=cfg.reflection_frac,
+                                          process_noise=cfg.reflection_process_noise)
+    return SiteBias.from_problem(cfg.reflection, problem, frac=cfg.reflection_frac), None
+
+
+
+
+def initial_mode(initial, curve, initial_q=None, initial_omega=None) -> str:
+    """Resolve ``invert(initial=…)`` to "truth", "given" or "global" (see :func:`invert`)."""
+    if initial not in INITIAL_MODES:
+        raise InputError("unknown initial-estimate mode", field="initial", value=initial,
+                         allowed=", ".join(INITIAL_MODES))
+    if initial == "auto":
+        if initial_q is not None:
+            return "given"
+        return "truth" if curve.has_truth else "global"
+    if initial == "given" and initial_q is None:
+        raise InputError("initial='given' needs initial_q (CLI --initial-q)", field="initial_q")
+    if initial == "truth" and not curve.has_truth:
+        raise InputError("initial='truth' needs a lightcurve with a truth attitude",
+                         field="initial", value=initial, allowed="given, global")
+    return initial
+
+
+def invert(curve, config="mekf", *, problem: ProblemConfig | None = None,
+           **options) -> Estimate:
     """Estimate attitude and body rate from a lightcurve.
 
     Parameters
     ----------
     curve : Lightcurve
-    method : {"mekf", "ukf", "bpf"}
-    seed : int
-        Seeds the initial-estimate perturbation and (BPF) every random draw; reproducible.
-    sigma_theta_deg, sigma_omega_deg_s : float
-        1σ of the initial attitude (deg, per axis) and rate (deg/s) errors; also ``P₀``.
-    particles, roughening, resampling, ess_threshold :
-        BPF: number of particles, roughening constant 𝒢 (Bernard table 7.9; used by the
-        "separate" rejuvenation), "systematic" or "multinomial", resample when
-        ``N_eff < ess_threshold · N``.
-    rejuvenation : {"auto", "separate", "joint"}
-        BPF: how the resampled cloud is moved (:func:`lightcurve.filters.bpf.run_bpf`): "joint"
-        = one Liu–West kernel on the full state (default "auto": joint when the attitude is
-        estimated), "separate" = the table-7.9 roughening of attitude and rate.
-    initial_q, initial_omega :
-        User initial estimate (inertial→body quaternion; rad/s body axes) instead of the
-        perturbed truth.
-    shape : Shape or str, optional
-        Default: the shape the file carries, else ``curve.attrs["shape"]`` from the library.
-    library_dirs, site_dirs : optional
-        Extra shape-library / observatory folders for a shape named by ``shape`` or by the
-        file, and for the file's scenario.
-    dynamics : {"controlled", "uncontrolled"}, optional (default: the file's scenario)
-    acs_sigma_deg : float, optional — ACS noise 1σ (deg); default the scenario's.
-    acs_mode : {"random_walk", "jitter"} — see :mod:`lightcurve.filters.models`.
-    pseudo_noise : float — rate pseudo-noise PSD, (rad/s)²/s.
-    eta_sigma_deg_s2 : float, optional — uncontrolled η level (deg/s^{3/2} as a PSD root).
-    inertia_kg_m2 : (3,3), optional — uncontrolled inertia (default scenario, then shape).
-    alpha, beta, kappa : UKF scaling parameters.
-    error, jacobian : MEKF options (see :func:`lightcurve.filters.mekf.run_mekf`).
-    keep_clouds : BPF epochs whose particle error clouds are kept (fig. 9.6-style plots).
-    reflection : {"none", "random-walk", "model1", "model2", "model3"}
-        Extra states for uncertain reflection parameters (Bernard ch. 8): per-site magnitude
-        biases (:mod:`lightcurve.filters.reflection`; the estimate then carries ``bias`` and
-        ``bias_sigma`` (N,S)) or Model 3 facet-parameter states
-        (:mod:`lightcurve.filters.facet_states`; ``refl_z``, ``refl_p`` and 1σ (N,D), final
-        values in ``meta["reflection"]``). All three filters.
-    reflection_frac : float > 0 — relative 1σ of the reflection parameters (eq. 8.10 for the
-        bias models; the Model 3 prior, §10.1).
-    attitude : {"estimate", "truth"} — "truth": attitude known (§10.7), only the reflection
-        states are estimated (needs ``reflection != "none"``).
-    reflection_process_noise : float ≥ 0 — Model 3 process-noise PSD in z-units²/s (default 0,
-        constant parameters, eq. 8.39).
-    reflection_facets, reflection_kinds : Model 3 facets (default every Cook–Torrance facet)
-        and parameters (default ξ, a, m, A).
-    gate : None, "auto", "reject", "inflate", "off", dict or GateConfig — the innovation
-        (outlier) gate and unlit/below-horizon screening of :mod:`lightcurve.filters.gating`;
-        None = its defaults (NIS > 15.14, false-alarm rate 1e-4; reject in the UKF, inflate
-        in the MEKF and the BPF). Counts land in
-        ``est.meta["gate"]`` and :meth:`Estimate.summary`.
+    config : "mekf" | "ukf" | "bpf" or a filter configuration object
+        (:class:`~lightcurve.filters.config.MEKFConfig`,
+        :class:`~lightcurve.filters.config.UKFConfig`, the particle filter's ``BPFConfig``).
+        A method name takes the default settings of that filter.
+    problem : :class:`~lightcurve.filters.config.ProblemConfig`, optional
+        Initial estimate, dynamics, reflection states, gate (default settings).
+    **options :
+        Any field of :class:`~lightcurve.filters.config.ProblemConfig` or of the filter's
+        configuration, by name — the keyword form of the call, e.g.
+        ``invert(lc, "ukf", seed=3, sigma_theta_deg=5.0, alpha=0.5)``. They change the
+        corresponding field of ``problem`` / ``config``. Particle filter without a
+        registered configuration class: its keywords (``particles``, ``roughening``,
+        ``resampling``, ``ess_threshold``, ``rejuvenation``, ``keep_clouds``) go to
+        :func:`lightcurve.filters.bpf.run_bpf`.
+
+    The fields, their units and sources are documented on the configuration classes:
+    1σ of the initial attitude / rate errors (Bernard ch. 9), dynamics model and noise,
+    reflection states (ch. 8: per-site biases, Model 3 facet parameters; ``attitude="truth"``
+    is the §10.7 attitude-known mode), the innovation gate (:mod:`lightcurve.filters.gating`),
+    where the filter starts (``initial``: "truth" = the file's truth perturbed by σθ, σω;
+    "given" = ``initial_q`` / ``initial_omega``; "global" = the global initialisation of
+    :mod:`lightcurve.acquisition.global_init`, which runs this filter from each posterior
+    mode and returns the heaviest mode's estimate, every mode in ``meta["global_init"]``;
+    "auto" = given, else truth, else global), and ``variant`` ("robust" default, "thesis"
+    the source text). The estimate carries the measurements and the magnitudes predicted at
+    the posterior attitude (:func:`attach_measurements`).
 
     Returns
     -------
     Estimate
     """
+    if isinstance(config, str):
+        method, fconf = config, None
+    elif isinstance(config, ConfigBase) and hasattr(type(config), "method"):
+        method, fconf = type(config).method, config
+    else:
+        raise InputError("config must be a method name or a filter configuration",
+                         field="config", value=type(config).__name__,
+                         allowed=", ".join(METHODS))
     if method not in METHODS:
         raise InputError("unknown filter method", field="method", value=method,
                          allowed=", ".join(METHODS))
-    problem = build_problem(curve, seed=seed, sigma_theta_deg=sigma_theta_deg,
-                            sigma_omega_deg_s=sigma_omega_deg_s, initial_q=initial_q,
-                            initial_omega=initial_omega, shape=shape, dynamics=dynamics,
-                            acs_sigma_deg=acs_sigma_deg, acs_mode=acs_mode,
-                            pseudo_noise=pseudo_noise, eta_sigma_deg_s2=eta_sigma_deg_s2,
-                            inertia_kg_m2=inertia_kg_m2, attitude=attitude,
-                            library_dirs=library_dirs, site_dirs=site_dirs)
-    problem.meta["method"] = method
-    if gate is not None:   # innovation gate / epoch screening settings (filters.gating)
-        from .gating import set_gate
-
-        set_gate(problem, gate)
-    bias = facets = None
-    from .reflection import REFLECTION_CHOICES
-
-    if reflection not in REFLECTION_CHOICES:
-        raise InputError("unknown reflection model", field="reflection", value=reflection,
-                         allowed=", ".join(REFLECTION_CHOICES))
-    if attitude == "truth" and reflection == "none":
-        raise InputError("attitude known (truth) leaves nothing to estimate without "
-                         "reflection states", field="reflection", value=reflection,
-                         allowed="random-walk, model1, model2, model3")
-    if reflection != "none":
-        from .reflection import SiteBias
-
-        fr = float(reflection_frac)
-        if not (fr > 0 and np.isfinite(fr)):
-            raise InputError("must be > 0", field="reflection_frac", value=reflection_frac)
-        if reflection == "model3":
-            from .facet_states import FacetParameterStates
-
-            facets = FacetParameterStates(problem.model.shape, facets=reflection_facets,
-                                          kinds=reflection_kinds, prior_frac=fr,
-                                          process_noise=reflection_process_noise)
-        else:
-            bias = SiteBias.from_problem(reflection, problem, frac=fr)
-    if method == "mekf":
-        from .mekf import run_mekf
-
-        est = run_mekf(problem, error=error, jacobian=jacobian, bias=bias, facets=facets)
-    elif method == "ukf":
-        from .ukf import run_ukf
-
-        est = run_ukf(problem, alpha=alpha, beta=beta, kappa=kappa, bias=bias, facets=facets)
+    prob_opts, filt_opts = split_options(method, options)
+    if problem is None:
+        pcfg = ProblemConfig(**prob_opts)
     else:
-        from .bpf import run_bpf
+        pcfg = problem.replace(**prob_opts) if prob_opts else problem
+    cls = filter_config_class(method)
+    if cls is not None:
+        fconf = cls(**filt_opts) if fconf is None else (fconf.replace(**filt_opts) if filt_opts
+                                                        else fconf)
+    if method == "bpf":  # refuse before allocating (lightcurve.memory)
+        from ..memory import check_allocation
 
-        extra = {"bias": bias, "facets": facets, "attitude": attitude,
-                 "rejuvenation": rejuvenation}
-        problem.meta.update({"particles": int(particles), "roughening": float(roughening),
-                             "resampling": resampling, "ess_threshold": float(ess_threshold)})
-        est = run_bpf(problem, particles=particles, seed=seed, roughening=roughening,
-                      resampling=resampling, ess_threshold=ess_threshold,
-                      keep_clouds=keep_clouds, **extra)
-    attach_measurements(est, curve, problem.model)
+        bo = dict(BPF_KEYWORDS)
+        bo.update(fconf.as_options() if fconf is not None else filt_opts)
+        n_p = int(bo["particles"])
+        check_allocation(n_p * (BPF_BYTES_PER_PARTICLE + 8 * 7 * len(tuple(bo["keep_clouds"]))),
+                         f"particle filter with {n_p} particles", field="particles", value=n_p)
+    if initial_mode(pcfg.initial, curve, pcfg.initial_q, pcfg.initial_omega) == "global":
+        start = ("seed", "sigma_theta_deg", "sigma_omega_deg_s", "initial_q", "initial_omega",
+                 "shape", "dynamics", "library_dirs", "site_dirs", "global_config", "initial")
+        handover = {k: v for k, v in pcfg.as_options().items() if k not in start}
+        handover.update(fconf.as_options() if fconf is not None else filt_opts)
+        handover["initial"] = "given"
+        # the global initialisation drives this filter (acquisition sits above filters):
+        # imported here, when it is asked for
+        from ..acquisition.global_init import global_initialise
+
+        return global_initialise(curve, method, seed=pcfg.seed, config=pcfg.global_config,
+                                 shape=pcfg.shape, dynamics=pcfg.dynamics,
+                                 filter_kwargs=handover, library_dirs=pcfg.library_dirs,
+                                 site_dirs=pcfg.site_dirs).best
+    fp = build_problem(curve, pcfg)
+    fp.meta["method"] = method
+    if fconf is not None:
+        fp.meta["variant"] = fconf.variant
+    if pcfg.gate is not None:   # innovation gate / epoch screening settings (filters.gating)
+        set_gate(fp, pcfg.gate)
+    bias, facets = _extra_states(fp, pcfg)
+    if fconf is not None:
+        est = _RUNNERS[method](fp, fconf, bias=bias, facets=facets)
+        attach_measurements(est, curve, fp.model)
+        return est
+    # the particle filter's keyword form (no registered configuration class)
+    bpf_opts = dict(BPF_KEYWORDS)
+    filt_opts.pop("variant", None)
+    bpf_opts.update(filt_opts)
+    fp.meta.update({"particles": int(bpf_opts["particles"]),
+                    "roughening": float(bpf_opts["roughening"]),
+                    "resampling": bpf_opts["resampling"],
+                    "ess_threshold": float(bpf_opts["ess_threshold"])})
+    est = _bpf.run_bpf(fp, seed=pcfg.seed, bias=bias, facets=facets, attitude=pcfg.attitude,
+                       **bpf_opts)
+    attach_measurements(est, curve, fp.model)
     return est
 
 
 def attach_measurements(est, curve, model) -> None:
     """Record what a real-data plot of ``est`` needs (:class:`Estimate` fields): the epoch,
-    the source file, the measured magnitudes, their σ and sites, and ``mag_post`` — the
+    the source file, the measured magnitudes, their σ and sites, and ``predicted_mag`` — the
     measurement model's magnitude at the posterior attitude of every epoch (nominal shape,
     no bias states; +inf where no light reaches the observer)."""
     est.epoch_utc = str(curve.epoch_utc)
@@ -313,4 +372,4 @@ def attach_measurements(est, curve, model) -> None:
     for k in range(len(curve)):
         if np.all(np.isfinite(q[k])):
             post[k] = float(model.predict_q(q[k], k)[0])
-    est.mag_post = post
+    est.predicted_mag = post

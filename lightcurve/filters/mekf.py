@@ -43,7 +43,6 @@ no shape copy per epoch.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
@@ -51,11 +50,10 @@ from ..core.kalman import UPDATE_OK, joseph_scalar_nb
 from ..core.photometry import magnitude_partials_q_nb
 from ..core.rotations import from_grp_rel_nb, normalize_into_nb, perturb_rotvec_nb, qmul_nb
 from ..photometry.partials import kernel_capable
-from ._common import (GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, attach_facets,
-                      initial_state_ext, layout_transition, reflection_histories,
-                      single_thread, truth_state)
-from .gating import InnovationGate
-from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
+from .config import MEKFConfig
+from ._common import GRP_A, GRP_F, FilterProblem, single_thread
+from .driver import StepBase, run_kalman
+from .result import FLAG_INVISIBLE, FLAG_REFUSED, Estimate
 
 __all__ = ["run_mekf"]
 
@@ -74,28 +72,28 @@ def _reset(q, dth, error):
     return qn
 
 
-def run_mekf(problem: FilterProblem, *, error="grp", jacobian="analytic", bias=None,
-             facets=None) -> Estimate:
+def run_mekf(problem: FilterProblem, config: MEKFConfig | None = None, *, error=None,
+             jacobian=None, bias=None, facets=None) -> Estimate:
     """Run the MEKF over every epoch of ``problem`` (module docstring) → :class:`Estimate`.
 
     Parameters
     ----------
     problem : FilterProblem
-    error : {"grp", "small_angle"}
-        How the error rotation ``δθ⁺`` is mapped back to a quaternion at the reset.
-    jacobian : {"analytic", "numeric"}
-        ``∂m/∂δθ`` from :func:`lightcurve.photometry.magnitude_partials` or central differences.
+    config : :class:`~lightcurve.filters.config.MEKFConfig`, optional (default settings)
+    error, jacobian : optional overrides of ``config.error`` ({"grp", "small_angle"}: how the
+        error rotation ``δθ⁺`` is mapped back to a quaternion at the reset) and
+        ``config.jacobian`` ({"analytic", "numeric"}: ``∂m/∂δθ`` analytic or by central
+        differences).
     bias : :class:`lightcurve.filters.reflection.SiteBias` or None
         Per-site reflection-bias states (module docstring); None = attitude and rate only.
     facets : :class:`lightcurve.filters.facet_states.FacetParameterStates` or None
         Model 3 facet-parameter states z appended after the biases (module docstring).
     """
-    if error not in ("grp", "small_angle"):
-        raise ValueError(f"error must be 'grp' or 'small_angle', got {error!r}")
-    if jacobian not in ("analytic", "numeric"):
-        raise ValueError(f"jacobian must be 'analytic' or 'numeric', got {jacobian!r}")
+    config = MEKFConfig.resolve(config, error=error, jacobian=jacobian)
+    problem.meta.setdefault("variant", config.variant)
     with single_thread():
-        return _run(problem, error, jacobian, bias, facets)
+        return run_kalman(problem, _MEKFStep(problem, config.error, config.jacobian, bias,
+                                             facets), bias, facets)
 
 
 class _Photometry:
@@ -114,87 +112,62 @@ class _Photometry:
         self.work = tuple(np.empty(F) for _ in range(4))   # ∂m/∂A, ∂m/∂ξ, ∂m/∂a, ∂m/∂m
 
 
-def _run(problem, error, jacobian, bias=None, facets=None):
-    t0 = time.perf_counter()
-    p = problem
-    m = p.model
-    ph = _Photometry(m, jacobian)
-    dyn = p.dynamics
-    rec = Recorder(p, "mekf")
-    gate = InnovationGate(p, auto="inflate")   # outlier gate, unlit/below-horizon screening
-    L, q, w, b, z, P = initial_state_ext(p, bias, facets)
-    na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
-    b_hist, bs_hist, z_hist, zc_hist = reflection_histories(p.n, nb, nz)
-    zc = dyn.zeta_cov
-    for k in range(p.n):
-        if k > 0:
-            dt = float(m.t[k] - m.t[k - 1])
-            if dt != 0.0:
-                Phi, Qd, phib = layout_transition(dyn, L, bias, facets, w, dt)
-                if nb:
-                    b = phib * b
-                if na:
-                    Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
-                    q, w = Qn[0], Wn[0]
-                P = Phi @ P @ Phi.T + Qd
-                if na and p.random_walk_zeta():
-                    P[:3, :3] += zc
-                P = 0.5 * (P + P.T)
-        if not na:
-            q, w = truth_state(p, k)
-        y = m.y[k]
-        if not np.isfinite(y):
-            rec.flags[k] |= FLAG_NAN
-            rec.skipped_nan += 1
-        elif gate.skip_epoch(k, rec):
-            pass  # object unlit or below the horizon: flagged and counted, not used
-        else:
-            yhat, Hth, Hz = _predict(m, facets, q, z, k, jacobian, ph)
-            if not np.isfinite(yhat) or not np.all(np.isfinite(Hth)) \
-                    or not np.all(np.isfinite(Hz)):
-                rec.flags[k] |= FLAG_INVISIBLE
-            else:
-                H = np.zeros((1, nx))
-                if na:
-                    H[0, :3] = Hth
-                if nb:
-                    s = int(bias.site[k])
-                    H[0, na + s] = 1.0
-                    yhat += float(b[s])
-                if nz:
-                    H[0, L.iz] = Hz
-                R = m.sigma[k] ** 2
-                if na and p.jitter_zeta():
-                    R = R + float(Hth @ zc @ Hth)
-                # innovation gate: None = outlier rejected (flagged; prior kept)
-                R = gate.check(k, y - yhat, float(H[0] @ P @ H[0]) + R, R, rec)
-                if R is not None:
-                    dx, Pn, nu, S, ok = _update(P, H[0], R, y, yhat)
-                    rec.innovation(k, nu, S)
-                    if ok:
-                        if na:
-                            q = _reset(q, dx[:3], error)
-                            w = w + dx[3:6]
-                        b = b + dx[L.ib]
-                        z = z + dx[L.iz]
-                        P = Pn
-                    else:
-                        rec.flags[k] |= FLAG_REFUSED
-        rec.store(k, q, w, P[:6, :6] if na else np.zeros((6, 6)))
+class _MEKFStep(StepBase):
+    """The MEKF's time and measurement updates (module docstring) for
+    :func:`lightcurve.filters.driver.run_kalman`."""
+
+    method = "mekf"
+    gate_auto = "inflate"
+
+    def __init__(self, problem, error, jacobian, bias, facets):
+        super().__init__(problem, bias, facets)
+        self.error = error
+        self.jacobian = jacobian
+        self.ph = _Photometry(problem.model, jacobian)
+
+    def predict(self, x, k, dt, Phi, Qd, phib, rec):
+        L = x.layout
+        if L.nb:
+            x.b = phib * x.b
+        if L.na:
+            Qn, Wn = self.p.dynamics.propagate(x.q[None, :], x.w[None, :], dt)
+            x.q, x.w = Qn[0], Wn[0]
+        x.P = Phi @ x.P @ Phi.T + Qd
+
+    def update(self, x, k, y, rec):
+        p, m, L = self.p, self.p.model, x.layout
+        na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
+        yhat, Hth, Hz = _predict(m, self.facets, x.q, x.z, k, self.jacobian, self.ph)
+        if not np.isfinite(yhat) or not np.all(np.isfinite(Hth)) or not np.all(np.isfinite(Hz)):
+            rec.flags[k] |= FLAG_INVISIBLE
+            return
+        H = np.zeros((1, nx))
+        if na:
+            H[0, :3] = Hth
         if nb:
-            b_hist[k] = b
-            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[L.ib], 0.0, None))
+            s = int(self.bias.site[k])
+            H[0, na + s] = 1.0
+            yhat += float(x.b[s])
         if nz:
-            z_hist[k] = z
-            zc_hist[k] = P[L.iz, L.iz]
-    est = gate.finish(rec.finish(time.perf_counter() - t0))
-    if nb:
-        attach_bias(est, bias, b_hist, bs_hist)
-    if nz:
-        attach_facets(est, facets, z_hist, zc_hist)
-    if not na:
-        est.meta["attitude"] = "truth"
-    return est
+            H[0, L.iz] = Hz
+        R = m.sigma[k] ** 2
+        if na and p.jitter_zeta():
+            R = R + float(Hth @ self.zc @ Hth)
+        # innovation gate: None = outlier rejected (flagged; prior kept)
+        R = rec.gate.check(k, y - yhat, float(H[0] @ x.P @ H[0]) + R, R, rec)
+        if R is None:
+            return
+        dx, Pn, nu, S, ok = _update(x.P, H[0], R, y, yhat)
+        rec.innovation(k, nu, S)
+        if not ok:
+            rec.flags[k] |= FLAG_REFUSED
+            return
+        if na:
+            x.q = _reset(x.q, dx[:3], self.error)
+            x.w = x.w + dx[3:6]
+        x.b = x.b + dx[L.ib]
+        x.z = x.z + dx[L.iz]
+        x.P = Pn
 
 
 def _update(P, h, R, y, yhat):

@@ -261,6 +261,12 @@ class MagnitudeModel:
         return self.t.shape[0]
 
     @property
+    def kernel_arrays(self):
+        """The shape packed for the kernels: ``(normals (F,3), areas (F,), ids (F,),
+        params (F,7))``, C-contiguous (:mod:`lightcurve.core.photometry`)."""
+        return self._karrs
+
+    @property
     def kernel_ok(self) -> bool:
         """True when every facet's BRDF has a numba kernel (fast particle path)."""
         return self._kernel

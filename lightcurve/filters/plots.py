@@ -105,9 +105,10 @@ def _measured(est, curve):
 
 
 def _fitted(est, curve):
-    pred = getattr(est, "predicted_mag", None)
+    pred = getattr(est, "predicted_mag", None)   # model magnitude at the posterior attitude
     if pred is not None:
-        return np.asarray(pred, float)
+        pred = np.asarray(pred, float)
+        return np.where(np.isfinite(pred), pred, np.nan)
     if curve is None or len(curve) != len(est):
         return None
     try:
@@ -121,9 +122,9 @@ def _fitted(est, curve):
 def estimate_figure(est, curve=None, title=None):
     """The analyst figure of an :class:`~lightcurve.filters.result.Estimate` (module docstring).
 
-    ``curve`` is the lightcurve the estimate was computed from (for the measured and fitted
-    magnitudes and the UTC axis); without it those panels use what the estimate file stores.
-    Returns the matplotlib figure.
+    ``curve`` is the lightcurve the estimate was computed from (truth lines, sites); without it
+    the estimate's ``source_file`` is tried, and the panels use what the estimate stores.
+    ``title`` prefixes the key numbers. Returns the matplotlib figure.
     """
     plt = _fig()
     from matplotlib.gridspec import GridSpec
@@ -131,6 +132,10 @@ def estimate_figure(est, curve=None, title=None):
     from ..report.style import DPI, figsize, utc_axis
     from .derived import euler321_with_sigma, spin_axis
 
+    if curve is None:  # the file it came from, when it can be found (truth lines, sites)
+        from ..report.plot_any import source_lightcurve
+
+        curve = source_lightcurve(est)
     x, is_utc, epoch = _time_axis(est, curve)
     truth = est.att_error_deg is not None
     tq = tw = None
@@ -240,6 +245,18 @@ def estimate_figure(est, curve=None, title=None):
         tra = np.degrees(np.unwrap(np.radians(st["ra_deg"])))
         tra += 360.0 * np.round((ra_c[-1] - tra[-1]) / 360.0)
         a.plot(tra, st["dec_deg"], "k--", lw=0.8, label="truth")
+    gi = (est.meta or {}).get("global_init") or {}
+    for j, m in enumerate(gi.get("modes", [])[1:], start=1):
+        # the other attitude modes of a global initialisation: their final spin axes
+        if "final_q" not in m:
+            continue
+        sm = spin_axis(np.asarray(m["final_q"]), np.radians(np.asarray(m["final_omega_deg_s"])))
+        mra = float(sm["ra_deg"][0])
+        mra += 360.0 * np.round((ra_c[-1] - mra) / 360.0)
+        a.plot(mra, float(sm["dec_deg"][0]), "s", mfc="none", mec="C1", ms=8, zorder=4,
+               label="other modes (global initialisation)" if j == 1 else None)
+        a.annotate(f"{100 * m['weight']:.0f}%", (mra, float(sm["dec_deg"][0])), fontsize=7,
+                   color="C1", xytext=(4, 4), textcoords="offset points")
     a.set_xlabel("right ascension [deg] (GCRS)")
     a.set_ylabel("declination [deg]")
     a.set_title("spin axis on the sky (colour: time)", loc="left", fontsize=9)
@@ -309,8 +326,8 @@ def estimate_figure(est, curve=None, title=None):
             elif id(a) in bottom:
                 a.set_xlabel("t − t₀ [s]")
         a.grid(True, alpha=0.3)
-    fig.suptitle(title or _title(est, sp, eul, eul_s, frac_in, epoch), fontsize=10,
-                 ha="left", x=0.01)
+    head = _title(est, sp, eul, eul_s, frac_in, epoch)
+    fig.suptitle(f"{title} · {head}" if title else head, fontsize=10, ha="left", x=0.01)
     return fig
 
 
@@ -347,6 +364,16 @@ def _title(est, sp, eul, eul_s, frac_in, epoch):
                   + ("inside 3σ" if s["inside_3sigma"] else "OUTSIDE 3σ"))
     if est.diverged:
         line2 += f"; DIVERGED ({est.divergence_reason})"
+    cons = s.get("consistency") or {}
+    if cons.get("flags"):
+        line2 += (f"; FLAGGED: {', '.join(cons['flags'])} (NIS mean {cons['nis_mean']:.2g}, 99 % "
+                  f"band {cons['nis_band'][0]:.2g}–{cons['nis_band'][1]:.2g})")
+    gi = (est.meta or {}).get("global_init")
+    if gi:
+        line2 += "\nglobal initialisation: " + (
+            f"AMBIGUOUS, {gi['n_modes']} attitude modes (this plot: the heaviest, "
+            f"{100 * gi['modes'][0]['weight']:.0f} %)" if gi["ambiguous"] else
+            f"one attitude mode ({100 * gi['modes'][0]['weight']:.0f} % of the posterior)")
     return line1 + "\n" + line2
 
 

@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.photometry import COOK_TORRANCE
 from ..errors import InputError
+from ..photometry.partials import magnitude_partials
 
 __all__ = ["BIAS_MODELS", "REFLECTION_CHOICES", "SiteBias", "reflection_prior_variance"]
 
@@ -52,14 +54,10 @@ def reflection_prior_variance(shape, q, model, frac=0.1, epochs=None):
     only). ``q`` (N,4) inertial→body attitudes at ``model.t[epochs]``; ``model`` a
     :class:`~lightcurve.filters.models.MagnitudeModel`. Returns (N,) (NaN where m = +inf).
     """
-    from ..photometry.partials import magnitude_partials
-
     idx = np.arange(len(model)) if epochs is None else np.asarray(epochs, int)
     with np.errstate(divide="ignore", invalid="ignore"):
         mp = magnitude_partials(shape, np.asarray(q, float), model.s_eci[idx], model.o_eci[idx],
                                 model.range_obs[idx], model.range_sun[idx], sun_mag=model.sun_mag)
-    from ..core.photometry import COOK_TORRANCE
-
     ct = shape.model_ids == COOK_TORRANCE
     var = (mp.dm_dA * frac * shape.areas_m2[None, :]) ** 2
     for name, col in (("dm_dxi", 0), ("dm_da", 1), ("dm_dm", 2)):

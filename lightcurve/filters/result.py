@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import rotations as rot
+from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..report.views import EstimateViews
 
@@ -83,11 +84,12 @@ class Estimate(EstimateViews):
     source_file : str — the lightcurve file inverted ('' if unknown)
     mag, mag_sigma : (N,) measured magnitudes and their 1σ (mag) or None
     site : (N,) int site index of every epoch, ``site_names`` the site ids, or None
-    mag_post : (N,) model magnitude at the posterior attitude of every epoch (mag; nominal
+    predicted_mag : (N,) model magnitude at the posterior attitude of every epoch (mag; nominal
         shape, no bias states; +inf where no light reaches the observer) or None
 
-    Derived: :attr:`mag_pred` = ``mag − innovations`` (the prior prediction ŷ used by the
-    update) and :attr:`nis` = ``ν² / S`` (normalised innovation squared, χ²₁ when consistent).
+    Derived: :attr:`prior_predicted_mag` = ``mag − innovations`` (the prior prediction ŷ used
+    by the update) and :attr:`nis` = ``ν² / S`` (normalised innovation squared, χ²₁ when
+    consistent).
     """
 
     method: str
@@ -123,13 +125,13 @@ class Estimate(EstimateViews):
     mag_sigma: np.ndarray | None = None
     site: np.ndarray | None = None
     site_names: list | None = None
-    mag_post: np.ndarray | None = None
+    predicted_mag: np.ndarray | None = None
 
     def __len__(self):
         return int(self.t.shape[0])
 
     @property
-    def mag_pred(self) -> np.ndarray | None:
+    def prior_predicted_mag(self) -> np.ndarray | None:
         """(N,) prior predicted magnitude ``ŷ = y − ν`` (mag; NaN where no update)."""
         if self.mag is None:
             return None
@@ -177,6 +179,57 @@ class Estimate(EstimateViews):
         return self
 
     # ------------------------------------------------------------------------------------
+    def consistency(self, prob=0.99) -> dict:
+        """Are the filter's innovations and the fitted lightcurve consistent with the noise?
+
+        Two tests at probability ``prob`` (default 99 %), independent of the truth:
+
+        * NIS: the mean of ``νₖ²/Sₖ`` over the updated epochs against the two-sided interval of
+          the mean of n χ²₁ variables (Bar-Shalom, Li & Kirubarajan 2001 §5.4.2,
+          :func:`lightcurve.estimation.consistency.chi2_interval`): above it, the filter's own
+          covariance does not explain its innovations (``"nis_high"``); below, it is
+          pessimistic (``"nis_low"``).
+        * Residuals (when the estimate carries ``predicted_mag`` from the posterior attitude and
+          the measured ``mag``, ``mag_sigma``): the χ²/dof of ``(y − ŷ)/σ`` with 6 fitted
+          states removed, against the same kind of interval (``"residuals_high"``: a model
+          mismatch or a wrong attitude, whatever the covariance says).
+
+        Returns a dict: ``nis_mean``, ``nis_band``, ``n_updates``, ``residual_chi2_dof``,
+        ``residual_band``, ``n_residuals``, ``flags`` (list of str) and ``consistent`` (no flag).
+        """
+        from ..estimation.consistency import chi2_interval
+
+        out = {"nis_mean": None, "nis_band": None, "n_updates": 0, "residual_chi2_dof": None,
+               "residual_band": None, "n_residuals": 0, "flags": []}
+        nu = np.asarray(self.innovations, float)
+        S = np.asarray(self.innovation_var, float)
+        ok = np.isfinite(nu) & np.isfinite(S) & (S > 0)
+        n = int(ok.sum())
+        if n:
+            m = float(np.mean(nu[ok] ** 2 / S[ok]))
+            lo, hi = chi2_interval(1, prob, n_avg=n)
+            out.update(nis_mean=m, nis_band=[lo, hi], n_updates=n)
+            if m > hi:
+                out["flags"].append("nis_high")
+            elif m < lo:
+                out["flags"].append("nis_low")
+        yhat = getattr(self, "predicted_mag", None)
+        y = getattr(self, "mag", None)
+        sig = getattr(self, "mag_sigma", None)
+        if yhat is not None and y is not None and sig is not None:
+            r = (np.asarray(y, float) - np.asarray(yhat, float)) / np.asarray(sig, float)
+            r = r[np.isfinite(r)]
+            dof = r.size - 6
+            if dof >= 1:
+                c = float(r @ r / dof)
+                lo, hi = chi2_interval(1, prob, n_avg=dof)
+                out.update(residual_chi2_dof=c, residual_band=[lo, hi], n_residuals=int(r.size))
+                if c > hi:
+                    out["flags"].append("residuals_high")
+        out["consistent"] = not out["flags"]
+        return out
+
+    # ------------------------------------------------------------------------------------
     def summary(self) -> dict:
         """Final-epoch summary (JSON-ready): RSS errors, 3σ bounds, inside-3σ, runtime."""
         out = {
@@ -200,6 +253,13 @@ class Estimate(EstimateViews):
         }
         if np.any(np.isfinite(self.n_eff)):
             out["final_n_eff"] = float(self.n_eff[-1])
+        cons = self.consistency()
+        out["consistency"] = cons
+        out["flagged"] = bool(cons["flags"])
+        gi = (self.meta or {}).get("global_init")
+        if gi:   # global initialisation (lightcurve.acquisition.global_init): the modes
+            out["global_init"] = {k: gi[k] for k in ("ambiguous", "statement", "n_modes",
+                                                     "modes") if k in gi}
         if self.bias is not None and self.bias_sigma is not None:
             out["final_bias_mag"] = [float(x) for x in self.bias[-1]]
             out["final_bias_sigma_mag"] = [float(x) for x in self.bias_sigma[-1]]
@@ -259,8 +319,8 @@ class Estimate(EstimateViews):
                                     ("refl_p_sigma", "xi, a, m dimensionless; A m^2"),
                                     ("mag", "mag, measured"), ("mag_sigma", "mag, 1 sigma"),
                                     ("site", "index into site_names"),
-                                    ("mag_post", "mag, model at the posterior attitude"),
-                                    ("mag_pred", "mag, prior prediction y - innovation"),
+                                    ("predicted_mag", "mag, model at the posterior attitude"),
+                                    ("prior_predicted_mag", "mag, prior prediction y - innovation"),
                                     ("nis", "innovation^2 / innovation_var")):
                     v = getattr(self, name)
                     if v is None:
@@ -287,7 +347,6 @@ def read_estimate(path) -> Estimate:
     checked before reading)."""
     import json
 
-    from ..errors import InputError
     from ..io.safe_open import open_hdf5, read_dataset
 
     path = Path(path)
@@ -302,7 +361,7 @@ def read_estimate(path) -> Estimate:
                         "innovations", "innovation_var", "n_eff", "flags", "att_error_deg",
                         "omega_error_rad_s", "nees", "bias", "bias_sigma", "refl_z",
                         "refl_z_sigma", "refl_p", "refl_p_sigma", "mag", "mag_sigma", "site",
-                        "mag_post")}
+                        "predicted_mag")}
         kw["epoch_utc"] = str(h.attrs.get("epoch_utc", ""))
         kw["source_file"] = str(h.attrs.get("source_file", ""))
         if "site_names_json" in h.attrs:

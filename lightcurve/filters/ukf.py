@@ -48,31 +48,32 @@ additive Gaussian noises of these models the two are equivalent to second order.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..core.rotations import perturb_rotvec_nb
 from ..estimation.sigma_points import sigma_offsets, unscented_update, unscented_weights
-from ._common import (FilterProblem, Recorder, StateLayout, apply_grp, attach_bias,
-                      attach_facets, grp_rel, initial_state_ext, layout_transition,
-                      reflection_histories, single_thread, truth_state)
-from .gating import InnovationGate
-from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
+from .config import UKFConfig
+from ._common import FilterProblem, StateLayout, apply_grp, grp_rel, single_thread
+from .driver import StepBase, run_kalman
+from .result import FLAG_INVISIBLE, FLAG_REFUSED, Estimate
 
 __all__ = ["run_ukf"]
 
 
-def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0, bias=None,
-            facets=None) -> Estimate:
+def run_ukf(problem: FilterProblem, config: UKFConfig | None = None, *, alpha=None, beta=None,
+            kappa=None, bias=None, facets=None) -> Estimate:
     """Run the USQUE/GRP UKF over every epoch (module docstring) → :class:`Estimate`.
 
-    ``alpha``, ``beta``, ``kappa``: scaled-unscented parameters (λ = α²(n+κ) − n, with n = 6,
+    ``config``: :class:`~lightcurve.filters.config.UKFConfig` (default settings); ``alpha``,
+    ``beta``, ``kappa`` override its scaled-unscented parameters (λ = α²(n+κ) − n, with n = 6,
     or 9 when the ACS jitter is augmented at the update; + S with ``bias``, + D with
     ``facets``; − 6 when ``problem.attitude_known``).
     ``bias``: :class:`lightcurve.filters.reflection.SiteBias` or None.
     ``facets``: :class:`lightcurve.filters.facet_states.FacetParameterStates` or None (Model 3).
     """
+    config = UKFConfig.resolve(config, alpha=alpha, beta=beta, kappa=kappa)
+    problem.meta.setdefault("variant", config.variant)
+    alpha, beta, kappa = config.alpha, config.beta, config.kappa
     L = StateLayout(not problem.attitude_known, bias, facets)
     if L.nx == 0:
         raise ValueError("attitude known and no extra state: nothing to estimate")
@@ -80,7 +81,7 @@ def run_ukf(problem: FilterProblem, *, alpha=1.0, beta=2.0, kappa=0.0, bias=None
     w9 = (unscented_weights(L.nx + 3, alpha, beta, kappa)
           if problem.jitter_zeta() and L.na else None)
     with single_thread():
-        return _run(problem, w6, w9, bias, facets)
+        return run_kalman(problem, _UKFStep(problem, w6, w9, bias, facets), bias, facets)
 
 
 def _sigma_states(q, w, off6, na):
@@ -96,84 +97,62 @@ def _sigma_states(q, w, off6, na):
     return chi, Q, np.ascontiguousarray(W)
 
 
-def _run(p: FilterProblem, w6, w9, bias=None, facets=None) -> Estimate:
-    t0 = time.perf_counter()
-    m = p.model
-    dyn = p.dynamics
-    rec = Recorder(p, "ukf")
-    rec.gate = InnovationGate(p)   # outlier gate + unlit/below-horizon screening (gating.py)
-    L, q, w, b, z, P = initial_state_ext(p, bias, facets)
-    na, nb, nz, nx = L.na, L.nb, L.nz, L.nx
-    b_hist, bs_hist, z_hist, zc_hist = reflection_histories(p.n, nb, nz)
-    zc = dyn.zeta_cov
-    for k in range(p.n):
-        if k > 0:
-            dt = float(m.t[k] - m.t[k - 1])
-            if dt != 0.0:
-                Phi, Qd, phib = layout_transition(dyn, L, bias, facets, w, dt)
-                off, ok = sigma_offsets(P, w6) if na else (None, False)
-                if ok:
-                    chi, Qs, Ws = _sigma_states(q, w, off, na)
-                    Qp, Wp = dyn.propagate(Qs, Ws, dt)
-                    dp = grp_rel(Qp, Qp[0])
-                    cols = [dp, Wp]
-                    if nb:
-                        cols.append((b + chi[:, L.ib]) * phib)
-                    if nz:
-                        cols.append(z + chi[:, L.iz])
-                    X = np.hstack(cols)
-                    xm = w6.wm @ X
-                    D = X - xm
-                    Pn = (D * w6.wc[:, None]).T @ D + Qd
-                    q = apply_grp(xm[None, :3], Qp[0])[0]
-                    w = xm[3:6].copy()
-                    b = xm[L.ib].copy()
-                    z = xm[L.iz].copy()
-                else:
-                    # attitude known (the extra states are linear: exact Φ P Φᵀ + Q_d), or a
-                    # refused factorisation (flagged; linear propagation so the filter goes on)
-                    if na:
-                        rec.flags[k] |= FLAG_REFUSED
-                        Qn, Wn = dyn.propagate(q[None, :], w[None, :], dt)
-                        q, w = Qn[0], Wn[0]
-                    if nb:
-                        b = phib * b
-                    Pn = Phi @ P @ Phi.T + Qd
-                if na and p.random_walk_zeta():
-                    Pn[:3, :3] += zc
-                P = 0.5 * (Pn + Pn.T)
-        if not na:
-            q, w = truth_state(p, k)
-        q, w, b, z, P = _epoch(p, k, q, w, b, z, P, L, w6, w9, zc, rec, bias, facets)
-        rec.store(k, q, w, P[:6, :6] if na else np.zeros((6, 6)))
+class _UKFStep(StepBase):
+    """The USQUE time and measurement updates (module docstring) for
+    :func:`lightcurve.filters.driver.run_kalman`."""
+
+    method = "ukf"
+    gate_auto = "reject"
+
+    def __init__(self, problem, w6, w9, bias, facets):
+        super().__init__(problem, bias, facets)
+        self.w6 = w6
+        self.w9 = w9
+
+    def predict(self, x, k, dt, Phi, Qd, phib, rec):
+        L = x.layout
+        na, nb, nz = L.na, L.nb, L.nz
+        off, ok = sigma_offsets(x.P, self.w6) if na else (None, False)
+        if ok:
+            chi, Qs, Ws = _sigma_states(x.q, x.w, off, na)
+            Qp, Wp = self.p.dynamics.propagate(Qs, Ws, dt)
+            dp = grp_rel(Qp, Qp[0])
+            cols = [dp, Wp]
+            if nb:
+                cols.append((x.b + chi[:, L.ib]) * phib)
+            if nz:
+                cols.append(x.z + chi[:, L.iz])
+            X = np.hstack(cols)
+            xm = self.w6.wm @ X
+            D = X - xm
+            x.P = (D * self.w6.wc[:, None]).T @ D + Qd
+            x.q = apply_grp(xm[None, :3], Qp[0])[0]
+            x.w = xm[3:6].copy()
+            x.b = xm[L.ib].copy()
+            x.z = xm[L.iz].copy()
+            return
+        # attitude known (the extra states are linear: exact Φ P Φᵀ + Q_d), or a refused
+        # factorisation (flagged; linear propagation so the filter goes on)
+        if na:
+            rec.flags[k] |= FLAG_REFUSED
+            Qn, Wn = self.p.dynamics.propagate(x.q[None, :], x.w[None, :], dt)
+            x.q, x.w = Qn[0], Wn[0]
         if nb:
-            b_hist[k] = b
-            bs_hist[k] = np.sqrt(np.clip(np.diag(P)[L.ib], 0.0, None))
-        if nz:
-            z_hist[k] = z
-            zc_hist[k] = P[L.iz, L.iz]
-    est = rec.gate.finish(rec.finish(time.perf_counter() - t0))
-    if nb:
-        attach_bias(est, bias, b_hist, bs_hist)
-    if nz:
-        attach_facets(est, facets, z_hist, zc_hist)
-    if not na:
-        est.meta["attitude"] = "truth"
-    return est
+            x.b = phib * x.b
+        x.P = Phi @ x.P @ Phi.T + Qd
+
+    def update(self, x, k, y, rec):
+        x.q, x.w, x.b, x.z, x.P = _epoch(self.p, k, y, x.q, x.w, x.b, x.z, x.P, x.layout,
+                                         self.w6, self.w9, self.zc, rec, self.bias,
+                                         self.facets)
 
 
-def _epoch(p, k, q, w, b, z, P, L, w6, w9, zc, rec, bias, facets):
-    """Measurement update of epoch k → the new (q, w, b, z, P) (the prior when skipped)."""
+def _epoch(p, k, y, q, w, b, z, P, L, w6, w9, zc, rec, bias, facets):
+    """Measurement update of epoch k with the magnitude y → the new (q, w, b, z, P) (the prior
+    when refused or gated out)."""
     m = p.model
     nx, na, nb, nz = L.nx, L.na, L.nb, L.nz
     prior = (q, w, b, z, P)
-    y = m.y[k]
-    if not np.isfinite(y):
-        rec.flags[k] |= FLAG_NAN
-        rec.skipped_nan += 1
-        return prior
-    if rec.gate.skip_epoch(k, rec):   # object unlit or below the horizon: flagged, counted
-        return prior
     wts = w9 if w9 is not None else w6
     Pa = P
     if w9 is not None:

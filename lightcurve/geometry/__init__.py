@@ -1,5 +1,5 @@
 """Observation geometry: time and ephemeris, sites, orbits, frames, eclipses, visibility,
-schedules and the vectorised per-epoch geometry object (issue 3; see DESIGN.md).
+schedules and the vectorised per-epoch geometry object (see DESIGN.md).
 
 Conventions: GCRS is our ECI; SI units (m, m/s, rad, s); times are seconds since a scenario
 epoch given as ISO 8601 UTC text; everything offline (skyfield + skyfield-data's de421.bsp +

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from .sites import Site, enu_matrix, get_site, site_itrs_m
-from .time import _is_time, skyfield_times
+from .time import is_time, skyfield_times
 
 __all__ = [
     "OMEGA_EARTH_RAD_S",
@@ -38,7 +38,7 @@ OMEGA_EARTH_RAD_S = 7.292115e-5
 
 
 def _times(epoch_utc, t_s):
-    return epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    return epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
 
 
 _INTERP_MIN_N = 64

@@ -5,15 +5,18 @@ Frames and units: positions in GCRS (our ECI) metres, velocities m/s, angles rad
 
 Gravity models for :func:`propagate_orbit`
 ------------------------------------------
-``"point"`` (two-body), ``"J2"``, ``"J3"``, ``"J4"``: the zonal harmonics of EGM2008
-(unnormalised J2 = 1.08262617e-3, J3 = −2.53241052e-6, J4 = −1.61989760e-6, reference radius
-6378136.3 m, GM = 3.986004418e14 m³/s²). Zonal terms are axisymmetric about the Earth's
+``"point"`` (two-body), ``"J2"`` … ``"J6"``: the zonal harmonics of EGM2008
+(unnormalised J2 = 1.08262617e-3, J3 = −2.53241052e-6, J4 = −1.61989760e-6,
+J5 = −2.27753591e-7, J6 = 5.40666576e-7 — Vallado, *Fundamentals of Astrodynamics and
+Applications*, 4th ed., EGM-08 values; reference radius 6378136.3 m, GM = 3.986004418e14 m³/s²). Zonal terms are axisymmetric about the Earth's
 rotation pole, so only the pole direction matters; we evaluate them about the true pole (CIP,
 ITRS z) *at the scenario epoch*, expressed in GCRS (:func:`lightcurve.geometry.frames.earth_pole_gcrs`),
 and hold it fixed over the arc (precession moves it by ~0.006° per year, negligible over a
 pass). Called directly without ``pole``, :func:`propagate_orbit` uses GCRS z as the pole — an
 approximation off by the precession–nutation angle (≈0.1° in 2020).
-No drag, SRP or third bodies: the arcs we need are minutes to hours long.
+No drag, SRP or third bodies by default (the arcs we need are minutes to hours long);
+:func:`propagate_orbit` adds any extra acceleration a caller passes (``accel``), e.g. the drag
+and solar radiation pressure of O'Keefe (2015) §2.4 in :mod:`lightcurve.css.truth`.
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from .sites import enu_matrix, get_site, itrs_to_geodetic, site_itrs_m
+from .time import is_time, parse_epoch, skyfield_times, timescale
 
 __all__ = [
     "MU_EARTH",
@@ -33,6 +38,8 @@ __all__ = [
     "J2",
     "J3",
     "J4",
+    "J5",
+    "J6",
     "KeplerElements",
     "coe_to_rv",
     "rv_to_coe",
@@ -57,9 +64,11 @@ R_EARTH_GRAVITY_M = 6378136.3
 J2 = 1.08262617385222e-3
 J3 = -2.53241051856772e-6
 J4 = -1.61989759991697e-6
+J5 = -2.27753590730836e-7
+J6 = 5.40666576283813e-7
 
-_GRAVITY = {"point": (0.0, 0.0, 0.0), "J2": (J2, 0.0, 0.0), "J3": (J2, J3, 0.0),
-            "J4": (J2, J3, J4)}
+_GRAVITY = {"point": (), "J2": (J2,), "J3": (J2, J3), "J4": (J2, J3, J4),
+            "J5": (J2, J3, J4, J5), "J6": (J2, J3, J4, J5, J6)}
 
 
 # ----------------------------------------------------------------------------------------
@@ -212,29 +221,34 @@ def kepler_propagate(r0_m, v0_m_s, t_s, mu=MU_EARTH):
 # numerical propagation
 # ----------------------------------------------------------------------------------------
 @njit(cache=True)
-def _zonal_accel_nb(r, mu, re, j2, j3, j4, k):
-    """Acceleration (m/s²) of point-mass + J2..J4 zonal gravity about unit pole ``k``.
+def _zonal_accel_nb(r, mu, re, jn, k):
+    """Acceleration (m/s²) of point-mass + zonal gravity about unit pole ``k``.
 
-    From the potential V = μ/r [1 − Σ J_n (R/r)^n P_n(s)], s = r̂·k:
-    a_n = μ/r² (R/r)^n [(n+1) P_n(s) r̂ − P_n'(s) (k − s r̂)].
+    ``jn`` holds J2, J3, … (any length, may be empty). From the potential
+    V = μ/r [1 − Σ J_n (R/r)^n P_n(s)], s = r̂·k:
+    a_n = μ/r² (R/r)^n [(n+1) P_n(s) r̂ − P_n'(s) (k − s r̂)], with the Legendre recursions
+    n P_n = (2n−1) s P_{n−1} − (n−1) P_{n−2} and P_n' = P_{n−2}' + (2n−1) P_{n−1} (regular at
+    the poles, s = ±1).
     """
     rn = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     out = np.empty(3)
     s = (r[0] * k[0] + r[1] * k[1] + r[2] * k[2]) / rn
     g = mu / (rn * rn)
     q = re / rn
-    s2 = s * s
-    p2 = 1.5 * s2 - 0.5
-    d2 = 3.0 * s
-    p3 = 2.5 * s2 * s - 1.5 * s
-    d3 = 7.5 * s2 - 1.5
-    p4 = (35.0 * s2 * s2 - 30.0 * s2 + 3.0) / 8.0
-    d4 = 17.5 * s2 * s - 7.5 * s
-    c2 = j2 * q * q
-    c3 = j3 * q * q * q
-    c4 = j4 * q * q * q * q
-    radial = -1.0 + c2 * 3.0 * p2 + c3 * 4.0 * p3 + c4 * 5.0 * p4
-    polar = c2 * d2 + c3 * d3 + c4 * d4
+    p_m2, p_m1 = 1.0, s          # P_0, P_1
+    d_m2, d_m1 = 0.0, 1.0        # P_0', P_1'
+    qn = q
+    radial = -1.0
+    polar = 0.0
+    for i in range(jn.shape[0]):
+        n = i + 2
+        p = ((2 * n - 1) * s * p_m1 - (n - 1) * p_m2) / n
+        d = d_m2 + (2 * n - 1) * p_m1
+        qn *= q
+        radial += jn[i] * qn * (n + 1) * p
+        polar += jn[i] * qn * d
+        p_m2, p_m1 = p_m1, p
+        d_m2, d_m1 = d_m1, d
     for j in range(3):
         rh = r[j] / rn
         out[j] = g * (radial * rh - polar * (k[j] - s * rh))
@@ -242,9 +256,9 @@ def _zonal_accel_nb(r, mu, re, j2, j3, j4, k):
 
 
 @njit(cache=True)
-def _rhs_nb(y, mu, re, j2, j3, j4, k):
+def _rhs_nb(y, mu, re, jn, k):
     out = np.empty(6)
-    a = _zonal_accel_nb(y[:3], mu, re, j2, j3, j4, k)
+    a = _zonal_accel_nb(y[:3], mu, re, jn, k)
     out[0] = y[3]
     out[1] = y[4]
     out[2] = y[5]
@@ -257,17 +271,17 @@ def _rhs_nb(y, mu, re, j2, j3, j4, k):
 def _gravity_coeffs(gravity):
     if gravity not in _GRAVITY:
         raise ValueError(f"unknown gravity model {gravity!r}; allowed: {', '.join(_GRAVITY)}")
-    return _GRAVITY[gravity]
+    return np.array(_GRAVITY[gravity], dtype=float)
 
 
 def zonal_acceleration(r_m, gravity="J4", mu=MU_EARTH, pole=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Gravitational acceleration (m/s²) at position(s) ``r_m`` (m), shape like ``r_m``."""
-    j2, j3, j4 = _gravity_coeffs(gravity)
+    jn = _gravity_coeffs(gravity)
     k = np.asarray(pole, dtype=float)
     k = k / np.linalg.norm(k)
     r = np.asarray(r_m, dtype=float)
     flat = np.atleast_2d(r)
-    out = np.array([_zonal_accel_nb(np.ascontiguousarray(x), mu, R_EARTH_GRAVITY_M, j2, j3, j4, k)
+    out = np.array([_zonal_accel_nb(np.ascontiguousarray(x), mu, R_EARTH_GRAVITY_M, jn, k)
                     for x in flat])
     return out.reshape(r.shape)
 
@@ -287,7 +301,7 @@ def _check_bound_and_clear(r0, v0, mu, field_r="r0_m", field_v="v0_m_s", file=No
 
 
 def propagate_orbit(r0_m, v0_m_s, t_s, gravity="J4", *, mu=MU_EARTH, pole=None,
-                    rtol=1e-12, atol_m=1e-6, check=True):
+                    rtol=1e-12, atol_m=1e-6, check=True, accel=None):
     """Numerically propagate an Earth orbit (scipy ``solve_ivp``, DOP853).
 
     Parameters
@@ -297,7 +311,7 @@ def propagate_orbit(r0_m, v0_m_s, t_s, gravity="J4", *, mu=MU_EARTH, pole=None,
     t_s : array (N,)
         Output times, seconds from the state's epoch, any order, may be negative (the arc is
         integrated backwards and forwards from 0).
-    gravity : {"point", "J2", "J3", "J4"}
+    gravity : {"point", "J2", "J3", "J4", "J5", "J6"}
         Gravity model (module docstring).
     pole : array (3,), optional
         Unit vector of the Earth's rotation pole in GCRS for the zonal terms; default GCRS z.
@@ -306,6 +320,9 @@ def propagate_orbit(r0_m, v0_m_s, t_s, gravity="J4", *, mu=MU_EARTH, pole=None,
     check : bool
         Reject unbound orbits and orbits whose perigee is below the Earth's surface
         (:class:`InputError`).
+    accel : callable, optional
+        ``accel(t, r, v) -> (3,)``: an extra acceleration (m/s², GCRS) added to the gravity,
+        e.g. drag and solar radiation pressure.
 
     Returns
     -------
@@ -315,7 +332,7 @@ def propagate_orbit(r0_m, v0_m_s, t_s, gravity="J4", *, mu=MU_EARTH, pole=None,
 
     r0 = np.asarray(r0_m, dtype=float).reshape(3)
     v0 = np.asarray(v0_m_s, dtype=float).reshape(3)
-    j2, j3, j4 = _gravity_coeffs(gravity)
+    jn = _gravity_coeffs(gravity)
     if check:
         _check_bound_and_clear(r0, v0, mu)
     k = np.array([0.0, 0.0, 1.0]) if pole is None else np.asarray(pole, dtype=float).reshape(3)
@@ -326,10 +343,13 @@ def propagate_orbit(r0_m, v0_m_s, t_s, gravity="J4", *, mu=MU_EARTH, pole=None,
     y0 = np.concatenate([r0, v0])
     atol = np.array([atol_m] * 3 + [atol_m * 1e-3] * 3)
     out = np.empty((t.size, 6))
-    args = (mu, R_EARTH_GRAVITY_M, j2, j3, j4, k)
+    args = (mu, R_EARTH_GRAVITY_M, jn, k)
 
     def fun(_t, y):
-        return _rhs_nb(y, *args)
+        dy = _rhs_nb(y, *args)
+        if accel is not None:
+            dy[3:] += accel(_t, y[:3], y[3:])
+        return dy
 
     for sign in (1.0, -1.0):
         sel = (t >= 0) if sign > 0 else (t < 0)
@@ -379,8 +399,6 @@ def check_tle(line1: str, line2: str) -> None:
 def _earth_satellite(line1, line2):
     from skyfield.api import EarthSatellite
 
-    from .time import timescale
-
     check_tle(line1, line2)
     try:
         return EarthSatellite(line1.rstrip(), line2.rstrip(), ts=timescale())
@@ -409,19 +427,22 @@ def satellite_positions(sat, epoch_utc, t_s):
 
     Raises :class:`InputError` when SGP4 reports an error (e.g. decayed) at any time.
     """
-    from .time import _is_time, skyfield_times
-
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     p = sat.at(t)
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T
     if not np.all(np.isfinite(r)):
-        msg = getattr(p, "message", None)
-        msgs = sorted({str(m) for m in np.atleast_1d(np.asarray(msg, dtype=object))
-                       if m is not None}) if msg is not None else []
-        bad = int(np.sum(~np.all(np.isfinite(r), axis=1)))
-        raise InputError(f"SGP4 failed for this element set at {bad} of {r.shape[0]} requested "
-                         f"times: {'; '.join(msgs) or 'no position'}", field="line1/line2")
+        bad = ~np.all(np.isfinite(r), axis=1)
+        msg = getattr(p, "message", None)  # one entry per time, None where SGP4 succeeded
+        if msg is None or isinstance(msg, str):
+            texts = [str(msg)] if msg else []
+        else:
+            texts = sorted({str(m) for m, b in zip(np.atleast_1d(msg), bad) if b and m})
+        k = int(np.argmax(bad))
+        raise InputError(f"SGP4 failed for this TLE at {int(bad.sum())} of {bad.size} requested "
+                         f"time(s), first at index {k}: "
+                         f"{'; '.join(texts)[:300] or 'no position returned'}",
+                         field="line1/line2")
     return np.ascontiguousarray(r), np.ascontiguousarray(v)
 
 
@@ -429,28 +450,13 @@ def satellite_positions(sat, epoch_utc, t_s):
 # positions from topocentric observations
 # ----------------------------------------------------------------------------------------
 def geodetic_height_m(r_itrs_m) -> np.ndarray:
-    """Height above the WGS84 ellipsoid (m) of ITRS point(s), ``(N,)`` (iterative, < 1 mm)."""
-    from .sites import WGS84_A_M, WGS84_F
-
-    r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
-    e2 = WGS84_F * (2 - WGS84_F)
-    p = np.hypot(r[:, 0], r[:, 1])
-    z = r[:, 2]
-    lat = np.arctan2(z, p * (1 - e2))
-    for _ in range(8):
-        n = WGS84_A_M / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-        h = np.where(np.abs(np.cos(lat)) > 1e-9, p / np.cos(lat) - n,
-                     np.abs(z) - n * (1 - e2))
-        lat = np.arctan2(z, p * (1 - e2 * n / (n + h)))
-    n = WGS84_A_M / np.sqrt(1 - e2 * np.sin(lat) ** 2)
-    # robust form valid at all latitudes
-    return p * np.cos(lat) + z * np.sin(lat) - n * (1 - e2 * np.sin(lat) ** 2)
+    """Height above the WGS84 ellipsoid (m) of ITRS point(s), ``(N,)``
+    (:func:`lightcurve.geometry.sites.itrs_to_geodetic`)."""
+    return itrs_to_geodetic(r_itrs_m)[2]
 
 
 def _as_time_list(utc_times):
-    from .time import _is_time, parse_epoch, timescale
-
-    if _is_time(utc_times):
+    if is_time(utc_times):
         return utc_times
     vals = [utc_times] if isinstance(utc_times, str) else list(np.atleast_1d(utc_times))
     dts = [parse_epoch(x if not isinstance(x, np.str_) else str(x)) for x in vals]
@@ -480,8 +486,6 @@ def positions_from_topocentric(site, utc_times, alt_deg, az_deg, range_m=None, h
         reaches (or an altitude below the horizon), negative ranges.
     """
     from .frames import altaz_to_enu, itrs_rotation
-    from .sites import enu_matrix, get_site, site_itrs_m
-
     site = get_site(site)
     if (range_m is None) == (height_m is None):
         raise InputError("give exactly one of range_m or height_m", field="range_m/height_m")
@@ -572,6 +576,13 @@ class Orbit:
         return rv_to_coe(self.r0_m, self.v0_m_s)
 
 
+#: largest orbit size accepted (semi-major axis, or a position component), km: the radius of
+#: the Earth's Hill sphere, a (m_E / 3 M_S)^(1/3) = 1.496e8 km x (3.0e-6 / 3)^(1/3) ~ 1.5e6 km,
+#: beyond which the Sun, not the Earth, dominates the motion (and the two-body propagation
+#: here is meaningless); velocity components at most 100 km/s (Earth escape at LEO ~ 11 km/s)
+MAX_ORBIT_RADIUS_KM = 1.5e6
+
+
 def orbit_from_section(section) -> Orbit:
     """Parse a scenario's ``[orbit]`` table (a :class:`~lightcurve.io.tomlio.Section`).
 
@@ -591,9 +602,9 @@ def orbit_from_section(section) -> Orbit:
     sec = section if isinstance(section, Section) else Section(section, name="orbit")
     kind = sec.str("type", "keplerian", choices=("keplerian", "cartesian", "tle"))
     gravity = sec.str("gravity", "J4", choices=tuple(_GRAVITY))
-    f = sec._field
+    f = sec.field_name
     if kind == "keplerian":
-        a_km = sec.float("a_km", min=0.0, min_open=True)
+        a_km = sec.float("a_km", min=0.0, min_open=True, max=MAX_ORBIT_RADIUS_KM)
         e = sec.float("e", min=0.0, max=1.0, max_open=True)
         i = sec.float("i_deg", min=0.0, max=180.0)
         raan = sec.float("raan_deg", 0.0)
@@ -609,8 +620,8 @@ def orbit_from_section(section) -> Orbit:
         r, v = coe_to_rv(a_km * 1e3, e, *np.radians([i, raan, argp, nu]))
         return Orbit("keplerian", gravity, r, v)
     if kind == "cartesian":
-        r = sec.vector("r_km", n=3) * 1e3
-        v = sec.vector("v_km_s", n=3) * 1e3
+        r = sec.vector("r_km", n=3, min=-MAX_ORBIT_RADIUS_KM, max=MAX_ORBIT_RADIUS_KM) * 1e3
+        v = sec.vector("v_km_s", n=3, min=-100.0, max=100.0) * 1e3
         sec.check_unknown()
         if np.linalg.norm(r) <= R_EARTH_M:
             raise InputError("position is inside the Earth", file=sec.file, field=f("r_km"),

@@ -75,7 +75,10 @@ def build_schedule(duration_s: float, cadence_s: float = DEFAULT_CADENCE_S,
             except (TypeError, ValueError):
                 raise InputError("a window must be a pair (t0, t1) of seconds",
                                  field=f"windows[{k}]", value=w) from None
-            if not (np.isfinite(t0) and np.isfinite(t1)) or t1 < t0:
+            if not (np.isfinite(t0) and np.isfinite(t1)):
+                raise InputError("window times must be finite", field=f"windows[{k}]",
+                                 value=(t0, t1), allowed="finite seconds, t0 <= t1")
+            if t1 < t0:
                 raise InputError("window end before its start", field=f"windows[{k}]",
                                  value=(t0, t1), allowed="t0 <= t1")
             mask |= (grid >= t0 - tol) & (grid <= t1 + tol)

@@ -35,6 +35,7 @@ from ..errors import InputError
 from ..io.tomlio import Section, load_toml
 
 __all__ = [
+    "itrs_to_geodetic",
     "Site",
     "load_sites",
     "get_site",
@@ -141,6 +142,28 @@ class Site:
         return "\n".join(lines)
 
 
+def itrs_to_geodetic(r_itrs_m):
+    """WGS84 geodetic latitude (rad), longitude (rad) and height (m) of ITRS point(s) (m),
+    ``(N, 3)`` → three ``(N,)`` arrays.
+
+    Fixed-point iteration of ``φ = atan2(z, p (1 − e² N/(N + h)))`` with the height in the form
+    ``h = p cos φ + z sin φ − N (1 − e² sin²φ)`` (valid at all latitudes); ten iterations reach
+    < 1e-12 rad for any point above the Earth's centre region.
+    """
+    r = np.atleast_2d(np.asarray(r_itrs_m, dtype=float))
+    e2 = WGS84_F * (2.0 - WGS84_F)
+    p = np.hypot(r[:, 0], r[:, 1])
+    z = r[:, 2]
+    lat = np.arctan2(z, p * (1.0 - e2))
+    for _ in range(10):
+        n = WGS84_A_M / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+        h = p * np.cos(lat) + z * np.sin(lat) - n * (1.0 - e2 * np.sin(lat) ** 2)
+        lat = np.arctan2(z, p * (1.0 - e2 * n / (n + h)))
+    n = WGS84_A_M / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    h = p * np.cos(lat) + z * np.sin(lat) - n * (1.0 - e2 * np.sin(lat) ** 2)
+    return lat, np.arctan2(r[:, 1], r[:, 0]), h
+
+
 def inline_site_id(table, position: int | None = None) -> str:
     """The id of an inline site table (the id rule, docs/formats.md "Sites").
 
@@ -172,7 +195,7 @@ def site_from_section(sec: Section, *, site_id: str | None = None) -> Site:
     """
     sid = sec.str("id", site_id or "inline")
     if not _ID_RE.match(sid):
-        raise InputError("bad site id", file=sec.file, field=sec._field("id"), value=sid,
+        raise InputError("bad site id", file=sec.file, field=sec.field_name("id"), value=sid,
                          allowed="lower-case letters, digits, '_' and '-'")
     name = sec.str("name", sid)
     lat = sec.float("lat_deg", min=-90.0, max=90.0)
@@ -317,9 +340,9 @@ def site_position_velocity_gcrs(site: Site, epoch_utc, t_s=0.0):
 
     ``epoch_utc`` may be a skyfield ``Time`` array, in which case ``t_s`` is ignored.
     """
-    from .time import _is_time, skyfield_times
+    from .time import is_time, skyfield_times
 
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     p = _topos(site).at(t)
     r = np.asarray(p.position.m, dtype=float).reshape(3, -1).T
     v = np.asarray(p.velocity.m_per_s, dtype=float).reshape(3, -1).T

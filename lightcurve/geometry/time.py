@@ -144,7 +144,11 @@ def parse_epoch(epoch_utc) -> datetime:
                          field="epoch_utc", value=epoch_utc)
     if dt.tzinfo is None:
         dt = dt.replace(tzinfo=timezone.utc)
-    dt = dt.astimezone(timezone.utc)
+    try:
+        dt = dt.astimezone(timezone.utc)
+    except (OverflowError, ValueError):  # e.g. 0001-01-01T00:00:00+01:00 is before year 1 UTC
+        raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
+                         value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC") from None
     if not (DE421_START_UTC <= dt <= DE421_END_UTC):
         raise InputError("epoch outside the DE421 ephemeris range", field="epoch_utc",
                          value=epoch_utc, allowed="1899-07-30 to 2053-10-08 UTC")
@@ -212,7 +216,7 @@ def skyfield_times(epoch_utc, t_s):
 
 def _body_gcrs(name: str, epoch_utc, t_s, light_time: bool) -> np.ndarray:
     eph = ephemeris()
-    t = epoch_utc if _is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
+    t = epoch_utc if is_time(epoch_utc) else skyfield_times(epoch_utc, t_s)
     earth, body = eph["earth"], eph[name]
     if light_time:
         pos = earth.at(t).observe(body).position.m
@@ -225,7 +229,7 @@ def _is_skyfield_time(x) -> bool:
     return type(x).__name__ == "Time" and hasattr(x, "tt") and hasattr(x, "ts")
 
 
-def _is_time(x) -> bool:
+def is_time(x) -> bool:
     """True for a skyfield ``Time`` *array* (the explicit-times form of the geometry
     functions, ``t_s`` ignored); a scalar ``Time`` is an epoch like any other."""
     return _is_skyfield_time(x) and np.ndim(x.tt) > 0

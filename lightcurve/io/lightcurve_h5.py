@@ -18,9 +18,16 @@ from ..errors import InputError
 from ..report.views import LightcurveViews
 from .atomic import atomic_path
 
-__all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION"]
+__all__ = ["Lightcurve", "read_lightcurve", "FORMAT_VERSION", "MAG_RANGE", "MIN_OBJECT_RADIUS_M"]
 
 FORMAT_VERSION = 1
+#: apparent magnitudes accepted from any source (open interval): the Sun is −26.7, the
+#: faintest objects measured (Hubble deep fields) about +31; beyond this a value is a unit or
+#: parsing error, not a measurement (1e300 overflowed the filters' likelihoods)
+MAG_RANGE = (-30.0, 40.0)
+#: an observed object is outside the Earth: its distance from the centre exceeds the polar
+#: radius, WGS84 b = 6356752.3 m (an object at the Earth's centre used to be inverted)
+MIN_OBJECT_RADIUS_M = 6_356_752.3
 
 
 @dataclass(repr=False)
@@ -90,6 +97,11 @@ class Lightcurve(LightcurveViews):
     def has_truth(self) -> bool:
         """True when the file carries the truth attitude (simulated data)."""
         return self.truth_q is not None
+
+    @property
+    def camera_index(self) -> np.ndarray | None:
+        """Alias of :attr:`camera` (per-row camera index, or None)."""
+        return self.camera
 
     @property
     def obj_to_sun_unit(self) -> np.ndarray:
@@ -169,6 +181,12 @@ class Lightcurve(LightcurveViews):
             k = int(np.argmax(np.isinf(self.mag)))
             raise err("mag", f"infinite magnitude at row {k}", value=float(self.mag[k]),
                       allowed="finite, or NaN for not measured")
+        lo, hi = MAG_RANGE
+        out = np.isfinite(self.mag) & ~((self.mag > lo) & (self.mag < hi))
+        if np.any(out):
+            k = int(np.argmax(out))
+            raise err("mag", f"magnitude out of range at row {k}", value=float(self.mag[k]),
+                      allowed=f"({lo:g}, {hi:g}), or NaN for not measured")
         bad_sig = ~((self.mag_sigma > 0) & np.isfinite(self.mag_sigma)) & np.isfinite(self.mag)
         if np.any(bad_sig):
             k = int(np.argmax(bad_sig))
@@ -205,12 +223,33 @@ class Lightcurve(LightcurveViews):
                 and np.all((lla[:, 1] >= -180) & (lla[:, 1] <= 360))):
             raise err("sites/lla_deg_m", "site latitude/longitude not finite or out of range",
                       allowed="lat in [-90, 90] deg, lon in [-180, 360] deg")
+        self._check_geometry(err)
         self._check_time_span(err)
         if self.truth_q is not None:
             nq = np.linalg.norm(self.truth_q, axis=1)
             if np.any(np.abs(nq - 1) > 1e-6):
                 raise err("truth_q", "quaternions must have unit norm")
 
+    def _check_geometry(self, err) -> None:
+        """The object is outside the Earth (|r_obj| > :data:`MIN_OBJECT_RADIUS_M`) and apart
+        from the site and the Sun (an inversion needs the object-to-observer and
+        object-to-Sun directions)."""
+        if not len(self):
+            return
+        r = np.linalg.norm(self.r_obj_eci_m, axis=1)
+        bad = ~(r > MIN_OBJECT_RADIUS_M)
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise err("geometry/r_obj_eci_m", f"object inside the Earth at row {k}",
+                      value=float(r[k]), allowed=f"|r| > {MIN_OBJECT_RADIUS_M:.1f} m (WGS84 "
+                      "polar radius)")
+        for name, other in (("geometry/r_site_eci_m", self.r_site_eci_m),
+                            ("geometry/r_sun_eci_m", self.r_sun_eci_m)):
+            d = np.linalg.norm(other - self.r_obj_eci_m, axis=1)
+            if not np.all(d > 0):
+                k = int(np.argmax(~(d > 0)))
+                raise err(name, f"object and {name.split('_')[1]} at the same place at row {k}",
+                          allowed="distinct positions")
     def _validate_cameras(self, err, n) -> None:
         """Camera indices, names and exposure times (all optional)."""
         if (self.camera is None) != (self.camera_names is None):
@@ -407,7 +446,12 @@ def read_lightcurve(path) -> Lightcurve:
                 kw["shape"] = read_shape(h["shape"], file=path)
             else:
                 kw["shape"] = None
-    except InputError:
+    except InputError as exc:
+        if exc.bare_message.startswith("not a readable HDF5") and \
+                path.suffix.lower() in (".csv", ".txt", ".tsv", ".dat"):
+            raise InputError("not an HDF5 lightcurve: a CSV recording is imported first "
+                             "('lightcurve import RECORDING.csv -o OUT.h5 --scenario MODEL.toml', "
+                             "docs/formats.md)", file=path) from None
         raise
     except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py: damaged file
         raise InputError(f"corrupted or unexpected HDF5 content: {exc}", file=path) from None

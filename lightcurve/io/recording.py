@@ -87,7 +87,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .lightcurve_h5 import Lightcurve
+from .lightcurve_h5 import MAG_RANGE, Lightcurve
 from .safe_open import CSV_MAX_BYTES, read_text
 from .tomlio import Section
 
@@ -207,7 +207,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
         if isinstance(v, bool) or not isinstance(v, (str, int)) or (isinstance(v, int) and v < 0) \
                 or (isinstance(v, str) and not v.strip()):
             raise InputError("expected a column name (text) or a 0-based column index", file=sec.file,
-                             field=sec._field(key), value=v)
+                             field=sec.field_name(key), value=v)
         return v.strip() if isinstance(v, str) else v
 
     cols = {k: col(k, {"time_column": "utc", "mag_column": "mag"}.get(k)) for k in _COLUMN_KEYS}
@@ -234,7 +234,7 @@ def recording_spec_from_section(sec) -> RecordingSpec:
     sec.check_unknown()
 
     def err(key, msg, value=None, allowed=None):
-        return InputError(msg, file=sec.file, field=sec._field(key), value=value, allowed=allowed)
+        return InputError(msg, file=sec.file, field=sec.field_name(key), value=value, allowed=allowed)
 
     pairs = (("sigma_column", "default_sigma_mag"), ("site_column", "site"),
              ("object_column", "object"), ("band_column", "band"), ("band", "sun_mag"),
@@ -481,8 +481,9 @@ def _parse_rows(path, rows, header, ci, colname, spec: RecordingSpec, default_si
             m = float(ms)
         except ValueError:
             raise bad("mag", "not a number") from None
-        if not math.isfinite(m) or not (-30.0 < m < 40.0):
-            raise bad("mag", "magnitude out of range", "(-30, 40), or empty/nan to skip the row")
+        if not math.isfinite(m) or not (MAG_RANGE[0] < m < MAG_RANGE[1]):
+            raise bad("mag", "magnitude out of range",
+                      f"({MAG_RANGE[0]:g}, {MAG_RANGE[1]:g}), or empty/nan to skip the row")
         expo = float("nan")
         if ci["exposure_start"] is not None:
             t0, t1 = when("exposure_start"), when("exposure_end")
@@ -948,7 +949,7 @@ def read_recordings(csv_path, scenario_or_recording_section=None, *, site_dirs=N
         missing = want - set(rows.obj)
         if missing:
             raise InputError("object not in the recording", file=path, field="object",
-                             value=sorted(missing)[0], allowed=", ".join(dict.fromkeys(rows.obj)))
+                             value=min(missing), allowed=", ".join(dict.fromkeys(rows.obj)))
         groups = {k: v for k, v in groups.items() if k[0] in want}
     base_epoch = spec.epoch_utc or (scenario.epoch_utc if scenario is not None else None)
     if base_epoch is None:

@@ -81,11 +81,12 @@ class Section:
         self._used: set[str] = set()
 
     # -- helpers -----------------------------------------------------------------------
-    def _field(self, key: str) -> str:
+    def field_name(self, key: str) -> str:
+        """Dotted name of ``key`` in this table (``"orbit.e"``), for error messages."""
         return f"{self.name}.{key}" if self.name else key
 
     def _err(self, key, msg, value=None, allowed=None):
-        return InputError(msg, file=self.file, field=self._field(key), value=value, allowed=allowed)
+        return InputError(msg, file=self.file, field=self.field_name(key), value=value, allowed=allowed)
 
     def has(self, key: str) -> bool:
         """True when ``key`` is present."""
@@ -177,10 +178,10 @@ class Section:
         """A sub-table as a :class:`Section` (None if absent and default is None)."""
         v, present = self._get(key, default)
         if not present:
-            return None if v is None else Section(v, self.file, self._field(key))
+            return None if v is None else Section(v, self.file, self.field_name(key))
         if not isinstance(v, dict):
             raise self._err(key, "expected a table", v)
-        return Section(v, self.file, self._field(key))
+        return Section(v, self.file, self.field_name(key))
 
     def sections(self, key, default=REQUIRED) -> list["Section"]:
         """An array of tables (``[[key]]``) as a list of :class:`Section`."""
@@ -189,7 +190,7 @@ class Section:
             return [] if v is None else v
         if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
             raise self._err(key, "expected an array of tables ([[...]])", v)
-        return [Section(x, self.file, f"{self._field(key)}[{i}]") for i, x in enumerate(v)]
+        return [Section(x, self.file, f"{self.field_name(key)}[{i}]") for i, x in enumerate(v)]
 
     def raw(self, key, default=REQUIRED):
         """The value as parsed, unvalidated (the caller validates)."""

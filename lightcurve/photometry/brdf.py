@@ -34,6 +34,8 @@ from __future__ import annotations
 import inspect
 import math
 import threading
+import warnings
+from importlib import metadata
 
 import numpy as np
 
@@ -191,21 +193,47 @@ def _load_entry_points() -> None:
     if _ENTRY_POINTS_LOADED:
         return
     _ENTRY_POINTS_LOADED = True
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in _REGISTRY:
+            continue
+        try:
+            obj = ep.load()
+        except Exception as exc:  # a broken plug-in must not break the built-ins
+            warnings.warn(f"BRDF entry point {ep.name!r} ({ep.value}) failed to load: {exc}",
+                          RuntimeWarning, stacklevel=2)
+            continue
+        if ep.name not in _REGISTRY:  # the module may have registered itself on import
+            _register(ep.name, obj, replace=False)
+
+
+def _load_entry_point(name: str) -> None:
+    """Load only the plug-in registered under ``name`` (a name read from a data file must not
+    import every installed plug-in)."""
     from importlib.metadata import entry_points
 
     for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name != name:
+            continue  # never imported
         if ep.name in _REGISTRY:
-            continue
+            return
         try:
             obj = ep.load()
         except Exception as exc:  # a broken plug-in must not break the built-ins
             import warnings
 
             warnings.warn(f"BRDF entry point {ep.name!r} ({ep.value}) failed to load: {exc}",
-                          RuntimeWarning, stacklevel=2)
-            continue
-        if ep.name not in _REGISTRY:  # the module may have registered itself on import
+                          RuntimeWarning, stacklevel=3)
+            return
+        if ep.name not in _REGISTRY:
             _register(ep.name, obj, replace=False)
+        return
+
+
+def _entry_point_names() -> list:
+    """Names of the installed BRDF plug-ins (nothing is imported)."""
+    from importlib.metadata import entry_points
+
+    return [ep.name for ep in entry_points(group=ENTRY_POINT_GROUP)]
 
 
 def _register(name, obj, replace, bounds=None) -> BRDF:
@@ -250,19 +278,21 @@ def unregister_brdf(name: str) -> None:
 
 
 def get_brdf(name: str, *, file=None, field=None) -> BRDF:
-    """The registered BRDF called ``name``; :class:`InputError` naming file/field if unknown."""
-    from . import brdf_models  # noqa: F401  (registers the built-ins)
+    """The registered BRDF called ``name``; :class:`InputError` naming file/field if unknown.
 
-    if name not in _REGISTRY:
-        _load_entry_points()
+    The built-ins are registered when :mod:`lightcurve.photometry` is imported (its
+    ``brdf_models``), which Python does before any of its modules."""
+    if name not in _REGISTRY and isinstance(name, str):
+        _load_entry_point(name)
     try:
         return _REGISTRY[name]
-    except KeyError:
+    except (KeyError, TypeError):
         raise InputError("unknown BRDF (a user BRDF must be registered first: on the command "
                          "line load its module with --plugin MODULE_OR_FILE.py, or install a "
                          "package with a 'lightcurve.brdfs' entry point; docs/extending.md)",
                          file=file, field=field, value=name,
-                         allowed=", ".join(sorted(_REGISTRY))) from None
+                         allowed=", ".join(sorted(set(_REGISTRY) | set(_entry_point_names()))))\
+            from None
 
 
 def available_brdfs() -> list[str]:
@@ -271,7 +301,5 @@ def available_brdfs() -> list[str]:
     Measured tables are not registry names: a material uses one with ``brdf = "tabulated"``
     and ``table = "file.csv"``, or code passes a :class:`~.tabulated.TabulatedBRDF` instance.
     """
-    from . import brdf_models  # noqa: F401  (registers the built-ins)
-
     _load_entry_points()
     return sorted(_REGISTRY)

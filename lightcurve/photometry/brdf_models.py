@@ -85,7 +85,7 @@ class CookTorrance(_KernelBRDF):
 
 
 @register_brdf("cook_torrance_bernard")
-class CookTorranceBernard(_KernelBRDF):
+class CookTorranceBernard(CookTorrance):
     """Cook–Torrance with the diffuse term as printed in Bernard (2021) eq. 5.8.
 
     f_r = ξ a (n̂·ŝ)/π + (1−ξ) F D G / (4 (n̂·ŝ)(n̂·ô))  [sr⁻¹]
@@ -96,10 +96,6 @@ class CookTorranceBernard(_KernelBRDF):
     :class:`CookTorrance` (standard Fresnel, not eq. 5.10's second denominator).
     """
 
-    param_names = ("xi", "a", "m")
-    param_bounds = {"xi": (0.0, 1.0, False, False), "a": (0.0, 1.0, True, True),
-                    "m": (0.0, 1.0, True, False)}
-    defaults = {}
     kernel_id = K.COOK_TORRANCE_THESIS
 
 

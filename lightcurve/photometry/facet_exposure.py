@@ -5,7 +5,7 @@ A facet i contributes to the magnitude (DESIGN.md magnitude equation) only at ep
 unit vectors in body axes, ``v_b = A(q) v_I`` (Bernard eq. 3.16). A facet that is never both
 lit and visible contributes nothing to any measurement, so none of its reflection parameters
 (ξ, a = F0, m, A) can be learned from the lightcurve: that is the geometry behind the
-observability statements of issue 6 (Bernard §10.7). Self-shadowing is not considered (the
+observability statements of Bernard §10.7. Self-shadowing is not considered (the
 convex-shape assumption of the magnitude model).
 """
 
@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..rotations import quat_rotate
+from .shapes_io import load_shape
 
 __all__ = ["facet_lit_visible", "facet_exposure_fractions"]
 
@@ -46,13 +48,9 @@ def facet_exposure_fractions(curve, shape=None) -> dict:
     over all epochs, and ``lit_and_visible_by_site`` {site name: list}.
     """
     if curve.truth_q is None:
-        from ..errors import InputError
-
         raise InputError("facet exposure needs the truth attitude of a simulated lightcurve",
                          field="truth/q")
     if shape is None:
-        from . import load_shape
-
         shape = load_shape(curve.attrs["shape"])
     lit, vis = facet_lit_visible(shape.normals_body, curve.truth_q, curve.obj_to_sun_unit,
                                  curve.obj_to_obs_unit)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from .brdf import BRDF, get_brdf
+from .tabulated import TabulatedBRDF
 
 __all__ = ["Material", "material_from_section"]
 
@@ -73,8 +74,6 @@ def material_from_section(sec, name: str, base_dir=None) -> Material:
     params = {k: v for k, v in sec.data.items() if k not in ("brdf", "table", "description")}
     sec.raw("description", None)
     if kind == "tabulated":
-        from .tabulated import TabulatedBRDF
-
         table = sec.str("table")
         path = Path(table)
         if not path.is_absolute() and base_dir is not None:

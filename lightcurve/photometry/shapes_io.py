@@ -44,6 +44,8 @@ from .._paths import data_dir
 from ..errors import InputError
 from ..io.safe_open import MESH_MAX_BYTES as _MAX_MESH_BYTES
 from ..io.tomlio import Section, load_toml
+from .brdf import get_brdf
+from .brdf_models import perpendicular_unit
 from .facets import Shape, facets_convex
 from .materials import Material, material_from_section
 
@@ -211,8 +213,6 @@ def _load(spec, library_dirs, probs: _Problems):
             if probs.strict or fatal:
                 raise
             # lenient: record every out-of-range parameter, keep the raw values
-            from .brdf import get_brdf
-
             model = get_brdf(msec.data["brdf"])
             raw = {k: v for k, v in msec.data.items() if k not in ("brdf", "description")}
             found: list = []
@@ -290,6 +290,21 @@ def _get(probs, fn, fallback):
         return fallback
 
 
+#: largest inertia element accepted, kg·m² (the ISS, the heaviest spacecraft, has principal
+#: moments of order 10⁸ kg·m²; four orders of margin; values near 1e308 overflow the
+#: eigen-decomposition and the Euler equations)
+MAX_INERTIA_KG_M2 = 1e12
+
+
+def check_inertia_magnitude(J, file, field) -> None:
+    """InputError when an inertia element exceeds :data:`MAX_INERTIA_KG_M2` in magnitude."""
+    J = np.asarray(J, float)
+    if not np.all(np.abs(J) <= MAX_INERTIA_KG_M2):
+        raise InputError("inertia element too large", file=file, field=field,
+                         value=float(np.max(np.abs(J))),
+                         allowed=f"|I_ij| <= {MAX_INERTIA_KG_M2:g} kg m^2")
+
+
 def _inertia(sh: Section, file, mesh_inertia):
     if sh.has("inertia_kg_m2") and sh.has("inertia_diag_kg_m2"):
         raise InputError("give either inertia_kg_m2 or inertia_diag_kg_m2, not both", file=file,
@@ -305,6 +320,7 @@ def _inertia(sh: Section, file, mesh_inertia):
     else:
         raise InputError("missing inertia (inertia_kg_m2 or inertia_diag_kg_m2; computed "
                          "automatically only for watertight meshes)", file=file, field="shape.inertia_kg_m2")
+    check_inertia_magnitude(J, file, fld)
     if not np.allclose(J, J.T, rtol=1e-9, atol=1e-12 * max(1.0, np.abs(J).max())):
         raise InputError("inertia matrix is not symmetric", file=file, field=fld, value=J.tolist())
     ev = np.linalg.eigvalsh(J)
@@ -340,7 +356,6 @@ def _facets_from_toml(root: Section, materials, file, probs):
     normals = np.array(normals)
     tangents = None
     if any_tangent:
-        from .brdf_models import perpendicular_unit
 
         nn = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
         tangents = perpendicular_unit(nn)

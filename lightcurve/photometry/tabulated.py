@@ -39,6 +39,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.safe_open import BRDF_MAX_BYTES as _MAX_TABLE_BYTES
 from .brdf import BRDF
+from .brdf_models import perpendicular_unit
 
 __all__ = ["TabulatedBRDF", "load_brdf_table"]
 
@@ -163,7 +164,6 @@ class TabulatedBRDF(BRDF):
     # -- general geometry ------------------------------------------------------------------
     def evaluate(self, n, s, o, params: dict):
         """f_r (sr⁻¹) for unit n, s (object→Sun), o (object→observer) in one frame (...,3)."""
-        from .brdf_models import perpendicular_unit
 
         n, s, o = np.broadcast_arrays(np.asarray(n, float), np.asarray(s, float),
                                       np.asarray(o, float))

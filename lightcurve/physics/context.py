@@ -453,7 +453,7 @@ class CSSContext:
     ``array`` (:class:`~lightcurve.css.sensors.CSSArray`, the model's sensors); ``t`` (K,) s
     since ``epoch_utc``; ``q`` (K,4) inertial→body; ``r_eci_m`` (K,3) spacecraft GCRS
     position; ``sun_eci_unit`` (K,3) unit spacecraft→Sun, GCRS; ``lit`` (K,) lit fraction.
-    Effect state: ``albedo_grid`` (:class:`~lightcurve.css.albedo.AlbedoGrid`) with
+    Effect state: ``albedo_grid`` (:class:`~lightcurve.earth.albedo.AlbedoGrid`) with
     ``albedo_scale``; ``fault`` = (sensor index, gain, start time s) or None.
     Outputs (K,S) are clipped at zero (photodiode currents), O'Keefe eq. 2.21.
     """
@@ -518,7 +518,8 @@ class CSSContext:
         return hit * self.albedo_scale
 
     def _albedo_signal_unscaled(self) -> np.ndarray:
-        from ..css.albedo import albedo_on_sensors_nb, earth_rotation_angle
+        from ..css.albedo import albedo_on_sensors_nb
+        from ..earth.albedo import earth_rotation_angle
         from ..rotations import quat_rotate_inv
 
         K, S = len(self), self.n_sensors

@@ -1,6 +1,6 @@
 """Earthshine: sunlight reflected by the Earth onto the object's facets.
 
-The Earth is a grid of Lambertian cells (albedo map, :mod:`lightcurve.css.albedo`). Cell j,
+The Earth is a grid of Lambertian cells (albedo map, :mod:`lightcurve.earth.albedo`). Cell j,
 sunlit and in view of the object, irradiates the object from the direction ĉ_j (object →
 cell) with, in units of the solar irradiance at the object (O'Keefe 2015, eq. 2.15),
 
@@ -13,7 +13,7 @@ and facet i reflects a fraction of it towards the observer exactly as it reflect
 added to the solar flux factor of the magnitude equation (:mod:`.context`), *not* multiplied
 by the object's lit fraction (an object in the Earth's shadow can still see sunlit ground).
 ``s`` (``albedo_scale``) scales the whole map. Cells are Earth-fixed (WGS84); ECI → Earth
-fixed uses the Greenwich sidereal angle (:func:`lightcurve.css.albedo.earth_rotation_angle`).
+fixed uses the Greenwich sidereal angle (:func:`lightcurve.earth.albedo.earth_rotation_angle`).
 The facet sum ignores self-shadowing of Earthshine. Map: ``albedo = "builtin"`` (the zonal
 CERES fit on a ``resolution_deg`` grid) or a CERES CSV / TOMS .dat path (relative paths
 against the scenario file).
@@ -39,8 +39,8 @@ _GRIDS: dict = {}
 
 
 def load_grid(albedo: str = "builtin", resolution_deg: float = 10.0):
-    """The :class:`~lightcurve.css.albedo.AlbedoGrid` for ``albedo`` ("builtin" or a path), cached."""
-    from ..css.albedo import builtin_albedo_map, load_albedo_map
+    """The :class:`~lightcurve.earth.albedo.AlbedoGrid` for ``albedo`` ("builtin" or a path), cached."""
+    from ..earth.albedo import builtin_albedo_map, load_albedo_map
 
     key = (str(albedo), float(resolution_deg))
     if key not in _GRIDS:
@@ -56,7 +56,7 @@ def earthshine_cells(grid, r_obj_eci_m, sun_eci_m, theta_rad):
     (3,) geocentric Sun position or direction, GCRS; ``theta_rad`` Greenwich angle.
     Returns ``(dirs_eci (M,3) unit object→cell, ratio (M,))`` (irradiance / solar irradiance).
     """
-    from ..css.albedo import albedo_cells_nb
+    from ..earth.albedo import albedo_cells_nb
     from .context import rotate_z
 
     r_e = rotate_z(np.asarray(r_obj_eci_m, float)[None], -theta_rad)[0]
@@ -100,7 +100,7 @@ class Earthshine(Effect):
 
     def flux(self, ctx, st, scale: float = 1.0) -> np.ndarray:
         """Earthshine flux factor (N,), m² sr⁻¹ in units of the solar irradiance."""
-        from ..css.albedo import earth_rotation_angle
+        from ..earth.albedo import earth_rotation_angle
         from ..photometry.magnitude import flux_factor
         from ..rotations import quat_rotate
 

@@ -31,10 +31,10 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
+from ..photometry.partials import facet_products
 from .registry import Effect, register_effect
 
-__all__ = ["SelfShadowing", "facet_triangles", "facet_samples", "visible_fraction_nb",
-           "facet_products"]
+__all__ = ["SelfShadowing", "facet_triangles", "facet_samples", "visible_fraction_nb"]
 
 
 def facet_triangles(shape):
@@ -182,24 +182,6 @@ def visible_fraction_nb(pts, w, pf, normals, areas, tri, tri_facet, s_body, o_bo
     return out
 
 
-def facet_products(shape, s_body, o_body) -> np.ndarray:
-    """Per-facet terms A_i max(n̂·ŝ,0) max(n̂·ô,0) f_r,i (N,F), m² sr⁻¹, for (N,3) directions."""
-    from ..core.photometry import facet_products_kernel
-
-    sb = np.ascontiguousarray(s_body, float)
-    ob = np.ascontiguousarray(o_body, float)
-    n, a, ids, p = shape.kernel_arrays()
-    out = facet_products_kernel(n, a, ids, p, sb, ob)
-    for brdf, idx in shape.numpy_groups:
-        nf = shape.normals_body[idx]
-        ns = sb @ nf.T
-        no = ob @ nf.T
-        params = {k: shape.param_table[k][idx] for k in brdf.param_names}
-        f = brdf.evaluate(nf[None, :, :], sb[:, None, :], ob[:, None, :], params)
-        out[:, idx] = np.where((ns > 0) & (no > 0), shape.areas_m2[idx] * ns * no * f, 0.0)
-    return out
-
-
 class _ShadowModel:
     """Callable flux model (ctx, state, s_body, o_body) -> (N,) with ray-cast visibility."""
 
@@ -235,7 +217,7 @@ class _ShadowModel:
 
     def __call__(self, ctx, st, s_body, o_body):
         v = self.fractions(ctx.shape, s_body, o_body)
-        return np.sum(v * facet_products(ctx.shape, s_body, o_body), axis=1)
+        return np.sum(v * facet_products(ctx.shape, s_body, o_body) * ctx.shape.areas_m2, axis=1)
 
 
 @register_effect

@@ -46,25 +46,22 @@ def _plt():
 
 def file_kind(path) -> str:
     """The kind of a file written by the package (one of :data:`KINDS`); InputError otherwise."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", file=path)
-    head = path.read_bytes()[:8]
-    if head.startswith(b"\x89HDF"):
-        import h5py
+    from ..io.safe_open import HDF5_MAX_BYTES, open_hdf5, open_regular, read_text
 
-        try:
-            with h5py.File(path, "r") as h:
-                fmt = h.attrs.get("format", "")
-                fmt = fmt.decode() if isinstance(fmt, bytes) else str(fmt)
-                if fmt == "lightcurve-estimate":
-                    return "estimate"
-                if fmt == "lightcurve-css":
-                    return "css-recording"
-                if "mag" in h and "t" in h:
-                    return "lightcurve"
-        except OSError as exc:
-            raise InputError(f"cannot open HDF5 file: {exc}", file=path) from None
+    path = Path(path)
+    # a regular file only (no FIFO or device), its first bytes read from the checked descriptor
+    with open_regular(path, max_bytes=HDF5_MAX_BYTES, what="file") as fh:
+        head = fh.read(8)
+    if head.startswith(b"\x89HDF"):
+        with open_hdf5(path) as h:  # external links/storage, VDS refused before any lookup
+            fmt = h.attrs.get("format", "")
+            fmt = fmt.decode() if isinstance(fmt, bytes) else str(fmt)
+            if fmt == "lightcurve-estimate":
+                return "estimate"
+            if fmt == "lightcurve-css":
+                return "css-recording"
+            if "mag" in h and "t" in h:
+                return "lightcurve"
         raise InputError("HDF5 file of unknown kind", file=path, field="format",
                          allowed="a lightcurve, estimate or CSS recording file")
     if head.startswith(b"\x89PNG") or path.suffix.lower() in (".png", ".html", ".htm"):
@@ -72,7 +69,7 @@ def file_kind(path) -> str:
                          file=path)
     if path.suffix.lower() == ".json":
         try:
-            doc = json.loads(path.read_text())
+            doc = json.loads(read_text(path, max_bytes=256 * 1024 * 1024, what="JSON file"))
         except (ValueError, UnicodeDecodeError) as exc:
             raise InputError(f"not valid JSON: {exc}", file=path) from None
         if isinstance(doc, dict) and "cells" in doc and "study" in doc:
@@ -86,7 +83,8 @@ def file_kind(path) -> str:
                          "see the PNG/HTML next to it)", file=path,
                          allowed="an invert or compare summary.json, a *.reflection.json")
     if path.suffix.lower() == ".csv":
-        first = path.read_text(errors="replace").splitlines()[:1]
+        with open_regular(path, max_bytes=1 << 40, what="CSV file") as fh:
+            first = fh.readline(4096).decode("utf-8", "replace").splitlines()[:1]
         if first and first[0].startswith("t_s,s_hat_x"):
             return "css-estimate-csv"
         raise InputError("CSV of unknown kind (a recording CSV is imported with 'lightcurve "
@@ -169,14 +167,14 @@ def _save(fig, out):
 def plot_css_recording(path, out) -> Path:
     """CSS recording: outputs of every sensor, Sun-direction error of the stored estimate
     (deg, against the truth; eclipse shaded) and the gyro rates, versus UTC."""
-    import h5py
-
     from ..css.recording import read_recording
+    from ..io.safe_open import open_hdf5, read_dataset
     from .style import figsize, utc_axis, utc_times
 
     rec = read_recording(path)
-    with h5py.File(path, "r") as h:
-        s_hat = np.asarray(h["estimate/s_hat"]) if "estimate/s_hat" in h else None
+    with open_hdf5(path) as h:
+        s_hat = (np.asarray(read_dataset(h, "estimate/s_hat", max_elements=2 * 10**8, file=path))
+                 if "estimate/s_hat" in h else None)
     plt = _plt()
     truth = rec["truth"] or {}
     has_err = s_hat is not None and "s_body" in truth

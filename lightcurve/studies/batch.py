@@ -104,8 +104,11 @@ def execute_invert_task(task: InvertTask) -> dict:
             warnings.simplefilter("ignore", RuntimeWarning)
             res["estimate"] = invert(curve, task.method, **dict(task.options))
         res["estimate"].source_file = str(task.file)
-    except InputError as exc:
-        res.update(status="failed", error=str(exc), error_kind="input")
+    except InputError as exc:  # the message always names the input file
+        text = str(exc)
+        if task.file not in text:
+            text = f"{task.file}: {text}"
+        res.update(status="failed", error=text, error_kind="input")
     except Exception as exc:  # noqa: BLE001 - one failing file must not stop the batch
         res.update(status="failed", error=f"{type(exc).__name__}: {exc}", error_kind="runtime",
                    traceback=traceback.format_exc(limit=8))
@@ -282,6 +285,13 @@ def _result_line(file, method, est, s) -> str:
         line += (f", final RSS error {s['final_att_error_rss_deg']:.3f} deg / "
                  f"{s['final_omega_error_rss_deg_s']:.4f} deg/s, inside 3-sigma: "
                  f"{'yes' if s['inside_3sigma'] else 'no'}")
+    else:  # no truth (a recording): the uncertainty reached and the innovation consistency
+        import numpy as np
+
+        nis = est.nis[np.isfinite(est.nis)]
+        line += (f", final 3-sigma {max(s['final_3sigma_att_deg']):.3f} deg / "
+                 f"{max(s['final_3sigma_omega_deg_s']):.4f} deg/s"
+                 + (f", mean NIS {float(np.mean(nis)):.2f} (1 when consistent)" if nis.size else ""))
     if est.diverged:
         line += f", DIVERGED ({est.divergence_reason})"
     if est.skipped_nan:

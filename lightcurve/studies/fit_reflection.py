@@ -1,4 +1,4 @@
-"""Batch Bayesian posterior of facet reflection parameters with emcee (issue 6, "fit-reflection").
+"""Batch Bayesian posterior of facet reflection parameters with emcee (`lightcurve fit-reflection`).
 
 Given a lightcurve and a *known* attitude history (the file's truth, or a filter estimate), the
 posterior of the Cook–Torrance parameters of the facets is sampled with the affine-invariant
@@ -42,7 +42,7 @@ Diagnostics
   :class:`ConvergenceError` naming the reasons (unless ``allow_unconverged=True``);
 * identifiability: ``width_ratio`` = posterior sd / prior sd in z; a parameter is called
   *identified* when the data shrink its width by at least 2× (ratio < ``identify_ratio`` = 0.5,
-  the criterion of the issue's acceptance for thesis fig. 10.11f);
+  our criterion for thesis fig. 10.11f);
 * posterior predictive lightcurve: quantile bands of the noise-free model and of model + noise
   over posterior draws, and the fraction of measurements inside the central 95 % band.
 """
@@ -56,22 +56,15 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
-from ..errors import InputError
-from ..core.photometry import COOK_TORRANCE, cook_torrance_xyz
+from ..core.photometry import cook_torrance_xyz
+from ..errors import ConvergenceError, InputError
+from ..photometry.perturb import perturb_reflection
 
-__all__ = ["KINDS", "ReflectionPosteriorModel", "ReflectionFit", "ConvergenceError",
-           "fit_reflection", "synthetic_reflection_case", "perturb_reflection", "reflection_sbc"]
+__all__ = ["KINDS", "ReflectionPosteriorModel", "ReflectionFit", "fit_reflection",
+           "synthetic_reflection_case", "perturb_reflection", "reflection_sbc"]
 
 KINDS = ("xi", "a", "m", "A")
 _LOGIT = ("xi", "a")
-
-
-class ConvergenceError(RuntimeError):
-    """The MCMC chain did not converge; ``.diagnostics`` holds the :class:`ChainDiagnostics`."""
-
-    def __init__(self, message, diagnostics):
-        super().__init__(message)
-        self.diagnostics = diagnostics
 
 
 # --------------------------------------------------------------------------------------------
@@ -547,6 +540,12 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     InputError — bad inputs (no truth attitude, mismatched estimate, unknown facet…).
     """
     from ..estimation.mcmc import sample_until_converged
+    from ..memory import check_allocation
+
+    if walkers is not None:  # a first, lower-bound estimate (one parameter) before any work
+        check_allocation(8 * int(walkers) * int(max_steps) * 2,
+                         f"MCMC with {int(walkers)} walkers, {int(max_steps)} steps",
+                         field="walkers", value=int(walkers))
 
     own_shape = shape is None or shape == (curve.attrs or {}).get("shape")
     shape = curve.resolve_shape(shape, library_dirs=library_dirs)
@@ -586,6 +585,12 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
     D = model.dim
     W = walkers if walkers is not None else max(2 * D + 2, 32)
     W = int(W) + (int(W) % 2)
+    # the stored chain (positions and log-probabilities of every walker at every step) and
+    # one ensemble evaluation (walkers x epochs x facets, a few temporaries)
+    check_allocation(8 * W * int(max_steps) * (D + 1)
+                     + 8 * 4 * W * len(curve) * max(1, int(getattr(shape, "n_facets", 1))),
+                     f"MCMC with {W} walkers, {int(max_steps)} steps, {D} parameters",
+                     field="walkers", value=W)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xEC3E]))
     z_map = model.map_estimate()
     # walkers start from the Laplace approximation at the MAP (a tiny ball would make the
@@ -641,37 +646,6 @@ def fit_reflection(curve, *, shape=None, attitude="truth", estimate=None, facets
 # --------------------------------------------------------------------------------------------
 # Truth perturbation and synthetic cases
 # --------------------------------------------------------------------------------------------
-
-def perturb_reflection(shape, rng, frac=0.1, kinds=KINDS, facets=None):
-    """Perturbed copy of ``shape`` (Bernard §10.1): each Cook–Torrance parameter p of the chosen
-    facets ← p + N(0, (frac·p)²), redrawn (up to 100 times) until in range (ξ, a in (0,1), m, A
-    > 0). Returns (shape_copy, dict kind -> (F,) new values; NaN for ξ, a, m of facets whose
-    BRDF is not Cook–Torrance)."""
-    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-    ct = (shape.model_ids == COOK_TORRANCE) & (shape.areas_m2 > 0)
-    sel = np.zeros(shape.n_facets, bool)
-    sel[np.flatnonzero(ct) if facets is None else np.asarray(facets, int)] = True
-    sel &= ct
-    cols = {"xi": 0, "a": 1, "m": 2}
-    new = {k: shape.params[:, cols[k]].copy() for k in cols}
-    new["A"] = shape.areas_m2.copy()
-    for k in kinds:
-        for i in np.flatnonzero(sel):
-            p0 = new[k][i]
-            for _ in range(100):
-                p = p0 + frac * p0 * rng.standard_normal()
-                if p > 0 and (p < 1 or k not in _LOGIT):
-                    break
-            else:
-                p = p0
-            new[k][i] = p
-    ctx = ~np.isnan(shape.param_table.get("xi", np.full(shape.n_facets, np.nan)))
-    kw = {k: np.where(ctx, new[k], np.nan) for k in ("xi", "a", "m")}
-    out = shape.copy_with(areas_m2=new["A"], check=False, **kw) if np.any(ctx) \
-        else shape.copy_with(areas_m2=new["A"], check=False)
-    new.update(kw)  # NaN for facets without Cook–Torrance parameters
-    return out, new
-
 
 def synthetic_reflection_case(shape, *, seed=0, n_epochs=300, duration_s=300.0, r_percent=1.0,
                               omega_rad_s=(0.035, 0.017, 0.063), frac=0.1, kinds=KINDS,

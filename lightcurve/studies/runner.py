@@ -133,7 +133,7 @@ def execute_task(task: RunTask) -> dict:
     try:  # compile / load the kernels once per process, so that runtime_s times the filter only
         from ..warmup import warm_up
 
-        warm_up((c.filter,), reflection=c.reflection == "model3")
+        warm_up((c.filter,), dynamics=(c.dynamics,), reflection=c.reflection == "model3")
     except Exception:  # noqa: BLE001 - a failed warm-up only costs the timing
         pass
     t0 = time.perf_counter()
@@ -141,9 +141,9 @@ def execute_task(task: RunTask) -> dict:
            "sim_seed": int(task.sim_seed), "filter_seed": int(task.filter_seed),
            "status": "ok", "error": ""}
     try:
+        dirs = (tuple(getattr(task, "library_dirs", ())), tuple(getattr(task, "site_dirs", ())))
         lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
-                         int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
-                         tuple(getattr(task, "site_dirs", ())))
+                         int(task.sim_seed), *(dirs if any(dirs) else ()))
         opts = dict(task.options)
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
@@ -152,6 +152,7 @@ def execute_task(task: RunTask) -> dict:
             kw["acs_mode"] = opts["acs_mode"]
         if c.reflection != "none":
             kw["reflection"] = c.reflection
+        kw.update(dict(dict(opts.get("filters", ())).get(c.filter, ())))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             est = invert(lc, c.filter, seed=int(task.filter_seed),
@@ -370,8 +371,11 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
     key = (lambda t: f"lightcurve-run-{t.run_id}-{t.filter_seed}") if key is None else key
     cluster = None
     if address is None:
+        import logging
+
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
-                                           processes=True, dashboard_address=None)
+                                           processes=True, dashboard_address=None,
+                                           silence_logs=logging.ERROR)
         client = distributed.Client(cluster)
     else:
         try:
@@ -481,7 +485,12 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         prepare_output(out, study, force=force)
         done = finished_runs(out)
         total = len(study.cells) * n
-        n_done = sum(1 for t in study.iter_tasks(n, ids_only=True) if t in done)
+        tags = {c.tag for c in study.cells}
+        n_done = 0  # stored runs that belong to this study and run count (RunTask.run_id)
+        for r in done:
+            tag, _, num = r.rpartition("_r")
+            n_done += (tag in tags and num.isdigit() and num == f"{int(num):05d}"
+                       and int(num) < n)
         # generated lazily (a million runs never sit in memory as task objects), in the
         # order that puts runs sharing a simulated lightcurve (same dynamics, sites, r and
         # run index: common random numbers) back to back for each worker's cache

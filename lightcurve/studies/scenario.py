@@ -5,7 +5,7 @@ seed), ``[orbit]`` (keplerian / cartesian / tle, gravity model), ``[shape]`` (li
 mesh + materials), ``[attitude]`` (controlled | uncontrolled, initial 3-2-1 angles, body rates,
 ACS noise, inertia, process noise, torques), ``[[sites]]`` (id or inline lat/lon/height, windows),
 ``[measurement]`` (noise, eclipse handling, visibility limits, Sun magnitude), ``[effects]``
-(physics effects switched on; see the diagnosis issue), ``[reflection]`` (truth reflection
+(physics effects switched on; :mod:`lightcurve.physics`), ``[reflection]`` (truth reflection
 parameters perturbed from the shape file's values, Bernard §10.1; see :class:`ReflectionSpec`).
 """
 
@@ -16,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .._paths import data_dir
 from ..errors import InputError
 from ..io.tomlio import REQUIRED, Section, load_toml, loads_toml
 
-__all__ = ["Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
+__all__ = [
+    "SCENARIO_ALIASES", "resolve_scenario","Scenario", "SiteSpec", "AttitudeSpec", "MeasurementSpec", "load_scenario", "parse_scenario",
            "scenario_from_lightcurve"]
 
 
@@ -82,7 +84,8 @@ class MeasurementSpec:
     ``ignore_eclipse``: compute magnitudes as if the object were sunlit (thesis cases);
     ``min_elevation_deg``: lowest usable object elevation; ``require_dark_site`` with
     ``twilight_deg``: measure only when the Sun is below that altitude at the site;
-    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74).
+    ``sun_mag``: apparent magnitude of the Sun in the band (V: −26.74); ``band``: a band of
+    :data:`lightcurve.photometry.bands.SUN_MAGNITUDES` setting ``sun_mag`` ('' = not given).
     """
 
     r_percent: float = 1.0
@@ -91,6 +94,7 @@ class MeasurementSpec:
     require_dark_site: bool = True
     twilight_deg: float = -12.0
     sun_mag: float = -26.74
+    band: str = ""
 
 
 @dataclass
@@ -141,6 +145,9 @@ class Scenario:
 _DYNAMICS = ("controlled", "uncontrolled", "law")
 #: most epochs a scenario may schedule (same cap as geometry.schedules.cadence_grid)
 _MAX_EPOCHS = 50_000_000
+#: memory of the simulator per scheduled epoch and site (measured 520 B on the default
+#: scenario at 1 s cadence, 2·10⁴ to 8·10⁴ epochs; rounded up)
+SIMULATE_BYTES_PER_EPOCH = 600
 _TORQUES = ("gravity_gradient", "srp", "drag")
 
 
@@ -215,7 +222,7 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
                              file=file, field="scenario.duration_s", value=duration,
                              allowed=f"<= {(DE421_END_UTC - epoch_dt).total_seconds():.0f} s "
                              "(DE421 ends 2053-10-08 UTC)")
-    seed = sc.int("seed", 0, min=0)
+    seed = sc.int("seed", 0, min=0, max=2**63 - 1)
     name = sc.str("name", Path(str(file)).stem)
     sc.check_unknown(extra_allowed=("description",))
 
@@ -263,6 +270,10 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         eta_sigma_deg_s2=at.float("eta_sigma_deg_s2", 0.0, min=0.0, max=10.0),
         inertia_kg_m2=at.matrix("inertia_kg_m2", None, shape=(3, 3)),
     )
+    if att.inertia_kg_m2 is not None:
+        from ..photometry.shapes_io import check_inertia_magnitude
+
+        check_inertia_magnitude(att.inertia_kg_m2, file, "attitude.inertia_kg_m2")
     torques = at.raw("torques", ["gravity_gradient"] if dyn == "uncontrolled" else [])
     if not isinstance(torques, list) or any(t not in _TORQUES for t in torques):
         raise InputError("unknown torque model", file=file, field="attitude.torques", value=torques,
@@ -324,14 +335,30 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         windows = s.raw("windows_s", [[0.0, duration if duration is not None else 0.0]])
         ok = isinstance(windows, list) and all(
             isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
-            and 0 <= w[0] <= w[1] for w in windows)
+            and all(np.isfinite(float(x)) for x in w) and 0 <= w[0] <= w[1] for w in windows)
         if not ok:
-            raise InputError("expected a list of [start_s, end_s] pairs with 0 <= start <= end",
-                             file=file, field=f"{s.name}.windows_s", value=windows)
+            raise InputError("expected a list of [start_s, end_s] pairs of finite seconds with "
+                             "0 <= start <= end", file=file, field=f"{s.name}.windows_s",
+                             value=windows)
         s.check_unknown(extra_allowed=("lat_deg", "lon_deg", "height_m", "id"))
+        # one place under two ids would count its measurements as independent twice over
+        for j, other in enumerate(sites):
+            if (other.site.lat_deg, other.site.lon_deg, other.site.height_m) == \
+                    (site.lat_deg, site.lon_deg, site.height_m):
+                raise InputError(f"the same place as sites[{j}] ({other.site.id}); give each "
+                                 "site once, with all its windows in windows_s", file=file,
+                                 field=s.name, value=site.id,
+                                 allowed="distinct sites (id and position)")
         sites.append(SiteSpec(site=site, windows_s=[(float(a), float(b)) for a, b in windows]))
     if not sites:
         raise InputError("a scenario needs at least one [[sites]] entry", file=file, field="sites")
+    if duration is not None:  # the simulator's arrays, per scheduled epoch and site
+        from ..memory import check_allocation
+
+        n_ep = int(duration / cadence) + 1
+        check_allocation(n_ep * len(sites) * SIMULATE_BYTES_PER_EPOCH,
+                         f"simulating {n_ep} epochs at {len(sites)} site(s)", file=file,
+                         field="scenario.cadence_s", value=cadence)
 
     me = root.section("measurement", {})
     meas = MeasurementSpec(
@@ -342,6 +369,15 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         twilight_deg=me.float("twilight_deg", -12.0, min=-90.0, max=10.0),
         sun_mag=me.float("sun_mag", -26.74, min=-30.0, max=-20.0),
     )
+    band = me.str("band", None)
+    if band is not None:  # the Sun's magnitude of that band (lightcurve.photometry.bands)
+        from ..photometry.bands import sun_magnitude
+
+        if me.has("sun_mag"):
+            raise InputError("give measurement.band or measurement.sun_mag, not both", file=file,
+                             field="measurement.band", value=band)
+        meas.sun_mag = sun_magnitude(band, file=file, field="measurement.band")
+        meas.band = band
     me.check_unknown()
 
     rec = root.section("recording", None)
@@ -427,3 +463,30 @@ def scenario_from_lightcurve(curve, file=None, *, drop=(), library_dirs=None, si
     return parse_scenario(doc, file=fname, text=text, library_dirs=library_dirs,
                           site_dirs=site_dirs, sites=known, embedded=embedded,
                           shape=shape if shape is not None else getattr(curve, "shape", None))
+
+
+#: ``--scenario`` short names of the bundled pipelines (``lightcurve demo --scenario thesis``)
+SCENARIO_ALIASES = {
+    "default": "default.toml",
+    "thesis": "thesis/leo-ic1-fast-spin-controlled-1site.toml",
+    "thesis-2site": "thesis/leo-ic1-fast-spin-controlled-2site.toml",
+}
+
+
+def resolve_scenario(spec) -> Path:
+    """A scenario path from a user's spec (``--scenario``, :func:`lightcurve.simulate`): a file,
+    an alias (:data:`SCENARIO_ALIASES`) or a bundled pipeline name relative to ``pipelines/``
+    (``thesis/geo-ic1-…``, ``.toml`` optional)."""
+    p = Path(spec)
+    if p.is_file():
+        return p
+    base = data_dir("pipelines")
+    name = SCENARIO_ALIASES.get(str(spec), str(spec))
+    for cand in (base / name, base / f"{name}.toml"):
+        if cand.is_file() and base.resolve() in cand.resolve().parents:
+            return cand
+    if str(spec).endswith(".toml") or p.parent != Path("."):
+        return p  # a path: the loader names the missing file
+    raise InputError("scenario not found", field="--scenario", value=str(spec),
+                     allowed="a TOML file, " + ", ".join(SCENARIO_ALIASES)
+                     + ", or a name under the bundled pipelines/ (e.g. thesis/geo-ic1-fast-spin-controlled-1site)")

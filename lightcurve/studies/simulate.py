@@ -98,13 +98,15 @@ def truth_attitude(scenario: Scenario, t_s: np.ndarray, rng, r_obj_eci_m=None, v
     return model.simulate(t_s)
 
 
-def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = False):
-    """Simulate the scenario's lightcurve.
+def simulate(scenario, seed: int | None = None, return_counts: bool = False):
+    """Simulate the scenario's lightcurve (also ``lightcurve.simulate``).
 
     Parameters
     ----------
-    scenario : Scenario
-        From :func:`lightcurve.studies.scenario.load_scenario`.
+    scenario : Scenario, path or bundled name
+        A :class:`~lightcurve.studies.scenario.Scenario`, a scenario TOML file or a bundled
+        scenario name (``"default"``, ``"thesis"``, ``"thesis/<case>"``;
+        :func:`lightcurve.studies.scenario.resolve_scenario`).
     seed : int, optional
         Overrides ``scenario.seed``. The attitude noise and the measurement noise use two
         independent streams spawned from it, so the result is reproducible bit for bit.
@@ -119,7 +121,10 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
     from ..geometry.schedules import build_schedule
     from ..photometry import apparent_magnitude
     from ..photometry.noise import magnitude_sigma
+    from .scenario import load_scenario, resolve_scenario
 
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(resolve_scenario(scenario))
     if scenario.orbit is None:
         raise InputError("this scenario has no [orbit] (it models a recording); add an [orbit] to "
                          "simulate", file=scenario.source, field="orbit")
@@ -135,7 +140,7 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
         import json
         from dataclasses import replace
 
-        from .fit_reflection import perturb_reflection
+        from ..photometry.perturb import perturb_reflection
 
         rng_refl = np.random.default_rng(np.random.SeedSequence([int(seed), 0x2EF1EC7]))
         shape_true, vals = perturb_reflection(scenario.shape, rng_refl, frac=refl.sigma_frac,
@@ -228,6 +233,8 @@ def simulate(scenario: Scenario, seed: int | None = None, return_counts: bool = 
                "dropped_eclipsed": counts.eclipsed, "dropped_no_reflection": n_no_reflection},
         shape=nominal_shape,
     )
+    if getattr(meas, "band", ""):
+        lc.attrs["band"] = meas.band
     if effects_json is not None:
         lc.attrs["effects"] = effects_json
     if refl_truth is not None:

@@ -29,6 +29,10 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     particles = 1000                      # BPF particles
     acs_mode = "random_walk"              # controlled model: "random_walk" or "jitter"
 
+    [filters.ukf]                         # optional per-filter settings: the fields of the
+    variant = "thesis"                    # filter's configuration (lightcurve.filters.config;
+    alpha = 1.0                           # MEKFConfig, UKFConfig, the particle filter's)
+
 Seeds (reproducible, independent of worker count and executor): the simulation seed of run
 ``i`` derives from the study seed, the *scenario* part of the cell key (dynamics, sites,
 r_percent) and ``i`` — so every filter and every initial-error setting sees the same simulated
@@ -169,42 +173,32 @@ class Study:
         """SHA-256 of the study text and every scenario text it uses (:func:`input_hash`)."""
         return input_hash(self)
 
-    def iter_tasks(self, runs: int | None = None, *, ids_only: bool = False):
-        """Every :class:`RunTask` (or only its ``run_id`` with ``ids_only``), generated lazily
-        in execution order: scenario keys sorted, then run index, then the cells sharing that
-        scenario key in grid order — runs that share a simulated lightcurve (common random
-        numbers) come back to back. The same set as :meth:`tasks`."""
+    def _task(self, c: Cell, i: int, opts: tuple) -> "RunTask":
+        s, fs = run_seeds(self.seed, c, i)
+        return RunTask(c, i, s, fs, self.scenario_texts[(c.dynamics, c.sites)],
+                       str(self.scenario_files[(c.dynamics, c.sites)]), opts,
+                       self.library_dirs, self.site_dirs)
+
+    def iter_tasks(self, runs: int | None = None):
+        """Every :class:`RunTask`, generated lazily in execution order: scenario keys sorted,
+        then run index, then the cells sharing that scenario key in grid order — runs that
+        share a simulated lightcurve (common random numbers) come back to back. The same set
+        as :meth:`tasks`."""
         n = self.runs if runs is None else int(runs)
         opts = tuple(sorted(self.options.items()))
         groups: dict = {}
         for c in self.cells:
             groups.setdefault(c.scenario_key, []).append(c)
         for key in sorted(groups):
-            cells = groups[key]
-            tags = [c.tag for c in cells]
             for i in range(n):
-                for c, tag in zip(cells, tags):
-                    if ids_only:
-                        yield f"{tag}_r{i:05d}"
-                        continue
-                    f = self.scenario_files[(c.dynamics, c.sites)]
-                    txt = self.scenario_texts[(c.dynamics, c.sites)]
-                    s, fs = run_seeds(self.seed, c, i)
-                    yield RunTask(c, i, s, fs, txt, str(f), opts)
+                for c in groups[key]:
+                    yield self._task(c, i, opts)
 
     def tasks(self, runs: int | None = None) -> list:
         """Every :class:`RunTask` (cells in grid order, runs 0…runs−1 in each)."""
         n = self.runs if runs is None else int(runs)
         opts = tuple(sorted(self.options.items()))
-        out = []
-        for c in self.cells:
-            f = self.scenario_files[(c.dynamics, c.sites)]
-            txt = self.scenario_texts[(c.dynamics, c.sites)]
-            for i in range(n):
-                s, fs = run_seeds(self.seed, c, i)
-                out.append(RunTask(c, i, s, fs, txt, str(f), opts, self.library_dirs,
-                                   self.site_dirs))
-        return out
+        return [self._task(c, i, opts) for c in self.cells for i in range(n)]
 
 
 def input_hash(study: Study) -> str:
@@ -301,7 +295,7 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
     raw = sec.raw(key)
     vals = raw if isinstance(raw, list) else [raw]
     if not vals:
-        raise InputError("expected a non-empty list", file=sec.file, field=sec._field(key), value=raw)
+        raise InputError("expected a non-empty list", file=sec.file, field=sec.field_name(key), value=raw)
     out = []
     for v in vals:
         ok = (kind is str and isinstance(v, str)) or (kind is int and isinstance(v, int)
@@ -309,16 +303,16 @@ def _list(sec: Section, key, kind, *, min=None, max=None, choices=None, min_open
               and not isinstance(v, bool) and np.isfinite(v))
         if not ok:
             raise InputError(f"expected a list of {kind.__name__}", file=sec.file,
-                             field=sec._field(key), value=raw)
+                             field=sec.field_name(key), value=raw)
         if choices is not None and v not in choices:
-            raise InputError("unknown value", file=sec.file, field=sec._field(key), value=v,
+            raise InputError("unknown value", file=sec.file, field=sec.field_name(key), value=v,
                              allowed=", ".join(map(str, choices)))
         if (min is not None and (v < min or (min_open and v == min))) or (max is not None and v > max):
-            raise InputError("out of range", file=sec.file, field=sec._field(key), value=v,
+            raise InputError("out of range", file=sec.file, field=sec.field_name(key), value=v,
                              allowed=f"{'(' if min_open else '['}{min}, {max}]")
         out.append(kind(v))
     if len(set(out)) != len(out):
-        raise InputError("duplicate values", file=sec.file, field=sec._field(key), value=raw)
+        raise InputError("duplicate values", file=sec.file, field=sec.field_name(key), value=raw)
     return out
 
 
@@ -371,6 +365,7 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         Naming the file, key and allowed values for any bad entry.
     """
     from ..filters import METHODS
+    from ..filters.config import BPF_KEYWORDS, filter_config_class
     from .scenario import parse_scenario
 
     path = Path(path)
@@ -400,9 +395,37 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     o = root.section("options", {})
     if o.has("particles"):
         opts["particles"] = o.int("particles", min=2, max=10_000_000)
+        from ..filters.invert import BPF_BYTES_PER_PARTICLE
+        from ..memory import check_allocation
+
+        check_allocation(opts["particles"] * BPF_BYTES_PER_PARTICLE,
+                         f"particle filter with {opts['particles']} particles (per worker)",
+                         file=path, field="options.particles", value=opts["particles"])
     if o.has("acs_mode"):
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
     o.check_unknown()
+    # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
+    # configuration objects validate them (lightcurve.filters.config)
+    fs = root.section("filters", {})
+    filt = {}
+    for method in METHODS:
+        tab = fs.section(method, None)
+        if tab is None:
+            continue
+        cls = filter_config_class(method)
+        values = dict(tab.data)
+        if cls is not None:
+            filt[method] = cls.from_mapping(values, file=path,
+                                            table=f"filters.{method}").as_options()
+        else:
+            bad = sorted(set(values) - set(BPF_KEYWORDS) - {"variant"})
+            if bad:
+                raise InputError("unknown key", file=path, field=f"filters.{method}.{bad[0]}",
+                                 allowed=", ".join(sorted(BPF_KEYWORDS)))
+            filt[method] = values
+    fs.check_unknown()
+    if filt:   # hashable: sorted (method, sorted (name, value) pairs) pairs
+        opts["filters"] = tuple(sorted((m, tuple(sorted(v.items()))) for m, v in filt.items()))
     root.check_unknown()
 
     lib = tuple(str(Path(d).resolve()) for d in (library_dirs or ()))

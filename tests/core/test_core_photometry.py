@@ -109,3 +109,20 @@ def test_magnitude_attitude_partials_by_finite_differences():
         assert np.isclose(m, PH.mag_kernel_nb(q[None], s, o, normals, areas, ids, prm, 1.0)[0])
         checked += 1
     assert checked >= 5
+
+
+def test_thesis_cook_torrance_is_registered_with_analytic_partials():
+    """``cook_torrance_bernard`` (Bernard eq. 5.8 as printed) is a registered BRDF on kernel id 4;
+    its diffuse value is the physical one times n̂·ŝ, and the magnitude partials of a shape made
+    of it are analytic (no finite-difference fallback)."""
+    from lightcurve.photometry import Material, get_brdf
+    from lightcurve.photometry.partials import kernel_capable
+
+    b = get_brdf("cook_torrance_bernard")
+    assert b.kernel_id == PH.COOK_TORRANCE_THESIS and b.param_names == ("xi", "a", "m")
+    n, s, o = np.array([0, 0, 1.0]), _unit(np.array([0.6, 0, 0.8])), _unit(np.array([0, 0.3, 1.0]))
+    prm = {"xi": 1.0, "a": 0.4, "m": 0.3}
+    phys = get_brdf("cook_torrance").evaluate(n, s, o, prm)
+    assert np.isclose(b.evaluate(n, s, o, prm), phys * (n @ s), rtol=1e-14)
+    assert Material.create("t", "cook_torrance_bernard", **prm).brdf is b
+    assert kernel_capable([PH.COOK_TORRANCE_THESIS, PH.LAMBERT])

@@ -99,7 +99,7 @@ def case44():
     # §4.4: one orbit (5553 s), 1 s steps, tumbling 1 deg/s per axis, dual pyramid 70° FOV,
     # scale factors N(1, 0.3²), misalignments N(0, 2°²), noise 0.017, built-in albedo,
     # tactical gyro, star tracker every 10 s (0.02°)
-    return simulate_calibration_case(0)
+    return simulate_calibration_case(1)
 
 
 def test_full_filter_meets_section_4_4_acceptance(case44):
@@ -129,8 +129,8 @@ def test_full_filter_meets_section_4_4_acceptance(case44):
 
 
 def test_reduced_filter_is_markedly_worse(case44):
-    """§4.3 reduced filter (no albedo model, albedo as a considered bias): table 4.1 reports
-    final scale-factor 3σ of 0.9 against 0.018 for the full filter."""
+    """§4.3 reduced filter (no albedo model, albedo as a considered bias): table 4.3 reports
+    final scale-factor 3σ of 0.21-0.61 against 0.0036-0.018 for the full filter (initial 0.9)."""
     c = case44
     full = run_calibration(c.css_nominal, c.t, c.Y, c.gyro, c.sun_N, c.lit, c.r_I_m,
                            c.epoch_utc, params=CalibrationParams().for_gyro(c.info["spec"]),

@@ -53,11 +53,12 @@ def test_end_to_end_off_failure_detected_and_clean_run_silent():
     """One orbit with the full calibration filter: a sensor switched off at 1950 s is flagged
     within seconds of being predicted lit; the same geometry without a failure raises no
     alarm (detector defaults: window 50, prob 1 − 10⁻⁶)."""
-    seed = np.random.SeedSequence([0, 0, 6])  # failed sensor predicted lit at 1950 s
+    # seed (0, 0, 19): the failed sensor (8) was lit before and is lit at 1950 s
+    seed = np.random.SeedSequence([0, 0, 19])
     r = run_fault_case(seed, "off")
     assert r.exposed and r.detected and r.time_to_detect_s < 30.0
     assert not r.false_alarm and not r.wrong_sensor
-    clean = run_fault_case(np.random.SeedSequence([0, 0, 6]), None)
+    clean = run_fault_case(np.random.SeedSequence([0, 0, 19]), None)
     assert not clean.false_alarm
 
 
@@ -93,15 +94,15 @@ def test_dark_sensor_detector_statistics_and_decisions():
 
 
 def test_uncalibrated_off_failure_caught_by_dark_test():
-    """Seed (0, 0, 22): sensor 7 fails off at 1950 s before ever being lit (scale 3σ 0.9);
+    """Seed (0, 0, 9): sensor 6 fails off at 1950 s before ever being lit (scale 3σ 0.9);
     at its first lit sample the filter explains the zero output by a gain ≈ 0.05, so the
     averaged NIS never fires (the previous session's miss); the dark-sensor test flags it
     once it has been predicted lit for ~10 samples.  The fault-free twin stays silent."""
-    r = run_fault_case(np.random.SeedSequence([0, 0, 22]), "off")
+    r = run_fault_case(np.random.SeedSequence([0, 0, 9]), "off")
     assert not r.calibrated and r.observable
     assert r.detected and r.detected_by == "dark" and r.info["ttd_nis_s"] is None
     assert not r.false_alarm and not r.wrong_sensor
-    clean = run_fault_case(np.random.SeedSequence([0, 0, 22]), None)
+    clean = run_fault_case(np.random.SeedSequence([0, 0, 9]), None)
     assert not clean.false_alarm
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from lightcurve.cli import main
 from lightcurve.css.recording import read_recording
-from lightcurve.css.study import load_study, run_study, write_report
+from lightcurve.css.study import load_study, run_study
 from lightcurve.errors import InputError
 
 
@@ -54,53 +54,93 @@ def _study_toml(tmp_path, extra=""):
     p.write_text(f"""
 [study]
 name = "t"
-n_runs = 2
+experiment = "fig3_11"
+runs = 2
 seed = 3
 settle_s = 60.0
 [scenario]
 configuration = "cube"
 estimators = ["ekf", "lsmn"]
-gyros = ["tactical"]
+variants = ["thesis", "robust"]
+gyros = ["intermediate"]
 controlled = true
 duration_s = 300.0
+albedo = "builtin"
 {extra}
-[control]
-deadband_deg = 2.0
 """)
     return p
 
 
-def test_study_load_run_report(tmp_path):
+def test_study_load_run_resume_report(tmp_path, capsys):
     spec = load_study(_study_toml(tmp_path))
-    assert spec.control.deadband_rad == pytest.approx(np.radians(2.0))
-    cases = run_study(spec)
-    out = write_report(spec, cases, tmp_path / "rep")
+    assert spec.estimators == ("ekf", "lsmn") and spec.variants == ("thesis", "robust")
+    out = tmp_path / "rep"
+    # the CLI: -o/--output and the deprecated --out alias, one worker (inline)
+    assert main(["css", "study", str(_study_toml(tmp_path)), "--workers", "1", "-q",
+                 "--out", str(out)]) == 0
     data = json.loads((out / "summary.json").read_text())
-    assert [c["estimator"] for c in data["cases"]] == ["ekf", "lsmn"]
-    assert (out / "envelopes.png").stat().st_size > 1000
-    assert (out / "error_maps.png").stat().st_size > 1000
-    assert "t_point" in (out / "summary.txt").read_text()
+    assert [(c["estimator"], c["variant"]) for c in data["cases"]] == [
+        ("ekf", "thesis"), ("lsmn", "thesis"), ("ekf", "robust"), ("lsmn", "robust")]
+    assert all(c["runs"] == 2 for c in data["cases"])
+    # the right thesis number for this experiment (fig. 3.11: controlled EKF 4 deg)
+    assert data["cases"][0]["thesis_p99_deg"] == 4.0
+    html = (out / "report.html").read_text()
+    assert "Verdict:" in html and "data:image/png;base64," in html
+    assert data["verdict"]["level"] in ("ok", "warn") and "thesis variant" in data["verdict"]["text"]
+    runs = sorted(p.name for p in (out / "runs").glob("*.npz"))
+    assert len(runs) == 2 * 2 * 2  # controlled: one task per run, variant and estimator
+    mtimes = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.npz")}
+    # resume: nothing recomputed, more runs only adds the missing ones
+    summary = run_study(spec, out, runs=3, workers=1, progress=False)
+    assert all(c["runs"] == 3 for c in summary["cases"])
+    for name, mt in mtimes.items():
+        assert (out / "runs" / name).stat().st_mtime_ns == mt
+    # a different study in the same folder is refused (exit 2), unless --force
+    other = _study_toml(tmp_path, "")
+    other.write_text(other.read_text().replace("seed = 3", "seed = 4"))
+    assert main(["css", "study", str(other), "--workers", "1", "-q", "-o", str(out)]) == 2
+    assert "different study" in capsys.readouterr().err
+
+
+def test_study_bad_toml(tmp_path):
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text().replace('estimators = ["ekf", "lsmn"]', 'estimators = ["kalman"]'))
+    with pytest.raises(InputError, match="scenario.estimators"):
+        load_study(p)
 
 
 @pytest.mark.parametrize("extra,field", [
-    ('albedo = "nowhere.csv"', ""),
-    ('dt_s = -1.0', "scenario.dt_s"),
+    ('albedo = "nowhere.csv"', "scenario.albedo"),
+    ('duration_s = -1.0', "scenario.duration_s"),
     ('estimaters = ["ekf"]', "scenario"),
 ])
-def test_study_bad_toml(tmp_path, extra, field):
+def test_study_bad_fields(tmp_path, extra, field):
     with pytest.raises(InputError) as e:
-        load_study(_study_toml(tmp_path, extra))
+        load_study(_rewrite(tmp_path, extra))
     assert field in str(e.value)
 
 
-def test_bundled_study_files_load():
-    from lightcurve._paths import data_dir
+def _rewrite(tmp_path, extra):
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text().replace('albedo = "builtin"\n', "").replace(
+        "duration_s = 300.0\n", "" if "duration_s" in extra else "duration_s = 300.0\n") + "")
+    txt = p.read_text().replace("[scenario]\n", "[scenario]\n" + extra + "\n")
+    p.write_text(txt)
+    return p
 
-    files = sorted((data_dir("pipelines") / "css").glob("*.toml"))
-    assert len(files) >= 3
+
+def test_bundled_study_files_load():
+    # every O'Keefe experiment file loads, cites its experiment and runs the thesis's 1000 cases
+    from lightcurve._paths import data_dir
+    from lightcurve.css.okeefe2015 import THESIS_RESULTS
+
+    files = sorted((data_dir("pipelines") / "css" / "okeefe2015").glob("*.toml"))
+    assert len(files) >= 6
     for f in files:
         spec = load_study(f)
-        assert spec.n_runs == 1000
+        assert spec.runs == 1000 and spec.experiment in THESIS_RESULTS
+        assert spec.simulation["fov_half_angle_deg"] == 60.0
+        assert spec.simulation["noise_sigma"] == 0.05
 
 
 def test_read_recording_rejects_other_hdf5(tmp_path):

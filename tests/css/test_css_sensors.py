@@ -21,7 +21,7 @@ def _inline_model(normals, fov, gains, s, lit):
 
 def test_dual_pyramid_table_2_1_normals():
     # Table 2.1: +z sensors at azimuth 0/90/180/270, elevation +45; -z sensors rotated 45 deg.
-    css = dual_pyramid()
+    css = dual_pyramid(fov_half_angle_deg=90.0)
     h = np.sqrt(0.5)
     assert np.allclose(css.normals[0], [h, 0, h])
     assert np.allclose(css.normals[1], [0, h, h], atol=1e-15)
@@ -68,7 +68,7 @@ def test_fov_cutoff():
 
 
 def test_scale_factors_and_misalignment_eq_2_19():
-    css = dual_pyramid()
+    css = dual_pyramid(fov_half_angle_deg=90.0)
     ci = np.linspace(0.9, 1.1, 8)
     mis = np.radians(np.column_stack([np.linspace(-2, 2, 8), np.linspace(1, -1, 8)]))
     e = css.with_errors(scale_common=0.95, scale_individual=ci, misalignment_rad=mis)

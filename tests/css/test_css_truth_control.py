@@ -6,8 +6,9 @@ import pytest
 
 from lightcurve.css.configurations import dual_pyramid
 from lightcurve.css.control import mrp_control_nb, sun_pointing_mrp
-from lightcurve.css.study import StudySpec, run_case, settled_mask
-from lightcurve.css.truth import Scenario, Spacecraft, simulate, wheel_pyramid
+from lightcurve.css.okeefe2015 import WHEEL_AXES
+from lightcurve.css.study import direction_nees, settled_mask
+from lightcurve.css.truth import Scenario, Spacecraft, simulate
 from lightcurve.rotations import mrp_to_dcm, quat_rotate_inv
 
 
@@ -26,7 +27,7 @@ def test_sun_pointing_mrp_definition():
 
 def test_control_law_inline_deadband_and_saturation():
     I = np.diag([10.5, 8.0, 7.5])
-    G = wheel_pyramid()
+    G = WHEEL_AXES
     Gp = G.T @ np.linalg.inv(G @ G.T)
     h_w = np.array([0.01, -0.02, 0.0, 0.005])
     w = np.array([0.001, -0.002, 0.0015])
@@ -75,11 +76,16 @@ def test_controlled_sun_pointing_converges():
     # near it (deadband 1 deg plus estimation error of a few degrees)
     sc = Scenario(dual_pyramid(), estimator="ekf", gyro="tactical", controlled=True,
                   duration_s=1500.0)
-    for seed in range(3):
+    checked = 0
+    for seed in range(4):
         r = simulate(sc, seed)
         pe = np.degrees(np.arccos(np.clip(r.s_true @ [0, 0, 1.0], -1, 1)))
-        late = (r.t > 900) & (r.lit > 0.999)
+        late = (r.t > 600) & (r.lit > 0.999)   # the start is sunlit, the Sun may set later
+        if late.sum() < 100:
+            continue
+        checked += 1
         assert np.percentile(pe[late], 95) < 8.0
+    assert checked >= 2
     # the same case uncontrolled keeps tumbling (the pointing error is not small)
     r = simulate(Scenario(dual_pyramid(), estimator="ekf", gyro="tactical", duration_s=1500.0), 0)
     pe = np.degrees(np.arccos(np.clip(r.s_true @ [0, 0, 1.0], -1, 1)))
@@ -93,28 +99,36 @@ def test_settled_mask():
     assert m.tolist() == [False, False, True, False, False, False, False, True, True, True]
 
 
+def _p99_case(estimator, n_runs, duration_s):
+    errs, nees = [], []
+    for i in range(n_runs):
+        sc = Scenario(dual_pyramid(), estimator=estimator, gyro="tactical", duration_s=duration_s)
+        r = simulate(sc, np.random.SeedSequence([1, i]))
+        m = settled_mask(r.t, r.lit, 300.0)
+        errs.append(r.error_deg[m])
+        if r.p_cov is not None:
+            nees.append(direction_nees(r.d_hat[m], r.p_cov[m], r.s_true[m]))
+    e = np.concatenate(errs)
+    n = np.concatenate(nees) if nees else np.array([np.nan])
+    n = n[np.isfinite(n)]
+    return np.percentile(e, 99), np.percentile(e, 50), (np.mean(n) if n.size else np.nan), \
+        (np.mean(n < 5.991) if n.size else np.nan)
+
+
 @pytest.mark.slow
 def test_tumbling_monte_carlo_dual_pyramid():
-    # Acceptance (issue 8): uncontrolled tumbling, dual pyramid, §2.4 dispersions as
-    # implemented (Dispersions defaults), built-in zonal albedo, tactical-grade gyro, 30 runs,
-    # errors after the first 5 minutes in sunlight.  The thesis's bounds: 5 deg (EKF) and
-    # 6 deg (ECKF).  With the filters' albedo model (phi grid filter, the default) the 200-run
-    # sets of benchmarks/css.py give EKF 1.73-1.92 / ECKF 1.75-1.91 deg over study seeds 1-3
-    # (without the albedo model 5.30 / 5.44 deg at seed 1, which missed the EKF bound), so
-    # the thesis bounds are asserted as published.  The single-point methods must be far worse (thesis: above 45 deg; ours
-    # ~35-40 deg because of the 0.5 activity threshold shared by all methods).
-    spec = StudySpec(n_runs=30, duration_s=1200.0, seed=1)
-    ekf = run_case(spec, "ekf", "tactical")
-    eckf = run_case(spec, "eckf", "tactical")
-    lsmn = run_case(spec, "lsmn", "tactical")
-    assert ekf.p99_settled_deg < 5.0
-    assert eckf.p99_settled_deg < 6.0
-    assert lsmn.p99_settled_deg > 25.0
-    assert ekf.p50_settled_deg < 1.5
-    # consistency of the Sun direction (2-DOF NEES, chi-square: 95 % of samples below 5.99
-    # for a consistent filter).  Without the albedo model the EKF had only 41 % of the
-    # samples inside (mean NEES 13: over-confident); with it ~99 % (mean ~0.9: slightly
-    # conservative, the albedo-model variance is a bound).  Asserted: not over-confident.
+    # The robust variant (albedo-aware sun-line filters, generic set-up: Dispersions
+    # defaults, built-in zonal albedo, tactical-grade gyro), 30 runs, errors after the first
+    # 5 minutes in sunlight: EKF/ECKF p99 below 5/6 deg, single-point far worse, and the
+    # filters not over-confident (2-DOF direction NEES: 95 % of samples below 5.99 for a
+    # consistent filter; asserted > 90 % and mean < 3).
+    ekf = _p99_case("ekf", 30, 1200.0)
+    eckf = _p99_case("eckf", 30, 1200.0)
+    lsmn = _p99_case("lsmn", 30, 1200.0)
+    assert ekf[0] < 5.0
+    assert eckf[0] < 6.0
+    assert lsmn[0] > 25.0
+    assert ekf[1] < 1.5
     for c in (ekf, eckf):
-        assert c.nees_frac_95 > 0.9
-        assert c.nees_mean < 3.0
+        assert c[3] > 0.9
+        assert c[2] < 3.0

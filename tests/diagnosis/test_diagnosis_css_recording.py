@@ -33,7 +33,8 @@ def _simulate(seed, albedo, duration_s=1200.0, dt_s=3.0):
 
     disp = Dispersions(css_scale_common_sigma=0.0, css_scale_sigma=0.0,
                        css_misalignment_sigma_deg=0.0, css_noise_sigma=0.017)
-    sc = Scenario(dual_pyramid(), estimator="wavg", gyro=None, duration_s=duration_s, dt_s=dt_s,
+    sc = Scenario(dual_pyramid(fov_half_angle_deg=70.0), estimator="wavg", gyro=None,
+                  duration_s=duration_s, dt_s=dt_s,
                   albedo=albedo, dispersions=disp, filter_params=FilterParams())
     return sc, simulate(sc, seed)
 
@@ -44,7 +45,7 @@ def test_cli_diagnose_css_recording_names_albedo(tmp_path):
     from lightcurve.css.albedo import load_albedo_map
     from lightcurve.css.recording import read_recording, write_recording
 
-    sc, r = _simulate(4, load_albedo_map(CERES))
+    sc, r = _simulate(2, load_albedo_map(CERES))
     h5 = tmp_path / "css_ceres.h5"
     write_recording(h5, r, sc.css, sc.epoch_utc, False, noise_sigma=0.017)
     rec = read_recording(h5)

@@ -131,7 +131,7 @@ def test_example_loads(kind, name, opts, text, written):
         from lightcurve.css.study import load_study
 
         spec = load_study(p)
-        assert spec.n_runs == 20 and spec.name == "css-demo"
+        assert spec.runs == 20 and spec.name == "css-demo"
     elif kind == "plugin":
         from lightcurve.photometry import get_brdf
         from lightcurve.plugins import load_plugin
@@ -180,7 +180,6 @@ def test_hdf5_tables_match_the_writers(tmp_path):
 
     import lightcurve
     from lightcurve.css.recording import write_recording
-    from lightcurve.css.study import gyroless_params  # noqa: F401  (import check)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -232,3 +232,19 @@ def test_weight_kernels_match_numpy_versions():
     mu2, C2 = B._stats_np(dp, W, w1)
     np.testing.assert_allclose(mu1, mu2, atol=1e-13)
     np.testing.assert_allclose(C1, C2, atol=1e-13)
+
+
+def test_filter_models_implement_the_state_space_protocols(curve):
+    """The magnitude model and both dynamics are the state-space model of
+    lightcurve.estimation.protocols (what the Kalman driver and the particle filter call)."""
+    from lightcurve.estimation.protocols import AttitudeDynamics, MeasurementModel
+
+    m = MagnitudeModel(load_shape("cube_1u"), curve)
+    assert isinstance(m, MeasurementModel) and m.dim_y == 1
+    assert isinstance(ControlledDynamics(1e-3), AttitudeDynamics)
+    assert isinstance(UncontrolledDynamics(np.diag([1.0, 2.0, 3.0])), AttitudeDynamics)
+    assert not isinstance(m, AttitudeDynamics) and not isinstance(object(), MeasurementModel)
+    k = int(np.flatnonzero(np.isfinite(curve.mag))[0])
+    x = np.concatenate([curve.truth_q[k], curve.truth_omega_rad_s[k]])
+    assert m.predict(x[None], k).shape == (1, 1)
+    assert m.jacobian(x, k).shape == (1, 6) and m.noise_cov(k).shape == (1, 1)

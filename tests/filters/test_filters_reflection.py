@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from filters_synth import make_curve
+from transition_oracle import discretize
 
 from lightcurve.filters.invert import build_problem, invert
-from lightcurve.filters.models import MagnitudeModel, discretize
+from lightcurve.filters.models import MagnitudeModel
 from lightcurve.filters.reflection import SiteBias, reflection_prior_variance
 from lightcurve.photometry import apparent_magnitude, load_shape
 

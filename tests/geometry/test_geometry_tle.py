@@ -8,20 +8,15 @@ from __future__ import annotations
 
 import json
 import os
-import sys
-import threading
 from datetime import datetime, timedelta, timezone
-from pathlib import Path
 
 import numpy as np
 import pytest
+import recgen as G  # tests/recgen.py: the plain-NumPy recording generator
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "io"))
-import recgen as G  # noqa: E402
-
-from lightcurve import InputError  # noqa: E402
-from lightcurve.cli import main  # noqa: E402
-from lightcurve.geometry.tle import (  # noqa: E402
+from lightcurve import InputError
+from lightcurve.cli import main
+from lightcurve.geometry.tle import (
     ElementAgeWarning,
     check_element_age,
     find_element_set,
@@ -115,19 +110,8 @@ def test_bad_element_files_name_the_line(tmp_path):
         find_element_set(load_element_sets(f), "ISS")
     fifo = tmp_path / "fifo.tle"
     os.mkfifo(fifo)
-    box = {}
-
-    def run():
-        try:
-            load_element_sets(fifo)
-        except InputError as exc:
-            box["msg"] = str(exc)
-
-    th = threading.Thread(target=run, daemon=True)
-    th.start()
-    th.join(10.0)
-    assert not th.is_alive(), "reading a FIFO blocked"
-    assert "not a regular file" in box["msg"]
+    msg = G.refused_without_blocking(load_element_sets, fifo)
+    assert msg.startswith("InputError") and "not a regular" in msg
 
 
 def test_old_elements_warn():
@@ -180,3 +164,22 @@ def test_passes_match_a_brute_force_skyfield_search(tmp_path):
         for s, e in mine:
             inside = [vis[k] for k, g in enumerate(grid) if s <= g <= e]
             assert not inside or any(inside) or (e - s).total_seconds() < step, (name, s, e)
+
+
+def test_an_object_above_the_horizon_all_day_is_one_pass(tmp_path):
+    """A geostationary object (a = 42 164 km, i ≈ 0) over Arizona has no rise or set: one pass
+    spanning the search, whose visible part is the night (skyfield: find_events finds nothing)."""
+    from lightcurve.cli.recordings import find_passes
+    from lightcurve.geometry.sites import get_site
+
+    (l1, l2), _ = _lines(91111, a_km=42164.0, e=1e-4, i=0.05, raan=0.0, argp=0.0, M=90.0)
+    f = tmp_path / "geo.tle"
+    f.write_text(f"GEO\n{l1}\n{l2}\n")
+    rows = find_passes(load_element_sets(f), get_site("mount_lemmon"), EPOCH,
+                       EPOCH + timedelta(days=1), step_s=60.0)
+    assert len(rows) == 1 and rows[0]["rise_utc"] == "2022-03-21T02:00:00Z"
+    assert rows[0]["set_utc"] == "2022-03-22T02:00:00Z" and rows[0]["max_elevation_deg"] > 10
+    assert 4 * 3600 < rows[0]["visible_s"] < 14 * 3600     # one night, not the whole day
+    with pytest.raises(InputError, match="--step-s"):
+        find_passes(load_element_sets(f), get_site("mount_lemmon"), EPOCH,
+                    EPOCH + timedelta(days=1), step_s=0.05)

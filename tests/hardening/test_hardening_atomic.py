@@ -112,18 +112,29 @@ def test_truncated_hdf5_detected(tmp_path, keep):
 
 UNSAFE = re.compile(r"\beval\(|\bexec\(|\bpickle\b|\bmarshal\b|\bdill\b|\bjoblib\b|\brunpy\b|__import__\("
                     r"|yaml\.load\(|allow_pickle\s*=\s*True|np\.load\(|numpy\.load\(|import_module\(")
+#: lines that match UNSAFE but are not driven by data: (file, text on the line, why)
+SAFE_LOADS = [
+    ("css/study.py", "np.load(fh, allow_pickle=False)", "the study's own .npz run files, "
+     "NumPy arrays only, opened through io.safe_open"),
+    ("plugins.py", "importlib.import_module(key)", "--plugin MODULE: a module the user names on "
+     "the command line, never a name read from a data file"),
+]
 
 
 def test_no_code_or_pickle_loading_from_data():
-    """No eval/exec, no pickle (np.load is not used at all: its pickle path stays closed), no
-    imports driven by data. The only dynamic loading is BRDF plug-ins registered by installed
-    packages through entry points (photometry/brdf.py), never a name read from a data file."""
+    """No eval/exec, no pickle (np.load only with allow_pickle=False, on the program's own
+    files), no imports driven by data. The only dynamic loading is BRDF plug-ins registered by
+    installed packages through entry points (photometry/brdf.py: only the one named) and
+    ``--plugin`` modules named on the command line (SAFE_LOADS), never a name read from a
+    data file."""
     hits = []
     for f in sorted(PKG.rglob("*.py")):
+        rel = f.relative_to(PKG).as_posix()
         for i, line in enumerate(f.read_text(encoding="utf-8").splitlines()):
             code = line.split("#", 1)[0]
-            if UNSAFE.search(code):
-                hits.append(f"{f.relative_to(PKG)}:{i + 1}: {line.strip()}")
+            if UNSAFE.search(code) and not any(rel == a and frag in code
+                                               for a, frag, _ in SAFE_LOADS):
+                hits.append(f"{rel}:{i + 1}: {line.strip()}")
     assert not hits, "unsafe loading:\n" + "\n".join(hits)
 
 

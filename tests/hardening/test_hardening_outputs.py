@@ -16,7 +16,6 @@ import pytest
 from hardening_util import small_curve
 from lightcurve import InputError
 from lightcurve._paths import data_dir
-from lightcurve.io.atomic import atomic_write_text, clean_stale_temp, temp_prefix
 from test_hardening_special_files import run_cli
 
 
@@ -116,19 +115,22 @@ def test_batch_output_that_is_an_input_is_refused(tmp_path, capsys):
     assert Path(summary["x.ukf"]["result"]).name == "x.ukf.ukf.h5"
 
 
+def _write_study(folder, runs=2):
+    """The tiny two-cell study of the signal tests, ``runs`` per cell; returns its path."""
+    from test_hardening_signals import SCENARIO, STUDY
+
+    (folder / "tiny-controlled-1site.toml").write_text(SCENARIO)
+    study = folder / "study.toml"
+    study.write_text(STUDY.replace("runs = 2000", f"runs = {runs}"))
+    return study
+
+
 def test_second_run_on_a_locked_study_folder_is_refused(tmp_path, capsys):
     """While one process holds a study folder, a second `compare` on it exits 2 at once,
     naming the holder, and writes nothing."""
     from lightcurve.io.locks import folder_lock
 
-    study = tmp_path / "study.toml"
-    src = Path(__file__).with_name("test_hardening_signals.py").read_text()
-    import re
-
-    (tmp_path / "tiny-controlled-1site.toml").write_text(
-        re.search(r'SCENARIO = """(.*?)"""', src, re.S).group(1))
-    study.write_text(re.search(r'STUDY = """(.*?)"""', src, re.S).group(1)
-                     .replace("runs = 2000", "runs = 2"))
+    study = _write_study(tmp_path)
     out = tmp_path / "out"
     with folder_lock(out):
         code, err = run_cli(["compare", study, "-o", out, "--workers", "1", "-q"], capsys)
@@ -179,6 +181,8 @@ def test_stale_temp_files_removed_live_ones_kept(tmp_path):
     """Temporary files of a killed writer (same host, pid gone) are removed by the next write
     of that file and by the study start-up; a live writer's (pid alive) never; another
     host's only after a day without change."""
+    from lightcurve.io.atomic import atomic_write_text, clean_stale_temp, temp_prefix
+
     dead = _dead_pid()
     host = temp_prefix("x").split(".")[-1].split("-")[0]
     live = os.getpid()
@@ -205,15 +209,11 @@ def test_stale_temp_files_removed_live_ones_kept(tmp_path):
 
 def test_study_startup_keeps_a_live_writers_temp_file(tmp_path):
     """prepare_output used to delete every `.*.h5.*` in runs/, a live writer's included."""
+    from lightcurve.io.atomic import temp_prefix
     from lightcurve.studies.runner import prepare_output
     from lightcurve.studies.study import load_study
 
-    src = Path(__file__).with_name("test_hardening_signals.py").read_text()
-    import re
-
-    (tmp_path / "tiny-controlled-1site.toml").write_text(
-        re.search(r'SCENARIO = """(.*?)"""', src, re.S).group(1))
-    (tmp_path / "study.toml").write_text(re.search(r'STUDY = """(.*?)"""', src, re.S).group(1))
+    _write_study(tmp_path)
     runs = tmp_path / "out" / "runs"
     runs.mkdir(parents=True)
     live = runs / (temp_prefix("abc_r00000.h5") + "abcd1234.tmp")
@@ -228,6 +228,8 @@ def test_study_startup_keeps_a_live_writers_temp_file(tmp_path):
 @pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
 def test_written_files_follow_the_umask(tmp_path, umask, mode):
     """Every output used to be 0600 (the temporary file's mode) whatever the umask."""
+    from lightcurve.io.atomic import atomic_write_text
+
     old = os.umask(umask)
     try:
         atomic_write_text(tmp_path / "a.txt", "x")

@@ -34,3 +34,12 @@ def test_every_listed_test_exists():
 def test_every_hardening_test_is_listed():
     unlisted = sorted(_defined() - set(_listed()))
     assert not unlisted, f"hardening tests missing from docs/robustness.md: {unlisted}"
+
+
+def test_dask_trust_model_is_stated():
+    """The --scheduler trust model is stated honestly: Dask pickles both ways."""
+    text = DOC.read_text(encoding="utf-8")
+    sec = text[text.index("## Dask: what `--scheduler` trusts"):]
+    sec = sec[: sec.index("\n## ", 5)]
+    for frag in ("pickle", "arbitrary code", "--scheduler", "tls://", "--dask-local"):
+        assert frag in sec, frag

@@ -129,7 +129,7 @@ def test_mesh_and_materials_special_files_refused(special, tmp_path):
 
 def _mesh_scenario(materials: str) -> str:
     """The default scenario with its shape given as a mesh and a materials file."""
-    text = (data_dir("pipelines") / "default.toml").read_text()
+    text = (data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text()
     mesh = data_dir("shapes") / "box_wing_mesh.obj"
     out = text.replace('[shape]\nname = "cube_1u"',
                        f'[shape]\nmesh = "{mesh}"\nmaterials = "{materials}"')

@@ -131,7 +131,7 @@ def _inverted_inside_3sigma(tmp, h5, oid, method, lib):
     # the estimate file carries what a real-data plot needs
     assert est.epoch_utc == EPOCH_ISO and est.source_file == str(h5)
     np.testing.assert_array_equal(est.mag, lc.mag)
-    assert np.nanmean(est.nis) < 3.0 and np.all(np.isfinite(est.mag_post[np.isfinite(est.innovations)]))
+    assert np.nanmean(est.nis) < 3.0 and np.all(np.isfinite(est.predicted_mag[np.isfinite(est.innovations)]))
     return est
 
 
@@ -170,7 +170,7 @@ def test_alt_az_recording_two_objects_two_cameras_inline_site(tmp_path, sky):
     assert lc.site_names == ["desert-ridge", "mount_lemmon"]
     assert lc.camera_names == ["desert-ridge/cam1", "desert-ridge/cam2", "mount_lemmon/cam3"]
     assert lc.t[0] >= 600.0 and lc.epoch_utc == EPOCH_ISO and lc.shape.name == "boxpanel"
-    assert np.sum(lc.t == lc.t[0]) == 3           # three cameras at one instant: normal data
+    assert np.unique(lc.t, return_counts=True)[1].max() == 3   # three cameras at one instant
     assert lc.attrs["object_id"] == "1001" and lc.attrs["geometry_source"] == "topocentric"
     # the imported geometry reproduces the generator's positions (alt/az/range → GCRS)
     np.testing.assert_allclose(lc.r_obj_eci_m[0], G.kepler(*_states(sky)["1001"], [lc.t[0]])[0][0],

@@ -4,10 +4,10 @@ duplicates across cameras, and the hardening of the CSV reader (regular files, s
 from __future__ import annotations
 
 import os
-import threading
 
 import numpy as np
 import pytest
+import recgen as G
 
 from lightcurve import InputError
 from lightcurve.io.recording import read_recording, read_recordings
@@ -119,28 +119,37 @@ def test_special_files_and_size_caps(tmp_path, monkeypatch):
     reading it; a field beyond the csv module's limit names its line."""
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)
-    res = {}
-
-    def run():
-        try:
-            read_recording(fifo)
-        except InputError as exc:
-            res["msg"] = str(exc)
-
-    th = threading.Thread(target=run, daemon=True)
-    th.start()
-    th.join(10.0)
-    assert not th.is_alive(), "reading a FIFO blocked"
-    assert "not a regular file" in res["msg"]
-    with pytest.raises(InputError, match="not a regular file"):
+    msg = G.refused_without_blocking(read_recording, fifo)
+    assert msg.startswith("InputError") and "not a regular" in msg
+    with pytest.raises(InputError, match="not a regular"):
         read_recording("/dev/zero")
     import lightcurve.io.recording as rec
 
     f = _write(tmp_path, [HEAD, f"{WHEN},6.0,0.05,{GEOM}"])
-    monkeypatch.setattr(rec, "MAX_CSV_BYTES", 10)
+    monkeypatch.setattr(rec, "CSV_MAX_BYTES", 10)
     with pytest.raises(InputError, match="too large"):
         read_recording(f)
     monkeypatch.undo()
     g = _write(tmp_path, [HEAD, f'{WHEN},6.0,0.05,"{"x" * 140_000}",40,100,1e6'], "long.csv")
     with pytest.raises(InputError, match="line 2"):
         read_recording(g)
+
+
+def test_a_csv_given_as_lightcurve_says_import_it(tmp_path):
+    from lightcurve.io.lightcurve_h5 import read_lightcurve
+
+    f = _write(tmp_path, [HEAD, f"{WHEN},6.0,0.05,{GEOM}"])
+    with pytest.raises(InputError, match="lightcurve import"):
+        read_lightcurve(f)
+
+
+def test_scenario_band_sets_the_sun_magnitude():
+    from lightcurve._paths import data_dir
+    from lightcurve.studies.scenario import parse_scenario
+
+    text = (data_dir("pipelines") / "default.toml").read_text()
+    sc = parse_scenario(text.replace("[measurement]", '[measurement]\nband = "g"'), file="<t>")
+    assert sc.measurement.sun_mag == sun_magnitude("g") and sc.measurement.band == "g"
+    with pytest.raises(InputError, match="not both"):
+        parse_scenario(text.replace("[measurement]", '[measurement]\nband = "g"\nsun_mag = -26.0'),
+                       file="<t>")

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from lightcurve.css.albedo import AUTHALIC_RADIUS_M, AlbedoMap
+from lightcurve.earth.albedo import AUTHALIC_RADIUS_M, AlbedoMap
 from lightcurve.photometry import load_shape
 from lightcurve.physics.earthshine import earthshine_cells
 from lightcurve.physics.self_shadowing import SelfShadowing

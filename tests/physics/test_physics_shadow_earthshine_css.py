@@ -4,7 +4,7 @@ the CSS effects (independent evaluation through lightcurve.css)."""
 import numpy as np
 import pytest
 
-from lightcurve.css.albedo import AlbedoMap, AUTHALIC_RADIUS_M, albedo_cells_in_view
+from lightcurve.earth.albedo import AUTHALIC_RADIUS_M, AlbedoMap, albedo_cells_in_view
 from lightcurve.errors import InputError
 from lightcurve.photometry import Shape, get_brdf, load_shape
 from lightcurve.photometry.materials import Material
@@ -131,7 +131,7 @@ def test_earthshine_effect_on_a_nadir_plate():
     eff.grid = lambda: grid
     m = eff.apply(ctx, {"albedo_scale": 1.0})
     # E from the cells (validated against the Lambert sphere above) at the epoch's GMST
-    from lightcurve.css.albedo import earth_rotation_angle
+    from lightcurve.earth.albedo import earth_rotation_angle
 
     th = float(earth_rotation_angle(ctx.epoch_utc, 0.0))
     dirs, ratio = earthshine_cells(grid, r[0], np.array([1.496e11, 0, 0]), th)
@@ -177,7 +177,7 @@ def test_css_scale_misalignment_fault_against_cssarray():
 
 
 def test_css_albedo_against_css_albedo_module():
-    from lightcurve.css.albedo import builtin_albedo_map, earth_rotation_angle
+    from lightcurve.earth.albedo import builtin_albedo_map, earth_rotation_angle
     from lightcurve.physics.context import rotate_z
 
     ctx = _css_ctx()

@@ -36,7 +36,9 @@ def test_estimate_figure_panels(default_pass):
     # without truth and without the lightcurve: no truth row, no lightcurve panel, no empty axes
     import dataclasses
 
-    bare = dataclasses.replace(est, att_error_deg=None, omega_error_rad_s=None, nees=None)
+    bare = dataclasses.replace(est, att_error_deg=None, omega_error_rad_s=None, nees=None,
+                               mag=None, mag_sigma=None, predicted_mag=None, epoch_utc="",
+                               source_file="")
     fig = estimate_figure(bare)
     _visible_axes_have_data(fig)
     titles = " ".join(a.get_title(loc="left") for a in fig.axes)

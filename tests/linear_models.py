@@ -1,11 +1,9 @@
-"""Linear-Gaussian models, a simulator and a generic (extended) Kalman filter run.
+"""Linear-Gaussian models, a simulator and a generic (extended) Kalman filter run — test
+references (not production code).
 
-Reference implementations of the protocols in :mod:`lightcurve.estimation.protocols` for
-vector-space states: used by the tests (NIS/NEES consistency of a correctly tuned filter) and
-as the simplest worked example of the interfaces. Attitude filters, whose state contains a
-quaternion, do not use :func:`run_ekf` (its additive correction ``x + K ν`` is only right in a
-vector space); they use the same :func:`~lightcurve.estimation.kalman.joseph_update` on their
-error state.
+Vector-space models for the consistency tests of the generic Kalman machinery (NIS/NEES of a
+correctly tuned filter): they use the package's :func:`~lightcurve.estimation.kalman.joseph_update`
+and :func:`~lightcurve.estimation.kalman.kf_predict`.
 
 Model: ``x_{k+1} = F x_k + w_k``, ``w_k ~ N(0, Q)``; ``y_k = H x_k + v_k``, ``v_k ~ N(0, R)``.
 """
@@ -16,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kalman import joseph_update, kf_predict
-from .rng import as_generator
+from lightcurve.estimation.kalman import joseph_update, kf_predict
+from lightcurve.estimation.rng import as_generator
 
 __all__ = [
     "LinearGaussianDynamics",
@@ -36,10 +34,7 @@ def _square(M, name):
 
 
 class LinearGaussianDynamics:
-    """Time-invariant linear dynamics ``x_{k+1} = F x_k + w``, ``w ~ N(0, Q)``.
-
-    Implements :class:`~lightcurve.estimation.protocols.LinearizableDynamicsModel`.
-    """
+    """Time-invariant linear dynamics ``x_{k+1} = F x_k + w``, ``w ~ N(0, Q)``."""
 
     def __init__(self, F, Q):
         self.F = _square(F, "F")
@@ -71,10 +66,7 @@ class LinearGaussianDynamics:
 
 
 class LinearGaussianMeasurement:
-    """Linear measurement ``y = H x + v``, ``v ~ N(0, R)``.
-
-    Implements :class:`~lightcurve.estimation.protocols.DifferentiableMeasurementModel`.
-    """
+    """Linear measurement ``y = H x + v``, ``v ~ N(0, R)``."""
 
     def __init__(self, H, R):
         self.H = np.atleast_2d(np.asarray(H, dtype=float))

@@ -86,10 +86,13 @@ def kepler(r0, v0, dt):
     a = 1.0 / (2.0 / rn - vn * vn / MU)
     n = np.sqrt(MU / a ** 3)
     h = np.cross(r0, v0)
+    h_hat = h / np.linalg.norm(h)
     evec = np.cross(v0, h) / MU - r0 / rn
+    evec = evec - np.dot(evec, h_hat) * h_hat          # rounding noise out of the plane
     e = np.linalg.norm(evec)
-    p_hat = evec / e
-    q_hat = np.cross(h / np.linalg.norm(h), p_hat)
+    p_hat = evec / e if e > 1e-10 else r0 / rn         # circular: any in-plane reference
+    e = e if e > 1e-10 else 0.0
+    q_hat = np.cross(h_hat, p_hat)
     nu0 = np.arctan2(np.dot(r0, q_hat), np.dot(r0, p_hat))
     E0 = 2 * np.arctan(np.sqrt((1 - e) / (1 + e)) * np.tan(nu0 / 2))
     M = E0 - e * np.sin(E0) + n * dt
@@ -296,12 +299,18 @@ def rv_to_elements(r, v):
     a = 1.0 / (2.0 / rn - vn * vn / MU)
     i = np.arccos(h[2] / np.linalg.norm(h))
     raan = np.arctan2(nvec[1], nvec[0]) % (2 * np.pi)
-    argp = np.arccos(np.clip(np.dot(nvec, evec) / (np.linalg.norm(nvec) * e), -1, 1))
-    if evec[2] < 0:
-        argp = 2 * np.pi - argp
-    nu = np.arccos(np.clip(np.dot(evec, r) / (e * rn), -1, 1))
-    if np.dot(r, v) < 0:
-        nu = 2 * np.pi - nu
+    if e < 1e-8:  # circular: perigee undefined; argument of latitude from the node
+        e, argp = 0.0, 0.0
+        nu = np.arccos(np.clip(np.dot(nvec, r) / (np.linalg.norm(nvec) * rn), -1, 1))
+        if r[2] < 0:
+            nu = 2 * np.pi - nu
+    else:
+        argp = np.arccos(np.clip(np.dot(nvec, evec) / (np.linalg.norm(nvec) * e), -1, 1))
+        if evec[2] < 0:
+            argp = 2 * np.pi - argp
+        nu = np.arccos(np.clip(np.dot(evec, r) / (e * rn), -1, 1))
+        if np.dot(r, v) < 0:
+            nu = 2 * np.pi - nu
     E = 2 * np.arctan(np.sqrt((1 - e) / (1 + e)) * np.tan(nu / 2))
     M = (E - e * np.sin(E)) % (2 * np.pi)
     return a, e, i, raan, argp, M
@@ -330,3 +339,23 @@ def sgp4_gcrs(ts, line1, line2, times):
 
     sat = EarthSatellite(line1, line2, ts=ts)
     return np.asarray(sat.at(ts.from_datetimes(times)).position.m).reshape(3, -1).T
+
+
+def refused_without_blocking(fn, path, timeout_s: float = 10.0) -> str:
+    """Run ``fn(path)`` in a thread; it must raise within ``timeout_s`` (a reader opening a
+    FIFO without O_NONBLOCK would block for ever). Returns the exception text."""
+    import threading
+
+    box = {}
+
+    def run():
+        try:
+            fn(path)
+        except Exception as exc:  # noqa: BLE001 - the caller checks the type through the text
+            box["msg"] = f"{type(exc).__name__}: {exc}"
+
+    th = threading.Thread(target=run, daemon=True)
+    th.start()
+    th.join(timeout_s)
+    assert not th.is_alive(), f"reading {path} blocked"
+    return box.get("msg", "")

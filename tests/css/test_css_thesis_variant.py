@@ -1,0 +1,288 @@
+"""The O'Keefe (2015) set-up and the thesis-variant estimators/controller against independent
+NumPy re-implementations written here (eq. numbers from ../shared/seeds/000_acf2322159507162.txt).
+"""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+from lightcurve.css import okeefe2015 as ok
+from lightcurve.css.experiments import thesis_css, thesis_filter_params, thesis_scenario
+from lightcurve.css.sunline_thesis import (thesis_init_nb, thesis_propagate_nb, thesis_state,
+                                           thesis_update_nb)
+from lightcurve.css.sensors import normal_to_azel
+
+
+def _skew(v):
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def test_table_values_and_wheel_matrix():
+    # Table 2.3 and §2.3.3: σ_ωd² = (2/τ) σ_ωr², τ = 1000 s (§2.4)
+    sw, sr, sd = ok.gyro_sigmas("intermediate")
+    assert sw == pytest.approx(np.radians(1e-4)) and sr == pytest.approx(np.radians(1e-6))
+    assert sd == pytest.approx(np.sqrt(2 / 1000.0) * np.radians(1e-6))
+    # §2.4 G_s: unit spin axes, rank 3
+    G = ok.WHEEL_AXES
+    assert np.allclose(np.linalg.norm(G, axis=0), 1.0) and np.linalg.matrix_rank(G) == 3
+    css = thesis_css("dual_pyramid")
+    assert np.allclose(np.degrees(css.fov_half_angle_rad), 60.0)   # §2.1.3
+    # §2.2.1: the +z pyramid cannot see below the x-y plane (structure horizon)
+    s = np.array([np.cos(np.radians(-5)), 0.0, np.sin(np.radians(-5))])
+    assert css.signals(s)[0] == 0.0
+    assert thesis_css("dual_pyramid", 90.0).signals([1, 0, 1e-3])[0] > 0.7
+
+
+def test_thesis_propagation_matches_exact_rotation_and_riccati():
+    # ḋ = −ω×d: RK4 at 10 Hz vs exp(−[ω×]t); EKF covariance with no noise: Φ P Φᵀ (eq. 3.19)
+    w = np.radians([1.5, -2.0, 0.7])
+    d, P, L, Lam, B, Bnu = thesis_state(8)
+    d[:] = [0.3, 0.8, -0.5]
+    P[:, :] = np.diag([0.1, 0.2, 0.3])
+    prm = thesis_filter_params("ekf", "intermediate")
+    d0, P0 = d.copy(), P.copy()
+    for _ in range(100):
+        thesis_propagate_nb(d, P, L, Lam, B, w, 0.1, prm, 0.0, 0.0)
+    Phi = expm(-_skew(w) * 10.0)
+    assert np.allclose(d, Phi @ d0, atol=1e-10)
+    assert np.allclose(P, Phi @ P0 @ Phi.T, atol=1e-10)
+
+
+def test_eckf_propagation_matches_augmented_riccati():
+    # eq. 3.39 on the augmented covariance P_z = [[P_x, L, Λ], [Lᵀ, B_η, 0], [Λᵀ, 0, B_ν]]
+    # with Θ = [[F, S, 0], 0, 0] and Υ Q Υᵀ, integrated by scipy (independent of eq. 3.42)
+    N = 8
+    prm = thesis_filter_params("eckf", "moderate")
+    sig_s, sig_w, sig_wd = 2e-3, prm[3], prm[4]
+    w = np.radians([0.4, -1.0, 2.0])
+    d, P, L, Lam, B, Bnu = thesis_state(N)
+    d[:] = [0.2, -0.4, 1.0]
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(3, 3)) * 0.1
+    P[:, :] = A @ A.T + 0.01 * np.eye(3)
+    L[:, :] = rng.normal(size=(3, 6)) * 1e-4
+    Lam[:, :] = rng.normal(size=(3, 4 * N)) * 1e-3
+    B[:, :] = np.diag([1e-12] * 3 + [1e-8] * 3)
+    n = 3 + 6
+
+    def rhs(_t, y):
+        dd = y[:3]
+        Pz = y[3:].reshape(n, n)
+        F = -_skew(w)
+        S = np.hstack([np.eye(3), -_skew(dd)])
+        Th = np.zeros((n, n))
+        Th[:3, :3] = F
+        Th[:3, 3:] = S
+        U = np.zeros((n, 9))
+        U[:3, :3] = -np.eye(3)
+        U[:3, 3:6] = -_skew(dd)
+        U[6:9, 6:9] = np.eye(3)   # gyro-bias random walk on the ω_β block of β_η
+        Q = np.diag([sig_s ** 2] * 3 + [sig_w ** 2] * 3 + [sig_wd ** 2] * 3)
+        dP = Th @ Pz + Pz @ Th.T + U @ Q @ U.T
+        return np.concatenate([F @ dd, dP.ravel()])
+
+    Pz0 = np.zeros((n, n))
+    Pz0[:3, :3], Pz0[:3, 3:], Pz0[3:, :3], Pz0[3:, 3:] = P, L, L.T, B
+    sol = solve_ivp(rhs, (0, 5.0), np.concatenate([d, Pz0.ravel()]), rtol=1e-11, atol=1e-14)
+    Pz = sol.y[3:, -1].reshape(n, n)
+    Lam0 = Lam.copy()
+    for _ in range(50):
+        thesis_propagate_nb(d, P, L, Lam, B, w, 0.1, prm, sig_s, sig_w)
+    assert np.allclose(d, sol.y[:3, -1], atol=1e-9)
+    assert np.allclose(P, Pz[:3, :3], atol=1e-9)
+    assert np.allclose(L, Pz[:3, 3:], atol=1e-12)
+    assert np.allclose(B, Pz[3:, 3:], atol=1e-15)
+    assert np.allclose(Lam, expm(-_skew(w) * 5.0) @ Lam0, atol=1e-10)   # eq. 3.42c
+
+
+def _setup(kind, y, d_true=None):
+    css = thesis_css("dual_pyramid")
+    prm = thesis_filter_params(kind, "intermediate")
+    st = thesis_state(8)
+    az, el = normal_to_azel(css.normals)
+    return css, prm, st, np.ascontiguousarray(az), np.ascontiguousarray(el)
+
+
+def test_ekf_update_matches_numpy_joseph():
+    # eq. 3.21-3.24 with H_i = n̂_iᵀ for sensors predicted in view (3.31c), M = |d̂| I (3.31d)
+    css, prm, (d, P, L, Lam, B, Bnu), az, el = _setup("ekf", None)
+    d[:] = np.array([0.2, 0.1, 1.0]) * 1.2 / np.linalg.norm([0.2, 0.1, 1.0])
+    P[:, :] = np.diag([0.02, 0.03, 0.01])
+    y = np.array([0.9, 0.8, 0.5, 0.6, 0.0, 0.0, 0.01, 0.0])
+    u = d / np.linalg.norm(d)
+    cf = np.cos(css.fov_half_angle_rad)
+    sel = [i for i in range(8) if css.normals[i] @ u >= cf[i] or y[i] > 0.5 * np.linalg.norm(d)]
+    H = css.normals[sel]
+    R = np.diag([(np.linalg.norm(d) * 1.84 * (1 if css.normals[i] @ u >= cf[i] else 2.0)) ** 2
+                 for i in sel])
+    W = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(W)
+    nu = y[sel] - H @ d
+    d_ref = d + K @ nu
+    IKH = np.eye(3) - K @ H
+    P_ref = IKH @ P @ IKH.T + K @ R @ K.T
+    m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
+                              css.horizon_normals, prm)
+    assert m == len(sel)
+    assert np.allclose(d, d_ref, atol=1e-12) and np.allclose(P, P_ref, atol=1e-12)
+    assert nis == pytest.approx(nu @ np.linalg.solve(W, nu))
+
+
+def test_eckf_update_equals_schmidt_joseph_on_augmented_state():
+    # eq. 3.52 (traditional consider update) = the Joseph update of the augmented covariance
+    # with the gain rows of the biases set to zero (eq. 3.50 with K_b = 0)
+    css, prm, (d, P, L, Lam, B, Bnu), az, el = _setup("eckf", None)
+    # Sun along +z: sensors 1-4 see it 45° off their normals, 15° inside their 60° FOV, far
+    # (> γ of §3.2.3 for this small P) from any visibility boundary: no consistency inflation
+    y = np.array([0.9, 0.7, 0.95, 0.8, 0.02, 0.0, 0.0, 0.0])
+    assert thesis_init_nb(y, css.normals, prm, d, P, L, Lam, B, Bnu)
+    d[:] = [0.01, -0.02, 1.2]
+    rng = np.random.default_rng(3)
+    P[:, :] = np.diag([1e-4, 2e-4, 1.5e-4])
+    L[:, :] = rng.normal(size=(3, 6)) * 1e-5
+    Lam[:, :] = rng.normal(size=(3, 32)) * 1e-4
+    N = 8
+    nb = 4 * N
+    n = 3 + 6 + nb
+    Pz = np.zeros((n, n))
+    Pz[:3, :3], Pz[:3, 3:9], Pz[:3, 9:] = P, L, Lam
+    Pz[3:9, :3], Pz[9:, :3] = L.T, Lam.T
+    Pz[3:9, 3:9] = B
+    Pz[9:, 9:] = np.diag(Bnu)
+    dd = d.copy()
+    nd = np.linalg.norm(dd)
+    u = dd / nd
+    cf = np.cos(css.fov_half_angle_rad)
+    P0 = P.copy()
+    m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
+                              css.horizon_normals, prm)
+    assert m > 0
+    # rebuild Y = [H 0 J] and R exactly as eq. 3.57 (no consistency inflation is active here:
+    # checked by comparing with the kernel's own W through the NIS below)
+    sel = [i for i in range(N) if css.normals[i] @ u >= cf[i] or y[i] > 0.5 * nd]
+    Y = np.zeros((len(sel), n))
+    R = np.zeros((len(sel), len(sel)))
+    for a, i in enumerate(sel):
+        Y[a, :3] = css.normals[i]
+        Y[a, 9 + 3 * N + i] = nd
+        if css.normals[i] @ u >= cf[i]:
+            th, ph = az[i], el[i]
+            Y[a, 9 + i] = css.normals[i] @ dd
+            Y[a, 9 + N + i] = np.cos(ph) * (-dd[0] * np.sin(th) + dd[1] * np.cos(th))
+            Y[a, 9 + 2 * N + i] = (-(dd[0] * np.cos(th) + dd[1] * np.sin(th)) * np.sin(ph)
+                                   + dd[2] * np.cos(ph))
+        R[a, a] = (nd * 0.05 * (1 if css.normals[i] @ u >= cf[i] else 2.0)) ** 2
+    W = Y @ Pz @ Y.T + R
+    nu = y[sel] - css.normals[sel] @ dd
+    assert len(sel) == 4
+    assert nis == pytest.approx(nu @ np.linalg.solve(W, nu), rel=1e-9)
+    K = Pz @ Y.T @ np.linalg.inv(W)
+    K[3:] = 0.0
+    IKY = np.eye(n) - K @ Y
+    Pz_post = IKY @ Pz @ IKY.T + K @ R @ K.T
+    assert np.allclose(d, dd + K[:3] @ nu, atol=1e-12)
+    assert np.allclose(P, Pz_post[:3, :3], atol=1e-12)
+    assert np.allclose(L, Pz_post[:3, 3:9], atol=1e-14)
+    assert np.allclose(Lam, Pz_post[:3, 9:], atol=1e-13)
+    assert np.all(np.linalg.eigvalsh(P) > 0) and np.trace(P) < np.trace(P0)
+
+
+def test_thesis_control_law_matches_eq_3_64_inline():
+    from lightcurve.css.control import sun_pointing_mrp
+    from lightcurve.css.truth import _thesis_control_nb
+
+    I = np.diag([10.5, 8.0, 7.5])
+    G = ok.WHEEL_AXES
+    Gp = G.T @ np.linalg.inv(G @ G.T)
+    w = np.radians([0.5, -0.3, 0.2])
+    Om = np.array([10.0, -5.0, 3.0, 0.0])
+    h_abs = 0.001 * (G.T @ w + Om)
+    s = np.array([0.3, 0.2, 0.93])
+    s /= np.linalg.norm(s)
+    zint = np.array([1e-4, -2e-4, 5e-5])
+    dw0 = np.radians([1.0, 1.0, -1.0])
+    gains = np.array([0.041, 0.5, 0.001, np.radians(1.0)])
+    z0 = zint.copy()
+    u = _thesis_control_nb(s, True, w, I, G, Gp, h_abs, zint, dw0, gains, 10.0,
+                           np.array([0, 0, 1.0]), 0.1)
+    sig, _ = sun_pointing_mrp(s)
+    z = z0 + 0.041 * sig * 0.1 + I @ (w - dw0)       # z = K∫σ dt + [I](Δω − Δω₀)
+    H = I @ w + G @ h_abs
+    rhs = 0.041 * sig + 0.5 * w + 0.5 * 0.001 * z + np.cross(0.001 * z, H)   # eq. 3.64
+    assert np.allclose(G @ u, rhs, atol=1e-14)
+    assert np.allclose(zint, z0 + 0.041 * sig * 0.1)
+    # inside the 1° deadband σ = 0 (§3.3.2), rate damping stays
+    s_db = np.array([np.sin(np.radians(0.5)), 0, np.cos(np.radians(0.5))])
+    zint = z0.copy()
+    u = _thesis_control_nb(s_db, True, w, I, G, Gp, h_abs, zint, dw0, gains, 10.0,
+                           np.array([0, 0, 1.0]), 0.1)
+    z = z0 + I @ (w - dw0)
+    assert np.allclose(G @ u, 0.5 * w + 0.0005 * z + np.cross(0.001 * z, H), atol=1e-14)
+
+
+def _short(est, gyro, controlled=False):
+    return thesis_scenario("dual_pyramid", est, gyro=gyro, controlled=controlled,
+                           duration_s=120.0, albedo="builtin", perturbations=False)
+
+
+def test_truth_is_the_same_with_and_without_gyro():
+    # the no-gyro defect: every row of a study flies the same spacecraft (common random
+    # numbers) — the truth and the CSS outputs do not depend on the gyro option
+    from lightcurve.css.truth import simulate
+
+    a = simulate(_short("wavg", "intermediate"), np.random.SeedSequence([7, 1]))
+    b = simulate(_short("wavg", None), np.random.SeedSequence([7, 1]))
+    c = simulate(_short("ekf", "low"), np.random.SeedSequence([7, 1]))
+    assert np.array_equal(a.q, b.q) and np.array_equal(a.y, b.y) and np.array_equal(a.q, c.q)
+    # §2.4 dispersions: rates uniform within ±2°/s per axis; common scale 1..1.5
+    assert np.all(np.abs(np.degrees(a.info["omega0_rad_s"])) <= 2.0)
+    assert 1.0 <= a.info["css_scale_common"] <= 1.5
+    assert a.t[1] - a.t[0] == 0.5   # CSS at 2 Hz
+
+
+def test_thesis_ekf_converges_tumbling_without_albedo():
+    # one 20-minute tumbling run without albedo or misalignment, started in sunlight: after
+    # 850 s (the Sun sets at ≈1050 s in this run) the EKF error is below 3° (thesis: 1.75° p99 with every error source on)
+    from lightcurve.css.truth import simulate
+
+    sc = thesis_scenario("dual_pyramid", "ekf", duration_s=1200.0, albedo="none",
+                         perturbations=False, sim={"misalignment_sigma_deg": 0.0})
+    sc.start_sunlit = True
+    r = simulate(sc, np.random.SeedSequence([1, 0]))
+    m = (r.direct > 0) & (r.t > 850)
+    assert m.sum() > 200
+    assert np.percentile(r.error_deg[m], 99) < 3.0
+
+
+def test_perturbed_orbit_stays_circular_400km():
+    # J2-J6 + drag + SRP (§2.4): a 100-minute arc stays within a few km of 400 km altitude
+    from lightcurve.css.truth import simulate
+
+    sc = thesis_scenario("dual_pyramid", "wavg", duration_s=600.0, albedo="none")
+    r = simulate(sc, np.random.SeedSequence([2, 0]))
+    h = np.linalg.norm(r.info["r_I_m"], axis=1) - 6378137.0
+    assert np.all(np.abs(h - 400e3) < 25e3)   # J2 alone moves a polar orbit by ~±11 km
+    assert np.degrees(r.info["raan_rad"]) == pytest.approx(60.0)
+
+
+def test_reproduction_css_section(tmp_path):
+    from lightcurve.studies.reproduction import css_section, write_reproduction
+
+    d = tmp_path / "s"
+    d.mkdir()
+    cases = [{"estimator": "ekf", "variant": "thesis", "gyro": "intermediate", "runs": 5,
+              "p99_level_deg": 2.0, "p99_pooled_deg": 2.5, "thesis_p99_deg": 1.75,
+              "ratio_to_thesis": 2.0 / 1.75},
+             {"estimator": "eckf", "variant": "thesis", "gyro": "intermediate", "runs": 5,
+              "p99_level_deg": 3.5, "thesis_p99_deg": 3.1, "ratio_to_thesis": 3.5 / 3.1}]
+    (d / "summary.json").write_text(json.dumps({"experiment": "fig3_09", "runs": 5,
+                                                "albedo": "toms", "failures": 0,
+                                                "verdict": "v", "cases": cases}))
+    txt = css_section([d])
+    assert "| EKF | intermediate | 1.75 | 2.00 / 2.50 | 1.14 |" in txt
+    assert "ECKF ≈ 1.8× EKF" in txt and "1.75×" in txt and "**agrees**" in txt
+    out = write_reproduction(tmp_path / "r.md", [txt])
+    assert out.read_text().startswith("# Reproduction")

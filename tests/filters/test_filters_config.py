@@ -1,0 +1,108 @@
+"""Configuration objects of the filters (lightcurve.filters.config): validation, the three ways
+of building them (Python keywords, objects, CLI options, study TOML) giving the same run."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+
+from lightcurve.errors import InputError
+from lightcurve.filters import MEKFConfig, ProblemConfig, UKFConfig, build_problem, invert
+from lightcurve.filters.config import split_options
+
+
+def test_defaults_and_validation_name_the_field():
+    p = ProblemConfig()
+    assert (p.seed, p.sigma_theta_deg, p.sigma_omega_deg_s) == (0, 3.0, 0.02)   # Bernard ch. 9
+    assert MEKFConfig().variant == "robust" and UKFConfig().alpha == 1.0
+    cases = [(ProblemConfig, {"sigma_theta_deg": 0.0}, "sigma_theta_deg"),
+             (ProblemConfig, {"seed": -1}, "seed"),
+             (ProblemConfig, {"acs_mode": "wobble"}, "acs_mode"),
+             (ProblemConfig, {"initial_q": (1.0, 0.1, 0.0, 0.0)}, "initial_q"),
+             (ProblemConfig, {"attitude": "truth"}, "reflection"),
+             (ProblemConfig, {"reflection_kinds": ("xi", "q")}, "reflection_kinds"),
+             (MEKFConfig, {"error": "euler"}, "error"),
+             (MEKFConfig, {"variant": "paper"}, "variant"),
+             (UKFConfig, {"alpha": 0.0}, "alpha"),
+             (UKFConfig, {"beta": float("nan")}, "beta")]
+    for cls, kw, fieldname in cases:
+        with pytest.raises(InputError) as err:
+            cls(**kw)
+        assert err.value.field == fieldname, (cls, kw)
+    with pytest.raises(InputError, match="filters.ukf.gamma"):
+        UKFConfig.from_mapping({"gamma": 1.0}, file="s.toml", table="filters.ukf")
+    with pytest.raises(InputError) as err:
+        UKFConfig.from_mapping({"alpha": -2}, file="s.toml", table="filters.ukf")
+    assert err.value.file == "s.toml" and err.value.field == "filters.ukf.alpha"
+    with pytest.raises(TypeError, match="bogus"):
+        split_options("mekf", {"bogus": 1})
+    # another filter's keyword is ignored, as the keyword form always did
+    prob, filt = split_options("mekf", {"particles": 5, "seed": 2, "error": "grp"})
+    assert prob == {"seed": 2} and filt == {"error": "grp"}
+
+
+@pytest.mark.parametrize("method", ["mekf", "ukf"])
+def test_object_and_keyword_calls_give_the_same_estimate(curve, method):
+    kw = dict(seed=4, sigma_theta_deg=5.0, sigma_omega_deg_s=0.05)
+    filt = {"mekf": dict(error="small_angle"), "ukf": dict(alpha=0.8, kappa=1.0)}[method]
+    a = invert(curve, method, **kw, **filt)
+    cfg = (MEKFConfig if method == "mekf" else UKFConfig)(**filt)
+    b = invert(curve, cfg, problem=ProblemConfig(**kw))
+    c = invert(curve, cfg, problem=ProblemConfig(seed=9, **{k: v for k, v in kw.items()
+                                                            if k != "seed"}), seed=4)
+    for e in (b, c):
+        np.testing.assert_array_equal(a.q, e.q)
+        np.testing.assert_array_equal(a.cov, e.cov)
+    assert a.meta["variant"] == "robust"
+    t = invert(curve, cfg.replace(variant="thesis"), problem=ProblemConfig(**kw))
+    assert t.meta["variant"] == "thesis"
+    # build_problem accepts the same object and keywords
+    p1 = build_problem(curve, ProblemConfig(**kw))
+    p2 = build_problem(curve, **kw)
+    np.testing.assert_array_equal(p1.q0, p2.q0)
+
+
+def test_cli_options_build_the_same_configs():
+    from lightcurve.cli import invert as cli_invert
+
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    cli_invert.register(sub)
+    args = parser.parse_args(["invert", "x.h5", "-o", "out", "--method", "ukf", "--alpha", "0.7",
+                              "--seed", "3", "--variant", "thesis", "--sigma-theta-deg", "4"])
+    problem, opts = cli_invert.configs_from_args(args)
+    assert problem.seed == 3 and problem.sigma_theta_deg == 4.0
+    assert UKFConfig(**opts) == UKFConfig(alpha=0.7, variant="thesis")
+
+
+def test_study_toml_filter_tables(tmp_path):
+    from lightcurve._paths import data_dir
+    from lightcurve.studies.study import load_study
+
+    scen = data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-{dynamics}-{sites}site.toml"
+    text = f"""
+[study]
+name = "t"
+runs = 1
+scenario = "{scen.as_posix()}"
+[grid]
+filter = ["ukf"]
+dynamics = ["controlled"]
+sites = [1]
+sigma_theta_deg = [3.0]
+sigma_omega_deg_s = [0.02]
+r_percent = [1.0]
+[filters.ukf]
+variant = "thesis"
+alpha = 0.5
+"""
+    f = tmp_path / "s.toml"
+    f.write_text(text)
+    st = load_study(f)
+    ukf = dict(dict(st.options["filters"])["ukf"])
+    assert UKFConfig(**ukf) == UKFConfig(alpha=0.5, variant="thesis")
+    f.write_text(text.replace("alpha = 0.5", "alpha = 0.5\nlambda = 2"))
+    with pytest.raises(InputError, match="filters.ukf.lambda"):
+        load_study(f)
