@@ -40,7 +40,7 @@ def _cmd_diagnose(args) -> int:
             raise InputError("unknown cross-validation grouping", field="--cv", value=g,
                              allowed="auto, none, " + ", ".join(GROUPINGS))
     folds = None if groups[0] == "none" else groups[0]
-    with naming_file(args.recording):
+    with naming_file(args.recording[0] if len(args.recording) == 1 else ", ".join(args.recording)):
         d = diagnose_recording(args.recording, args.scenario, free=args.free,
                                exclude=[e.strip() for e in (args.exclude or "").split(",")
                                         if e.strip()],
