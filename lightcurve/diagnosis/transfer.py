@@ -49,14 +49,13 @@ class Transfer:
 
 def read_fit(path) -> dict:
     """The ``model`` of a diagnosis.json (InputError naming the file and field)."""
+    from ..io.safe_open import read_text
+
     p = Path(path)
-    if not p.is_file():
-        raise InputError("file not found", file=p)
-    if p.stat().st_size > 64 * 1024 * 1024:
-        raise InputError("file too large for a diagnosis.json", file=p, allowed="<= 64 MiB")
+    text = read_text(p, max_bytes=64 * 1024 * 1024, what="diagnosis.json")
     try:
-        js = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        js = json.loads(text)
+    except json.JSONDecodeError as exc:
         raise InputError(f"not a JSON file: {exc}", file=p) from None
     if not isinstance(js, dict) or js.get("format") != "lightcurve-diagnosis":
         raise InputError("not a diagnosis.json", file=p, field="format",
