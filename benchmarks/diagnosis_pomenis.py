@@ -122,7 +122,7 @@ def main():
                        "params": {c["name"]: {k: (v.get("value"), v.get("sd"), v.get("status"))
                                               for k, v in s["params"].items()}
                                   for c in js["candidates"] for s in c["steps"]
-                                  if s.get("decision") == "added"}}
+                                  if str(s.get("decision", "")).startswith("added")}}
         if not a.quick:
             out["transfer"] = {}
             for name, (pa, pb, na, nb) in _split(csv_path, tmp).items():

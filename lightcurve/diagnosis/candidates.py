@@ -232,8 +232,11 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
     grid = _grid_values(eff, problem)
     gnames = {s.name for s in eff.params if s.integer or s.name in GRID_PARAMS}
     if around is not None and len(grid) > 1:
-        # refine only at the best grid point of stage 1
+        # refine only at the best grid point of stage 1 — a step time at the resolution of
+        # the data (_refine_step_time)
         fx = {k: v for k, v in around.terms[0][1].items() if k in gnames}
+        if "t_start_s" in fx:
+            fx = _refine_step_time(eff, problem, base_fit, around, fx, grid, rec)
         grid = [fx]
     profile = []
     for fixed in grid:
@@ -250,6 +253,32 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
     if around is None and len(grid) > 1:
         rec["_profiles"] = profile
     return best
+
+
+def _refine_step_time(eff, problem, base_fit, fit, fixed, grid, rec):
+    """The step time between the grid values around the best one, at the resolution of the
+    data: every distinct measurement time in (previous grid time, next grid time] is tried
+    with the other parameters at ``fit``'s values; the profile gets these points too."""
+    times = sorted({float(g["t_start_s"]) for g in grid})
+    t0 = float(fixed["t_start_s"])
+    i = times.index(t0) if t0 in times else int(np.argmin(np.abs(np.asarray(times) - t0)))
+    lo = times[i - 1] if i > 0 else -np.inf
+    hi = times[i + 1] if i + 1 < len(times) else np.inf
+    tu = np.unique(problem.t)
+    cand = tu[(tu > lo) & (tu <= hi)]
+    params = dict(fit.terms[0][1])
+    best = (float(fit.chi2), t0)
+    prof = rec.setdefault("_profiles", [])
+    for tt in cand:
+        p = {**params, "t_start_s": float(tt)}
+        try:
+            c2 = problem.chi2(problem.predict(fit.theta if problem.n_free else None, [(eff, p)]))
+        except Exception:  # pragma: no cover - defensive
+            continue
+        prof.append(({**fixed, "t_start_s": float(tt)}, float(c2)))
+        if c2 < best[0]:
+            best = (c2, float(tt))
+    return {**fixed, "t_start_s": best[1]}
 
 
 def held_values(effect, params) -> dict:
