@@ -227,12 +227,14 @@ def held_out_summary(problem, pred, folds=None, pred_var=None) -> dict:
 def gain_standard_error(best: dict, other: dict) -> float:
     """Standard error of G(best) − G(other) for two held-out summaries of the same
     measurements: G_b − G_o = n ln(χ²_o/χ²_b) ≈ n Σ_i d_i / χ²_b with d_i = z²_o,i − z²_b,i,
-    so se = n √(n var(d)) / χ²_b."""
+    so se = n √n s_d / χ²_b, with s_d the robust spread 1.4826 MAD(d) (a few measurements
+    that one model misses by tens of σ would otherwise make any two models look tied)."""
     d = np.asarray(other["_z2"]) - np.asarray(best["_z2"])
     n = d.size
     if n < 2 or best["chi2"] <= 0:
         return float("nan")
-    return float(n * np.sqrt(n * np.var(d, ddof=1)) / best["chi2"])
+    s_d = 1.4826 * float(np.median(np.abs(d - np.median(d))))
+    return float(n * np.sqrt(n) * s_d / best["chi2"])
 
 
 def held_out_gain(before: dict, after: dict) -> float:
