@@ -213,8 +213,8 @@ def _one_standard_error(ok):
     if len(ok) < 2 or "held_out" not in ok[0]:
         return
     best = ok[0]
-    tied = [r for r in ok if "held_out" in r and r["gain"] > 0 and
-            best["gain"] - r["gain"] <= gain_standard_error(best["held_out"], r["held_out"])]
+    se = gain_standard_error(best["held_out"])
+    tied = [r for r in ok if "held_out" in r and r["gain"] > 0 and best["gain"] - r["gain"] <= se]
     if len(tied) < 2:
         return
     simplest = min(tied, key=lambda r: (r["in_sample"]["n_params_added"], -r["gain"]))

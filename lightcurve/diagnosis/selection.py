@@ -36,13 +36,13 @@ the candidate with the largest G is added when G > ``min_gain`` (10: a held-out 
 ratio of e⁵ ≈ 150) *and* its parameters are identified (:mod:`.identify`); when the
 candidate with the largest G is not identified it is reported as "fits, but unidentifiable
 with these data" and nothing further is named. Among candidates whose gain is within one
-standard error of the largest (:func:`gain_standard_error`, the paired per-measurement
-differences of the held-out χ²), the one with the fewest parameters is preferred — the
-one-standard-error rule of cross-validated model choice (Hastie, Tibshirani & Friedman, *The
-Elements of Statistical Learning*, 2nd ed., §7.10): at GEO the light time is a near-constant
-delay that a clock offset of −τ reproduces to within the noise, and the parameter-free
-explanation is the one to name. The search stops when the model is consistent with the
-noise, when no candidate qualifies, or after ``max_effects`` additions.
+standard error of the largest (:func:`gain_standard_error`), the one with the fewest
+parameters is preferred — the one-standard-error rule of cross-validated model choice
+(Hastie, Tibshirani & Friedman, *The Elements of Statistical Learning*, 2nd ed., §7.10: the
+standard error of the best candidate's held-out statistic): at GEO the light time is a
+near-constant delay that a clock offset of −τ reproduces to within the noise, and the
+parameter-free explanation is the one to name. The search stops when the model is
+consistent with the noise, when no candidate qualifies, or after ``max_effects`` additions.
 """
 
 from __future__ import annotations
@@ -224,17 +224,17 @@ def held_out_summary(problem, pred, folds=None, pred_var=None) -> dict:
     return out
 
 
-def gain_standard_error(best: dict, other: dict) -> float:
-    """Standard error of G(best) − G(other) for two held-out summaries of the same
-    measurements: G_b − G_o = n ln(χ²_o/χ²_b) ≈ n Σ_i d_i / χ²_b with d_i = z²_o,i − z²_b,i,
-    so se = n √n s_d / χ²_b, with s_d the robust spread 1.4826 MAD(d) (a few measurements
-    that one model misses by tens of σ would otherwise make any two models look tied)."""
-    d = np.asarray(other["_z2"]) - np.asarray(best["_z2"])
-    n = d.size
+def gain_standard_error(best: dict) -> float:
+    """Standard error of the held-out statistic of the best candidate, in units of G:
+    G = n ln(χ²_A/χ²_held) moves with ln χ²_held, whose standard error over n independent
+    held-out measurements is √(n var(z²_i))/χ²_held (delta method), so se = n √(n var(z²))/χ²
+    (≈ √(2n) for Gaussian residuals). The one-standard-error rule compares the other
+    candidates' gains with this (Hastie, Tibshirani & Friedman 2009, §7.10)."""
+    z2 = np.asarray(best["_z2"], float)
+    n = z2.size
     if n < 2 or best["chi2"] <= 0:
         return float("nan")
-    s_d = 1.4826 * float(np.median(np.abs(d - np.median(d))))
-    return float(n * np.sqrt(n) * s_d / best["chi2"])
+    return float(n * np.sqrt(n * np.var(z2, ddof=1)) / best["chi2"])
 
 
 def held_out_gain(before: dict, after: dict) -> float:
