@@ -208,13 +208,15 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
 
 
 def _one_standard_error(ok):
-    """Reorder ``ok`` (sorted by gain) so that the candidate with the fewest parameters among
-    those within one standard error of the best gain comes first (:mod:`.selection`)."""
+    """Reorder ``ok`` (sorted by gain) so that the identified candidate with the fewest
+    parameters among those within one standard error of the best gain comes first
+    (:mod:`.selection`)."""
     if len(ok) < 2 or "held_out" not in ok[0]:
         return
     best = ok[0]
     se = gain_standard_error(best["held_out"])
-    tied = [r for r in ok if "held_out" in r and r["gain"] > 0 and best["gain"] - r["gain"] <= se]
+    tied = [r for r in ok if "held_out" in r and r["gain"] > 0 and r.get("identified")
+            and best["gain"] - r["gain"] <= se]
     if len(tied) < 2:
         return
     simplest = min(tied, key=lambda r: (r["in_sample"]["n_params_added"], -r["gain"]))
