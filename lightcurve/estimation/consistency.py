@@ -105,6 +105,23 @@ def chi2_interval(dof, prob=0.95, n_avg=1):
     return float(stats.chi2.ppf(a, k) / n_avg), float(stats.chi2.ppf(1.0 - a, k) / n_avg)
 
 
+def order_statistic_interval(dof, k, n, prob=0.99):
+    """Two-sided interval of the k-th smallest of ``n`` independent χ²_dof variables.
+
+    Exact: ``F(X_(k)) ~ Beta(k, n − k + 1)`` for the order statistic of any continuous
+    distribution F (David & Nagaraja 2003, Order Statistics, 3rd ed., §2.1), so
+    ``(lo, hi) = F⁻¹(Beta⁻¹((1 ∓ prob)/2))`` with F the χ²_dof distribution. With
+    ``k = ⌈n/2⌉`` it bounds the (lower) median, a statistic a few gross outliers cannot move.
+    """
+    dof, k, n = int(dof), int(k), int(n)
+    if dof < 1 or n < 1 or not 1 <= k <= n:
+        raise ValueError(f"need dof >= 1 and 1 <= k <= n, got dof={dof}, k={k}, n={n}")
+    prob = _check_prob(prob)
+    a = 0.5 * (1.0 - prob)
+    lo_u, hi_u = stats.beta.ppf([a, 1.0 - a], k, n - k + 1)
+    return float(stats.chi2.ppf(lo_u, dof)), float(stats.chi2.ppf(hi_u, dof))
+
+
 def averaged_nees(errs, P):
     """Ensemble-averaged NEES over Monte Carlo runs (axis 0): errs (N, …, n), P (N, …, n, n)."""
     return np.mean(nees(errs, P), axis=0)

@@ -138,3 +138,21 @@ def test_nis_detector_detects_fault_and_skips_nan():
     assert NISDivergenceDetector.first_flag(np.zeros(5, bool)) is None
     with pytest.raises(ValueError):
         det.update(-1.0)
+
+
+def test_order_statistic_interval_covers_the_sample_median_at_its_rate():
+    """The exact interval of the ⌈n/2⌉-th order statistic of n χ²₁ variables (Beta law of F(X_(k)),
+    David & Nagaraja 2003 §2.1) against 20,000 simulated medians (n = 73, fixed seed): the
+    fraction outside the 99 % interval is 1 % ± 0.3 % (4.2 binomial σ: false-alarm rate < 1e-4);
+    for k = n it is the χ²₁ quantile of the maximum, (F⁻¹(((1 ∓ p)/2)^(1/n)))."""
+    from lightcurve.estimation.consistency import order_statistic_interval
+
+    n, k = 73, 37
+    lo, hi = order_statistic_interval(1, k, n, 0.99)
+    rng = np.random.default_rng(8)
+    med = np.sort(rng.chisquare(1, size=(20000, n)), axis=1)[:, k - 1]
+    out = np.mean((med < lo) | (med > hi))
+    assert abs(out - 0.01) < 0.003, out
+    lo_m, hi_m = order_statistic_interval(1, n, n, 0.99)
+    assert hi_m == pytest.approx(stats.chi2.ppf(0.995 ** (1 / n), 1), rel=1e-9)
+    assert lo_m == pytest.approx(stats.chi2.ppf(0.005 ** (1 / n), 1), rel=1e-9)

@@ -321,23 +321,30 @@ def test_ukf_cholesky_failure_restores_prior_and_flags(curve, monkeypatch):
 
 
 def test_bpf_from_60deg_converges_on_the_default_scenario():
-    """Issue 5 / Bernard fig. 9.5c–e: from a 60° initial attitude error the particle filter
-    ends below 5° on the thesis LEO fast-spin case
-    (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml). Regression guard
-    for the joint kernel: applied to the wide multimodal early cloud it merged the modes and
-    19 of 20 such runs ended ≈ 170° off; with the compactness rule (joint_max_spread_deg) 20
-    of 20 end below 5° (median 0.64°; module docstring of filters/bpf.py). The first two
-    seeds, 10⁴ particles, as in benchmarks/filters_acceptance.py."""
+    """Bernard fig. 9.5c–e: from a 60° initial attitude error the particle filter ends below 5°
+    on the thesis LEO fast-spin case (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml,
+    Table 9.2 cube), 10⁴ particles as in benchmarks/filters_acceptance.py. Regression guard for
+    the joint kernel: applied to the wide multimodal early cloud it merged the modes and 19 of
+    20 such runs ended ≈ 170° off (module docstring of filters/bpf.py). Seeds 0–9: at least 7
+    end below 5° (measured 9/10; at a true success rate of 0.9 the binomial false-alarm rate of
+    this bound is 1.3 %), and every run that does not is flagged by the truth-free consistency
+    tests (Estimate.consistency) — a failure is never reported as a confident answer."""
     from lightcurve._paths import data_dir
     from lightcurve.filters.invert import invert
     from lightcurve.studies.scenario import load_scenario
     from lightcurve.studies.simulate import simulate
 
     sc = load_scenario(data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml")
-    for i in (0, 1):
+    good = 0
+    for i in range(10):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             lc = simulate(sc, i)
         e = invert(lc, "bpf", seed=i, sigma_theta_deg=60.0, sigma_omega_deg_s=0.02,
                    particles=10_000)
-        assert e.summary()["final_att_error_rss_deg"] < 5.0, i
+        s = e.summary()
+        if s["final_att_error_rss_deg"] < 5.0:
+            good += 1
+        else:
+            assert s["consistency"]["flags"], (i, s["final_att_error_rss_deg"])
+    assert good >= 7, good
