@@ -36,6 +36,10 @@ sys.path.insert(0, str(ROOT / "tests" / "diagnosis"))
 
 from reflection_bpf import print_with_machine  # noqa: E402  (shared JSON footer)
 
+from lightcurve.studies.runner import limit_blas_threads  # noqa: E402
+
+limit_blas_threads()   # small dense fits: threaded BLAS only spins (children inherit the env)
+
 
 def _one(args):
     case, seed = args

@@ -13,6 +13,9 @@ Top-level API (imported lazily so that ``import lightcurve`` stays fast):
 """
 
 from .errors import ConvergenceError, InputError
+from .threads import configure_threading
+
+configure_threading()
 
 __version__ = "0.1.0"
 

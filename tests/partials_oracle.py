@@ -102,7 +102,8 @@ def _partials_block(shape, qa, sun_dir_eci, obs_dir_eci, range_obs_m, range_sun_
         xi, a, m = (shape.params[ct, j] for j in range(3))
         nsc, noc, nhc, cc = ns[:, ct], no[:, ct], nh[:, ct], c[:, ct]
         nv = nvec[:, ct]
-        spec = (xi < 1.0) & (nhc > 0) & (cc > 0)
+        # the specular lobe is weighted by (1 − ξ): zero at ξ = 1 but its ξ-derivative is not
+        spec = (nhc > 0) & (cc > 0)
         nhs = np.where(spec, nhc, 1.0)
         cs = np.where(spec, cc, 1.0)
         nh2 = nhs * nhs

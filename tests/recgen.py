@@ -17,7 +17,7 @@ Nothing here calls the lightcurve package. The physics is written out again from
 from __future__ import annotations
 
 import os
-from datetime import datetime, timedelta, timezone
+from datetime import datetime, timedelta
 
 import numpy as np
 

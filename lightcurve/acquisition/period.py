@@ -19,6 +19,12 @@ Method
    ``5 log10(|r_sun|/1 au)`` (the distance terms of the magnitude equation, DESIGN.md), so a
    LEO pass's range sweep does not masquerade as a period. A polynomial trend in time (degree
    ``trend_degree``, one per site) absorbs the slow phase-angle dependence.
+   Specular glints (a facet's mirror direction crossing the observer for one or two samples,
+   several magnitudes bright) are not representable by a few harmonics and would dominate every
+   least-squares statistic; the detrended magnitudes are winsorised at ``clip_mad`` robust
+   standard deviations (1.4826 × the median absolute deviation; Huber 1981, Robust Statistics,
+   §1.4) before steps 2–4. A harmonic signal of any amplitude is never clipped at the default 3
+   (the MAD-σ of a sinusoid of amplitude A is 1.05 A); ``clip_mad=None`` turns this off.
 2. Candidates: the Lomb–Scargle periodogram (astropy, one harmonic, floating mean) of the
    detrended magnitudes, and the phase-dispersion minimisation statistic θ (Stellingwerf 1978,
    ApJ 224, 953) on the same residuals. Each strong peak may be the fundamental or one of its
@@ -31,7 +37,8 @@ Method
    rarely fits a pass to the stated noise, and the scale-free form keeps the penalty in
    proportion to the misfit) is the answer (a multiple of the true period fits no better with
    the same number of harmonics, so it loses on k). Harmonics above the Nyquist frequency of
-   the median cadence are not used.
+   the median cadence are not used. The brightness of a faceted body may repeat 2, 3 or 4
+   times per turn, so these multiples of the best period are always scored and listed.
 4. Uncertainty: a non-linear least-squares fit of frequency and linear terms together
    (scipy ``least_squares``); the frequency's 1σ from the Jacobian, inflated by √(χ²/dof) when
    the fit is worse than the noise. The 99 % interval of the sidereal period adds the synodic
@@ -192,6 +199,7 @@ class PeriodResult:
     pab_rate_rad_s: float
     n_points: int
     span_s: float
+    n_clipped: int
     frequency_hz: np.ndarray = field(repr=False)
     power_ls: np.ndarray = field(repr=False)
     theta_pdm: np.ndarray = field(repr=False)
@@ -207,7 +215,7 @@ class PeriodResult:
 
     @property
     def ambiguous(self) -> bool:
-        """True when another period fits about as well as the best (ΔBIC ≤ 6)."""
+        """True when another period cannot be ruled out (ΔBIC ≤ :data:`INDISTINGUISHABLE_DBIC`)."""
         return len(self.candidates) > 1
 
     def contains(self, period_s) -> bool:
@@ -238,7 +246,7 @@ class PeriodResult:
                                for c in self.candidates],
                 "ls_period_s": self.ls_period_s, "pdm_period_s": self.pdm_period_s,
                 "pab_rate_deg_s": math.degrees(self.pab_rate_rad_s),
-                "n_points": self.n_points, "span_s": self.span_s,
+                "n_points": self.n_points, "span_s": self.span_s, "n_clipped": self.n_clipped,
                 "aliases": [dict(a, interval_99_s=list(a["interval_99_s"])) for a in self.aliases]}
 
     def rate_candidates(self, max_delta_bic=10.0, multiples=(2,), multiple_weight=0.25):
@@ -323,7 +331,8 @@ class PeriodResult:
 
 
 def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics=6,
-                   trend_degree=2, oversample=20, n_peaks=6, pdm_bins=10) -> PeriodResult:
+                   trend_degree=2, oversample=20, n_peaks=6, pdm_bins=10,
+                   clip_mad=3.0) -> PeriodResult:
     """Spin-period analysis of a lightcurve (module docstring).
 
     Parameters
@@ -342,6 +351,9 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
         Periodogram peaks (Lomb–Scargle and PDM each) whose sub-harmonics are candidates.
     pdm_bins : int ≥ 2
         Phase bins of the PDM statistic.
+    clip_mad : float > 0 or None
+        Detrended magnitudes beyond this many robust standard deviations are winsorised
+        (glints); None keeps every value as it is.
 
     Returns
     -------
@@ -361,6 +373,9 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
                         ("pdm_bins", pdm_bins, 2)):
         if int(v) != v or v < lo:
             raise InputError("must be an integer", field=name, value=v, allowed=f">= {lo}")
+    if clip_mad is not None and not (np.isfinite(clip_mad) and clip_mad > 0):
+        raise InputError("must be a positive number or None", field="clip_mad", value=clip_mad,
+                         allowed="> 0 (robust standard deviations), or None")
     t_all = np.asarray(curve.t, float)[rows]
     order = np.argsort(t_all, kind="stable")
     rows = rows[order]
@@ -404,6 +419,16 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
     chi2_trend, ctr = _wls_chi2(T, y, w)
     resid = y - T @ ctr
     n = y.size
+    n_clipped = 0
+    if clip_mad is not None:
+        lim = float(clip_mad) * 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+        if lim > 0:
+            clipped = np.clip(resid, -lim, lim)
+            n_clipped = int(np.count_nonzero(clipped != resid))
+            if n_clipped:
+                y = T @ ctr + clipped
+                chi2_trend, ctr = _wls_chi2(T, y, w)
+                resid = y - T @ ctr
 
     # --- 2. Lomb–Scargle and PDM on the detrended residuals ----------------------------
     ls = LombScargle(t, resid, sig, nterms=1, fit_mean=True, center_data=True)
@@ -512,7 +537,7 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
             aliases.append({"period_s": P, "relation": relation(P),
                             "delta_bic": float(r[0] - b0), "n_harmonics": int(r[2]),
                             "interval_99_s": interval(P)})
-    for k in (2, 3):
+    for k in (2, 3, 4):
         P = k * P_best
         if P <= pmax * 1.5 and distinct(P):
             f = 1.0 / P
@@ -540,5 +565,6 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
         false_alarm_probability=fap, chi2_dof=float(chi2_dof), aliases=aliases,
         ls_period_s=float(1.0 / freqs[int(np.argmax(p_ls))]),
         pdm_period_s=float(1.0 / freqs[int(np.argmin(theta))]),
-        pab_rate_rad_s=float(pab), n_points=int(n), span_s=span, frequency_hz=freqs,
+        pab_rate_rad_s=float(pab), n_points=int(n), span_s=span, n_clipped=n_clipped,
+        frequency_hz=freqs,
         power_ls=p_ls, theta_pdm=theta, fold=fold)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._args import add_executors, add_model_options, add_output, add_quiet, number
+from ._args import add_device, add_executors, add_model_options, add_output, add_quiet, number
 
 __all__ = ["register"]
 
@@ -16,7 +16,7 @@ def _cmd_compare(args) -> int:
     study = load_study(args.study, library_dirs=args.library, site_dirs=args.sites)
     summary = run_study(study, args.output, runs=args.runs, workers=args.workers,
                         scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
-                        progress=not args.quiet)
+                        progress=not args.quiet, device=args.device)
     cells = summary["cells"]
     cnt = {c: sum(1 for x in cells if x["color"] == c) for c in ("green", "yellow", "red")}
     fails = sum(x["failures"] for x in cells)
@@ -55,5 +55,6 @@ def register(sub) -> None:
                    help="discard stored runs of a different (changed) study instead of refusing")
     add_quiet(p, help="no progress bar")
     add_model_options(p, shape=False)
+    add_device(p)
     p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
                    "run the same command again to resume")

@@ -12,6 +12,10 @@ __all__ = ["register"]
 def _cmd_diagnose(args) -> int:
     from ..diagnosis.folds import GROUPINGS
     from ..errors import InputError
+    from ..studies.runner import limit_blas_threads
+
+    # the diagnosis fits are small dense least-squares problems: threaded BLAS only spins
+    limit_blas_threads()
 
     say = (lambda m: None) if args.quiet else (lambda m: print(m, flush=True))
     if args.apply is not None:
@@ -36,7 +40,7 @@ def _cmd_diagnose(args) -> int:
             raise InputError("unknown cross-validation grouping", field="--cv", value=g,
                              allowed="auto, none, " + ", ".join(GROUPINGS))
     folds = None if groups[0] == "none" else groups[0]
-    with naming_file(args.recording):
+    with naming_file(args.recording[0] if len(args.recording) == 1 else ", ".join(args.recording)):
         d = diagnose_recording(args.recording, args.scenario, free=args.free,
                                exclude=[e.strip() for e in (args.exclude or "").split(",")
                                         if e.strip()],

@@ -6,12 +6,10 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from ..acquisition.global_init import GlobalInitConfig
 from ..errors import InputError
-from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
-from ..studies.batch import expand_inputs, invert_files
-from ._args import (add_executors, add_model_options, add_output, add_plot, add_quiet, add_seed,
-                    add_variant, csv_ints, csv_list, initial_omega_rad_s, initial_q, number,
+from ._args import (add_device, add_executors, add_model_options, add_output, add_plot,
+                    add_quiet, add_seed, add_variant, csv_ints, csv_list, initial_omega_rad_s,
+                    initial_q, number,
                     refuse_inapplicable)
 
 __all__ = ["register", "configs_from_args"]
@@ -37,6 +35,9 @@ def _refuse_inapplicable_options(args) -> None:
 def configs_from_args(args):
     """``(ProblemConfig, filter options dict)`` from the parsed ``invert`` options — the same
     validated objects the Python API and the study TOML build."""
+    from ..acquisition.global_init import GlobalInitConfig
+    from ..filters.config import BPF_KEYWORDS, ProblemConfig, filter_config_class
+
     start = {}  # the user's initial estimate (truth-free recordings); None: the file's truth
     if args.initial_q is not None:
         start["initial_q"] = initial_q(args.initial_q)
@@ -76,6 +77,8 @@ def configs_from_args(args):
 
 
 def _cmd_invert(args) -> int:
+    from ..studies.batch import expand_inputs, invert_files
+
     _refuse_inapplicable_options(args)
     n_files = len(expand_inputs(args.files))  # a pattern matching nothing: InputError, exit 2
     problem, filter_options = configs_from_args(args)
@@ -159,15 +162,18 @@ def register(sub) -> None:
     p.add_argument("--particles", type=number(2, 10_000_000, integer=True), default=10_000, help="BPF particles (default 10000)")
     p.add_argument("--roughening", type=number(0.0, 10.0), default=0.2,
                    help="BPF roughening constant G in [0, 10] (Bernard table 7.9: sigma = G E "
-                   "N^(-1/n), E the spread of the cloud; used with --rejuvenation separate; "
-                   "default 0.2)")
-    p.add_argument("--resampling", choices=("systematic", "multinomial"), default="systematic",
-                   help="BPF resampling scheme (default systematic)")
-    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint"), default="auto",
+                   "N^(-1/n), E the spread of the cloud; used by --rejuvenation separate and "
+                   "table7.9; default 0.2)")
+    p.add_argument("--resampling", choices=("systematic", "multinomial"), default=None,
+                   help="BPF resampling scheme (default: systematic; multinomial, Bernard "
+                   "table 6.3, with --variant thesis)")
+    p.add_argument("--rejuvenation", choices=("auto", "separate", "joint", "table7.9", "none"),
+                   default=None,
                    help="BPF: how the resampled cloud is moved: joint = one Liu-West kernel on "
                    "the whole state with the Musso et al. (2001) bandwidth; separate = the "
-                   "table-7.9 roughening of attitude and rate (uses --roughening); auto = joint "
-                   "when the attitude is estimated (default)")
+                   "table-7.9 sigma added in the GRP chart (uses --roughening); table7.9 = "
+                   "Bernard's table 7.9 as written; none; auto = joint while the attitude cloud "
+                   "is compact, else separate (default: auto; table7.9 with --variant thesis)")
     p.add_argument("--ess-threshold", type=number(0.0, 1.0), default=0.5,
                    help="BPF: resample when N_eff < threshold * N (default 0.5)")
     p.add_argument("--acs-mode", choices=("random_walk", "jitter"), default=None,
@@ -177,6 +183,7 @@ def register(sub) -> None:
                    help="rate pseudo-noise PSD, (rad/s)^2/s, in [0, 1] (1 already lets the rate "
                    "wander by 1 rad/s in 1 s; default 0)")
     add_variant(p, default=None)
+    add_device(p)
     p.add_argument("--alpha", type=number(1e-4, 1.0), default=1.0,
                    help="UKF alpha in [1e-4, 1] (Bernard sec. 6: between 0 and 1; below 1e-4 "
                    "the sigma-point weights lose all precision; default 1)")

@@ -18,7 +18,8 @@ def _cmd_period(args) -> int:
 
     curve = read_lightcurve(args.file)
     res = analyse_period(curve, min_period_s=args.min_period_s, max_period_s=args.max_period_s,
-                         max_harmonics=args.max_harmonics, trend_degree=args.trend_degree)
+                         max_harmonics=args.max_harmonics, trend_degree=args.trend_degree,
+                         clip_mad=None if args.clip_mad == 0 else args.clip_mad)
     lo, hi = res.interval_99_s
     print(f"{args.file}: {res.n_points} magnitudes over {res.span_s:.1f} s")
     print(f"brightness (synodic) period {res.period_s:.5g} ± {res.period_sigma_s:.2g} s "
@@ -33,6 +34,9 @@ def _cmd_period(args) -> int:
                         f"{c['interval_99_s'][0]:.5g}-{c['interval_99_s'][1]:.5g})"
                         for c in res.candidates[1:])
         print(f"AMBIGUOUS: these periods fit about as well (delta BIC <= 6): {alt}")
+    if res.n_clipped:
+        print(f"{res.n_clipped} glint(s) winsorised at {args.clip_mad:g} robust sigma "
+              "(--clip-mad 0 keeps them)")
     print(f"Lomb-Scargle peak {res.ls_period_s:.5g} s; PDM minimum {res.pdm_period_s:.5g} s")
     if res.aliases:
         print("aliases (period s, relation, delta BIC):")
@@ -70,4 +74,7 @@ def register(sub) -> None:
                    help="most harmonics of the multi-harmonic model (default 6)")
     p.add_argument("--trend-degree", type=number(0, 6, integer=True), default=2,
                    help="degree of the per-site polynomial trend removed with the fit (default 2)")
+    p.add_argument("--clip-mad", type=number(0.0, 100.0), default=3.0,
+                   help="winsorise detrended magnitudes beyond this many robust sigma (specular "
+                   "glints a few harmonics cannot follow); 0 keeps every value (default 3)")
     p.set_defaults(func=_cmd_period)

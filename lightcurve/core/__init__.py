@@ -12,7 +12,9 @@ Modules (each kernel's docstring names its equation and source):
   Schmidt consider update;
 * :mod:`.sigma_points` — scaled unscented weights and sigma points;
 * :mod:`.photometry` — BRDFs (one Cook–Torrance with its derivatives), facet flux and its
-  analytic partials.
+  analytic partials;
+* :mod:`.particles` — particle log weights (log-sum-exp), ESS, tempering, systematic and
+  multinomial resampling, Table 7.9 roughening, the Liu–West kernel, counter-based normals.
 
 Nothing here validates its inputs or allocates Python objects: the object layers
 (:mod:`lightcurve.rotations`, :mod:`lightcurve.dynamics`, :mod:`lightcurve.estimation`,

@@ -337,14 +337,21 @@ def fault_study(n_runs=300, modes=FAULT_MODES + (None,), *, seed=0, workers=1,
         for i in range(int(n_runs)):
             jobs.append((np.random.SeedSequence([int(seed), mi, i]), m, kw))
     if workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
+        from ..process import stop_pool
+        from ..studies.runner import process_pool
 
-        with ProcessPoolExecutor(workers) as ex:
+        # the package's pool: workers die with this process, stopped at once if interrupted
+        ex = process_pool(workers)
+        try:
             runs = []
             for r in ex.map(_worker, jobs, chunksize=4):
                 runs.append(r)
                 if progress is not None:
                     progress()
+        except BaseException:
+            stop_pool(ex)
+            raise
+        ex.shutdown(wait=True)
     else:
         runs = []
         for j in jobs:

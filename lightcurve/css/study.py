@@ -505,7 +505,9 @@ def write_css_report(spec: StudySpec, summary: dict, out_dir) -> Path:
     from ..report.html import figure_to_data_uri
 
     out = Path(out_dir)
-    envs = json.loads((out / "envelopes.json").read_text())
+    from ..io.safe_open import read_json
+
+    envs = read_json(out / "envelopes.json", what="envelopes.json", track=False)
     grid = np.arange(0.0, spec.duration_s + TAU_STEP_S, TAU_STEP_S) / 60.0
     rows = []
     for c in summary["cases"]:

@@ -16,8 +16,9 @@ For each effect of the problem's kind (``magnitude`` or ``css``) that is not exc
    facet or glint the body-frame Sun–observer bisector at the epochs most brighter than the
    model: the normal a mirror must have to flash there). Integer parameters (a CSS sensor)
    are enumerated and step times (``t_start_s``) scanned on a grid of the data's times.
-3. **Evidence**: ΔBIC = n ln(χ²₀/χ²₁) − k ln n (:func:`~.baseline.bic_gain`; k = the
-   effect's parameter count). Candidates are ranked by ΔBIC (largest first).
+3. **In-sample evidence**: ΔBIC = n ln(χ²₀/χ²₁) − k ln n (:func:`~.baseline.bic_gain`; k =
+   the effect's parameter count); the list is ordered by it. The choice between candidates
+   is made on held-out data by :mod:`.selection`.
 """
 
 from __future__ import annotations
@@ -231,8 +232,11 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
     grid = _grid_values(eff, problem)
     gnames = {s.name for s in eff.params if s.integer or s.name in GRID_PARAMS}
     if around is not None and len(grid) > 1:
-        # refine only at the best grid point of stage 1
+        # refine only at the best grid point of stage 1 — a step time at the resolution of
+        # the data (_refine_step_time)
         fx = {k: v for k, v in around.terms[0][1].items() if k in gnames}
+        if "t_start_s" in fx:
+            fx = _refine_step_time(eff, problem, base_fit, around, fx, grid, rec)
         grid = [fx]
     profile = []
     for fixed in grid:
@@ -251,9 +255,48 @@ def _fit_over_grid(eff, problem, base_fit, starts, nfev, rec, around=None):
     return best
 
 
+def _refine_step_time(eff, problem, base_fit, fit, fixed, grid, rec):
+    """The step time between the grid values around the best one, at the resolution of the
+    data: every distinct measurement time in (previous grid time, next grid time] is tried
+    with the other parameters at ``fit``'s values; the profile gets these points too."""
+    times = sorted({float(g["t_start_s"]) for g in grid})
+    t0 = float(fixed["t_start_s"])
+    i = times.index(t0) if t0 in times else int(np.argmin(np.abs(np.asarray(times) - t0)))
+    lo = times[i - 1] if i > 0 else -np.inf
+    hi = times[i + 1] if i + 1 < len(times) else np.inf
+    tu = np.unique(problem.t)
+    cand = tu[(tu > lo) & (tu <= hi)]
+    params = dict(fit.terms[0][1])
+    best = (float(fit.chi2), t0)
+    prof = rec.setdefault("_profiles", [])
+    for tt in cand:
+        p = {**params, "t_start_s": float(tt)}
+        try:
+            c2 = problem.chi2(problem.predict(fit.theta if problem.n_free else None, [(eff, p)]))
+        except Exception:  # pragma: no cover - defensive
+            continue
+        prof.append(({**fixed, "t_start_s": float(tt)}, float(c2)))
+        if c2 < best[0]:
+            best = (c2, float(tt))
+    return {**fixed, "t_start_s": best[1]}
+
+
 def held_values(effect, params) -> dict:
-    """The values of the parameters fits hold fixed (integer, grid, held) in ``params``."""
-    return {k: v for k, v in params.items() if k in held_names(effect)}
+    """The values of the parameters fits hold fixed: integer and grid parameters at their
+    values in ``params``; parameters in the effect's ``hold`` (held at their reference value
+    because the data do not identify them) at their default."""
+    specs = {s.name: s for s in effect.params}
+    hold = set(getattr(effect, "hold", ()) or ())
+    out = {}
+    for k, v in params.items():
+        if k not in held_names(effect):
+            continue
+        if k in hold:
+            d = float(specs[k].default)
+            out[k] = np.full(np.shape(v), d) if np.ndim(v) else d
+        else:
+            out[k] = v
+    return out
 
 
 def score_candidates(problem, base_fit, names=None, *, seed: int = 0, max_nfev: int = 60,

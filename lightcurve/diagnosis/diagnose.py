@@ -40,12 +40,12 @@ import numpy as np
 
 from ..report.views import DiagnosisViews
 from .baseline import bic_gain, fit_baseline, fit_terms
-from .candidates import params_to_json, score_candidates
+from .candidates import score_candidates
 from .folds import DEFAULT_FOLDS, make_folds
 from .identify import identify_free, identify_term
 from .residuals import consistency, find_segments
-from .selection import (MIN_GAIN, Model, cv_predict, folds_improved, held_out_gain,
-                        held_out_summary)
+from .selection import (MIN_GAIN, Model, cv_predict, folds_improved, gain_standard_error,
+                        held_out_gain, held_out_summary)
 from .surface import SURFACE_DESCRIPTION, identifiable_subset, surface_free_params
 
 __all__ = ["Diagnosis", "diagnose", "diagnose_recording", "TIMING_EFFECTS", "load_model_scenario",
@@ -195,7 +195,7 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
                in_sample=_in_sample(model.problem, model.fit, current.fit))
     if folds is not None:
         cv = cv_predict(model, folds, max_nfev=cv_nfev)
-        hs = held_out_summary(model.problem, cv["pred"], folds)
+        hs = held_out_summary(model.problem, cv["pred"], folds, cv["pred_var"])
         hs["gain"] = held_out_gain(cur_hs, hs)
         hs["folds_improved"] = folds_improved(cur_hs, hs)
         hs["n_folds"] = folds.n_folds
@@ -207,11 +207,34 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
     return rec, model
 
 
+def _one_standard_error(ok):
+    """Reorder ``ok`` (sorted by gain) so that the identified candidate with the fewest
+    parameters among those within one standard error of the best gain comes first
+    (:mod:`.selection`)."""
+    if len(ok) < 2 or "held_out" not in ok[0]:
+        return
+    best = ok[0]
+    se = gain_standard_error(best["held_out"])
+    tied = [r for r in ok if "held_out" in r and r["gain"] > 0 and r.get("identified")
+            and best["gain"] - r["gain"] <= se]
+    if len(tied) < 2:
+        return
+    simplest = min(tied, key=lambda r: (r["in_sample"]["n_params_added"], -r["gain"]))
+    if simplest is not best:
+        ok.remove(simplest)
+        ok.insert(0, simplest)
+        simplest["one_se_rule"] = (f"within one standard error of {best['name']}'s held-out gain "
+                                   "with fewer parameters")
+
+
 def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: float = MIN_GAIN,
              max_effects: int = 2, pair_candidates: int = 3, surface: bool = True,
              cv_report=(), skip_reasons=None, seed: int = 0, max_nfev: int = 60,
              cv_nfev: int = 30, progress=None) -> Diagnosis:
-    """Run the diagnosis of ``problem`` (module docstring).
+    """Run the diagnosis of ``problem`` (module docstring). Its fits are small dense
+    least-squares problems: with a multi-threaded OpenBLAS, call
+    :func:`lightcurve.studies.runner.limit_blas_threads` first (``lightcurve diagnose`` does;
+    4× less CPU on a loaded 2-core machine).
 
     ``folds``: grouping for the selection ("auto" or one of :data:`~.folds.GROUPINGS`, or
     None for no cross-validation); ``n_folds``: number of folds; ``min_gain``: held-out gain
@@ -254,7 +277,7 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
     base_hs = cur_hs = None
     if fo is not None:
         base_cv = cv_predict(current, fo, max_nfev=cv_nfev)
-        base_hs = cur_hs = held_out_summary(problem, base_cv["pred"], fo)
+        base_hs = cur_hs = held_out_summary(problem, base_cv["pred"], fo, base_cv["pred_var"])
     steps, chosen, unidentified = [], [], []
     chk = chk0
     by_name = {c["name"]: c for c in cands}
@@ -279,6 +302,7 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
             c.setdefault("steps", []).append(rec)
         ok = [r for r in recs if r.get("applicable") and np.isfinite(r.get("gain", np.nan))]
         ok.sort(key=lambda r: -r["gain"])
+        _one_standard_error(ok)
         pick = None
         top = ok[0] if ok else None
         for r in ok:
@@ -293,7 +317,7 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
                 continue
             if pick is None and r is top:
                 pick = r
-                r["decision"] = "added"
+                r["decision"] = "added" + (f" ({r['one_se_rule']})" if "one_se_rule" in r else "")
             elif pick is None:
                 # the best explanation is not identifiable: a lesser one would mislead
                 r["decision"] = f"not named: {top['name']} explains more but is unidentifiable"
@@ -307,7 +331,7 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
         chk = consistency(current.fit.z, current.problem.t, current.fit.n_params)
         if fo is not None:
             cv = cv_predict(current, fo, max_nfev=cv_nfev)
-            cur_hs = held_out_summary(current.problem, cv["pred"], fo)
+            cur_hs = held_out_summary(current.problem, cv["pred"], fo, cv["pred_var"])
         # later steps: the most promising of the rest (by this step's gain)
         rest = [r["name"] for r in ok if r["name"] != pick["name"] and r["gain"] > 0]
         pool = [by_name[n] for n in rest[:pair_candidates]]
@@ -343,9 +367,11 @@ def _cross_validation(d, base_hs, final_hs, cv_report, n_folds, cv_nfev, say):
             out["schemes"].append({"grouping": g, "possible": False, "reason": why})
             continue
         say(f"held-out check: {fo.describe()}")
-        b = held_out_summary(d.problem, cv_predict(base_model, fo, max_nfev=cv_nfev)["pred"], fo)
+        cb = cv_predict(base_model, fo, max_nfev=cv_nfev)
+        b = held_out_summary(d.problem, cb["pred"], fo, cb["pred_var"])
         fm = d.final_model
-        f = held_out_summary(fm.problem, cv_predict(fm, fo, max_nfev=cv_nfev)["pred"], fo)
+        cf = cv_predict(fm, fo, max_nfev=cv_nfev)
+        f = held_out_summary(fm.problem, cf["pred"], fo, cf["pred_var"])
         out["schemes"].append(_scheme(fo, b, f))
     return out
 

@@ -104,7 +104,7 @@ def earthshine_resolution_deg(ctx) -> float:
     (arccos(R⊕/r) at the lowest altitude). The Lambertian view-factor sum of a grid cell is
     then accurate to < 0.5 σ of 1 % photometry (700 km: 2°, 1.6 % of the Earthshine flux
     error at 10°, 0.1 % at 2°; MEO: 5°)."""
-    from ..css.albedo import WGS84_A_M
+    from ..earth.albedo import WGS84_A_M
 
     pos = ctx.r_obj_eci_m if hasattr(ctx, "r_obj_eci_m") else ctx.r_eci_m
     r = np.linalg.norm(np.asarray(pos, float), axis=1)

@@ -107,8 +107,6 @@ def _jsonable(v):
 
 def model_json(model) -> dict:
     """The fitted model in the form ``diagnose --apply`` reads (module docstring)."""
-    from ..physics.registry import ParamSpec  # noqa: F401  (documentation of the params)
-
     prob = model.problem
     fit = model.fit
     out = {"channels": prob.channel_names, "sites": list(prob.site_names),
@@ -263,7 +261,8 @@ def explanation(d) -> str:
     else:
         txt += f"No held-out check was possible ({d.cv_reason}); effects were judged in-sample. "
     by = {c["name"]: c for c in d.candidates}
-    recs = {r["name"]: r for s in d.steps for r in s["records"] if r.get("decision") == "added"}
+    recs = {r["name"]: r for s in d.steps for r in s["records"]
+            if str(r.get("decision", "")).startswith("added")}
     for i, name in enumerate(d.chosen):
         c, r = by[name], recs.get(name, {})
         desc = c.get("description", name)
@@ -401,7 +400,7 @@ def _figures(d):
     if recs and d.folds is not None:
         fig, ax = plt.subplots(figsize=figsize(10, 0.35 * len(recs) + 1.2), dpi=100)
         g = np.array([r["gain"] for r in recs])
-        col = ["C2" if r.get("decision") == "added" else ("C1" if not r.get("identified") else "0.6")
+        col = ["C2" if str(r.get("decision", "")).startswith("added") else ("C1" if not r.get("identified") else "0.6")
                for r in recs]
         yy = np.arange(len(recs))[::-1]
         ax.barh(yy, np.sign(g) * np.log10(1 + np.abs(g)), color=col)

@@ -49,15 +49,12 @@ class Transfer:
 
 def read_fit(path) -> dict:
     """The ``model`` of a diagnosis.json (InputError naming the file and field)."""
+    from ..io.safe_open import read_json
+
     p = Path(path)
-    if not p.is_file():
-        raise InputError("file not found", file=p)
-    if p.stat().st_size > 64 * 1024 * 1024:
-        raise InputError("file too large for a diagnosis.json", file=p, allowed="<= 64 MiB")
-    try:
-        js = json.loads(p.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"not a JSON file: {exc}", file=p) from None
+
+    # a regular file (no FIFO or device) of at most 64 MiB, size from the opened descriptor
+    js = read_json(p, max_bytes=64 * 1024 * 1024, what="diagnosis.json")
     if not isinstance(js, dict) or js.get("format") != "lightcurve-diagnosis":
         raise InputError("not a diagnosis.json", file=p, field="format",
                          value=js.get("format") if isinstance(js, dict) else None,
@@ -220,16 +217,18 @@ def write_transfer_report(tr: Transfer, out_dir) -> tuple[Path, Path]:
         f"<td>{(r['rms'] or float('nan')):.4f}</td><td>{(r['r'] or float('nan')):.3f}</td>"
         f"<td>{(r['delta_rms'] or 0):+.4f}</td><td>{'' if r['transfers'] is None else ('yes' if r['transfers'] else 'NO')}</td></tr>"
         for r in js["components"])
-    page = f"""<!DOCTYPE html><html><head><meta charset="utf-8"><title>Transfer: {html.escape(tr.recording)}</title>
-<style>body{{font-family:sans-serif;max-width:900px;margin:1.5em auto}}td,th{{border:1px solid #ccc;padding:2px 6px}}
-table{{border-collapse:collapse}}.v{{font-size:1.2em;font-weight:bold}}</style></head><body>
-<p class=v>{html.escape(tr.verdict[0].upper() + tr.verdict[1:])}.</p>
-<h1>Fitted model applied unchanged to a new recording</h1>
-<p>Recording {html.escape(tr.recording)} ({tr.n} measurements); fit {html.escape(Path(tr.fit_file).name)}.
-Nothing was refitted. A component transfers when it does not make the RMS worse.</p>
+    from ..report.style import page_html
+
+    full = [r for r in js["components"] if r["transfers"] is not None]
+    level = "ok" if full and full[-1]["transfers"] and all(r["transfers"] for r in full) else (
+        "warn" if full and full[-1]["transfers"] else "fail")
+    body = f"""<p>Recording {html.escape(tr.recording)} ({tr.n} measurements); fit
+{html.escape(Path(tr.fit_file).name)}. Nothing was refitted. A component transfers when it does
+not make the RMS worse than the model as given.</p>
 <table><tr><th>component</th><th>χ²/dof</th><th>RMS</th><th>Pearson R</th><th>ΔRMS vs as given</th><th>transfers</th></tr>
-{rows}</table><h2>Notes</h2><ul>{''.join(f'<li>{html.escape(n)}</li>' for n in tr.notes)}</ul></body></html>
-"""
+{rows}</table><h2>Notes</h2><ul>{''.join(f'<li>{html.escape(n)}</li>' for n in tr.notes)}</ul>"""
+    page = page_html(f"Fitted model applied to {tr.recording}", (level, tr.verdict[0].upper() + tr.verdict[1:] + "."),
+                     body)
     hp = out / "transfer.html"
     atomic_write_text(hp, page)
     return jp, hp

@@ -1,5 +1,8 @@
 """Particle-filter machinery: log weights, normalisation, resampling, roughening, moments.
 
+The checked object layer over the kernels of :mod:`lightcurve.core.particles` (where each
+equation is implemented once): argument validation, ``rng`` handling, new output arrays.
+
 Generic over the particle state (rows of an (N, d) float array). The bootstrap attitude
 filter (Bernard 2021 tables 7.7–7.11) keeps its particles as quaternion + rate and feeds the
 GRP/rate representation to :func:`roughen` and :func:`weighted_mean_cov`; the attitude-specific
@@ -24,6 +27,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..core import particles as core
+from ..core.particles import logsumexp_nb
 from ..errors import ConvergenceError
 from .rng import as_generator
 
@@ -52,86 +57,27 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 # --------------------------------------------------------------------------------------------
-# Numba kernels
+# Kernels (the one implementation lives in lightcurve.core.particles)
 # --------------------------------------------------------------------------------------------
 
-@numba.njit(cache=True)
-def logsumexp_nb(a):
-    """``log Σ exp(aᵢ)`` of a 1-D float64 array, stable for very negative entries.
-
-    Returns −inf when every entry is −inf (or the array is empty); NaN when an entry is NaN.
-    """
-    n = a.shape[0]
-    m = -np.inf
-    for i in range(n):
-        if np.isnan(a[i]):
-            return np.nan
-        if a[i] > m:
-            m = a[i]
-    if m == -np.inf:
-        return -np.inf
-    if m == np.inf:
-        return np.inf
-    s = 0.0
-    for i in range(n):
-        s += np.exp(a[i] - m)
-    return m + np.log(s)
-
-
-@numba.njit(cache=True)
-def _last_positive(w):
-    for i in range(w.shape[0] - 1, -1, -1):
-        if w[i] > 0.0:
-            return i
-    return -1
-
-
-@numba.njit(cache=True)
 def systematic_resample_nb(w, u0, n_out):
-    """Systematic resampling indices for non-negative weights ``w`` (need not sum to one).
-
-    Positions ``(u0 + j)/n_out`` (j = 0…n_out−1) of the normalised cumulative weights pick
-    particle i when ``C_{i−1} ≤ u < C_i``; ``u0`` ∈ [0, 1) is the single uniform draw.
-    Zero-weight particles are never selected. Output indices are non-decreasing.
-    """
-    N = w.shape[0]
-    last = _last_positive(w)
-    total = 0.0
-    for i in range(N):
-        total += w[i]
-    idx = np.empty(n_out, dtype=np.int64)
-    i = 0
-    c = w[0]
-    for j in range(n_out):
-        u = (u0 + j) / n_out * total
-        while u >= c and i < last:
-            i += 1
-            c += w[i]
-        idx[j] = i
+    """Systematic resampling indices (n_out,) for non-negative weights ``w`` (need not sum to
+    one), ``u0`` ∈ [0, 1) the single uniform (:func:`lightcurve.core.particles.
+    systematic_resample_into`). Zero-weight particles are never selected; indices are
+    non-decreasing."""
+    idx = np.empty(int(n_out), dtype=np.int64)
+    if not core.systematic_resample_into(w, float(u0), np.empty(w.shape[0]), idx):
+        raise ValueError("weights must not all be zero")
     return idx
 
 
-@numba.njit(cache=True)
 def resample_sorted_nb(w, u):
-    """Indices for sorted uniforms ``u`` (ascending, in [0, 1)) against the cumulative of ``w``.
-
-    Shared merge step of multinomial and stratified resampling; O(N + len(u)).
-    """
-    N = w.shape[0]
-    last = _last_positive(w)
-    total = 0.0
-    for i in range(N):
-        total += w[i]
-    n_out = u.shape[0]
-    idx = np.empty(n_out, dtype=np.int64)
-    i = 0
-    c = w[0]
-    for j in range(n_out):
-        uj = u[j] * total
-        while uj >= c and i < last:
-            i += 1
-            c += w[i]
-        idx[j] = i
+    """Indices for sorted uniforms ``u`` (ascending, in [0, 1)) against the cumulative of ``w``
+    (:func:`lightcurve.core.particles.sorted_resample_into`); O(N + len(u))."""
+    idx = np.empty(u.shape[0], dtype=np.int64)
+    if not core.sorted_resample_into(w, np.ascontiguousarray(u, dtype=np.float64),
+                                     np.empty(w.shape[0]), idx):
+        raise ValueError("weights must not all be zero")
     return idx
 
 
@@ -139,6 +85,7 @@ def resample_sorted_nb(w, u):
 def add_gaussian_loglik_nb(logw, resid, Linv, const):
     """In place: ``logw[i] += const − ½ |Linv · resid[i]|²`` for every particle i (prange).
 
+    The multivariate Gaussian measurement log-likelihood (Bernard eq. 6.56, in logs):
     ``resid`` (N, m) are measurement residuals ``y − h(xᵢ)``, ``Linv`` (m, m) the inverse of the
     lower Cholesky factor of R, ``const = −½ m log 2π − Σ log diag(L)``. Each particle is
     independent, so the parallel loop is deterministic.
@@ -374,8 +321,9 @@ def roughening_sigma(particles, G, d=None):
     dd = x.shape[1] if d is None else int(d)
     if dd < 1:
         raise ValueError(f"dimension d must be >= 1, got {dd}")
-    E = x.max(axis=0) - x.min(axis=0)
-    return G * E * float(x.shape[0]) ** (-1.0 / dd)
+    E = np.empty(x.shape[1])
+    core.column_ranges(np.ascontiguousarray(x), E)
+    return core.roughening_sigma_nb(E, G, x.shape[0], dd)
 
 
 def roughen(particles, rng, G, d=None):

@@ -1,154 +1,336 @@
-"""Bootstrap particle filter (BPF) on magnitudes, numba kernels (Bernard 2021 tables 7.7–7.11).
+"""Bootstrap particle filter (BPF) on magnitudes (Bernard 2021 §7.3, tables 7.7–7.11).
 
-Particles ``(q_i, ω_i)``: inertial→body quaternions (scalar first) and body rates (rad/s).
+Particles ``(q_i, ω_i)``: inertial→body quaternions (scalar first) and body rates (rad/s),
+plus optional extra states (site biases, Model 3 facet parameters; Bernard ch. 8).
 
 1. Initialisation (table 7.7): ``[δp_i, δω_i] ~ N(0, P₀)`` with δp a GRP (a = 1, f = 4);
-   ``q_i = grp2q(δp_i) ⊗ q̂₀``, ``ω_i = ω̂₀ + δω_i``; log weights ``−log N``.
-2. Propagation with the truth dynamics (table 7.8): exact constant-rate step (controlled) or
-   torque-free RK4 (uncontrolled), then a process-noise sample ``[δθ, δω] ~ N(0, Q_d)``
-   (η, pseudo-noise) and, for the controlled random-walk ACS model, ``ζ_i ~ N(0, σ_ζ² I)``
-   applied as ``q_i ← exp(ζ_i) ⊗ q_i`` at every new measurement time. For the "jitter" ACS
-   model ζ_i perturbs only the attitude used to predict the measurement.
-3. Weights (table 7.10): ``log w_i += −½ ((y − m(q_i))/σ)²`` (m = +inf → −inf), normalised
-   with log-sum-exp; ``N_eff = 1/Σ w_i²``. Before that (:mod:`lightcurve.filters.gating`):
-   epochs with the object unlit or below the horizon are skipped, and a magnitude far outside
-   the particles' predictive spread (``ν²/S`` with ``ν = y − Σ w m(q_i)``,
-   ``S = Σ w (m(q_i) − ŷ)² + σ²``, above the χ² gate) leaves the weights unchanged (or is used
-   with an inflated σ), flagged and counted.
-3b. Progressive correction (Oudjane & Musso 2000; an addition to the thesis's plain
-   bootstrap filter, on by default, ``progressive=False`` switches it off): when the full
-   likelihood would leave ``N_eff < ess_threshold · N`` — as at the first measurements from a
-   60° prior, where one measurement of σ ≈ 0.05 mag leaves a handful of the 10⁴ particles —
-   the likelihood is applied as ``L^φ₁ L^φ₂ … (Σφ = 1)``: each φ is the largest keeping
-   ``N_eff`` at the threshold (bisection), followed by resampling and roughening and a new
-   prediction of the moved particles. The posterior is the same; the cloud is not collapsed
-   onto the few particles that happened to lie near the likelihood's ridge. If every weight is zero the weights are reset to
-   uniform and the epoch is flagged (:data:`~lightcurve.filters.result.FLAG_COLLAPSE`; the run
-   is then reported as diverged).
-4. Estimate (eq. 7.100–7.105): weighted GRP mean about a reference attitude (the heaviest
-   particle refined once by the weighted GRP mean), ``q̂ = grp2q(δp̄) ⊗ q_ref``,
-   ``ω̂ = Σ w ω``, covariance of ``[δp, ω]`` about the mean.
-5. Resampling when ``N_eff < ess_threshold · N`` (systematic, or multinomial as table 6.3),
-   then roughening (table 7.9): ``σ_j = 𝒢 E_j N^(−1/6)`` with E_j the range of component j of
-   ``[δp, ω]`` over the cloud, jitter added in GRP about the mean attitude.
+   ``q_i = grp2q(δp_i) ⊗ q̂₀``, ``ω_i = ω̂₀ + δω_i``; log weights ``−log N``. A caller may
+   give its own initial cloud instead (``initial_cloud``, e.g. attitudes uniform over SO(3)).
+2. Propagation with the filter's dynamics (tables 7.7, 7.10): exact constant-rate step
+   (controlled) or torque-free RK4 (uncontrolled), then a process-noise sample
+   ``[δθ, δω] ~ N(0, Q_d)`` (η, pseudo-noise, and for the random-walk ACS model ζ, eq. 7.112).
+   For the "jitter" ACS model ζ_i perturbs only the attitude used to predict the measurement.
+3. Weights (table 7.8): ``log w_i += −½ ((y − m(q_i))/σ)²`` (m = +inf → −inf), normalised with
+   log-sum-exp; ``N_eff = 1/Σ w_i²`` (eq. 6.61). Epochs with the object unlit or below the
+   horizon are skipped; the robust variant gates outliers (:mod:`lightcurve.filters.gating`).
+3b. Progressive correction (Oudjane & Musso 2000; robust variant): while the full likelihood
+   would leave ``N_eff < ess_threshold · N`` it is applied as ``L^φ₁ L^φ₂ … (Σφ = 1)``, each φ
+   the largest keeping ``N_eff`` at the threshold (bisection), each stage followed by
+   resampling, a move of the attitude and a new prediction of the moved particles. If every
+   weight is zero the weights are reset to uniform and the epoch is flagged
+   (:data:`~lightcurve.filters.result.FLAG_COLLAPSE`; the run is reported as diverged).
+4. Estimate (eq. 7.100–7.105): weighted GRP mean and covariance of ``[δp, ω]`` about a
+   reference attitude q^(i) — the heaviest particle (thesis variant) or the heaviest particle
+   refined once by the weighted GRP mean (robust) — and ``q̂ = grp2q(δp̄) ⊗ q^(i)``.
+5. Resampling when ``N_eff < ess_threshold · N`` (multinomial, table 6.3, or systematic), then
+   a rejuvenation move (:class:`BPFConfig` ``rejuvenation``): Table 7.9 roughening
+   ``σ_l = 𝒢 E_l N^(−1/n)`` applied as ``q ← q(c_θ) ⊗ q`` (eq. 7.108) about the posterior
+   estimate (``"table7.9"``); the same σ added in the GRP chart about the estimate's reference
+   (``"separate"``, with the Liu–West jitter or Metropolis moves of the extra states); one
+   Liu & West (2001) kernel on the full state ``[δp, ω, e]`` (``"joint"``); ``"auto"`` = joint
+   while the resampled attitude cloud is compact (largest per-axis σ of its GRP error below
+   ``joint_max_spread_deg``), else separate (a wide cloud is often multimodal and the kernel's
+   shrinkage would merge the modes); ``"none"``.
 
-Extra states (Bernard ch. 8; issue 6)
--------------------------------------
-* Site biases (``bias=``, :class:`~lightcurve.filters.reflection.SiteBias`: random walk,
-  Model 1, Model 2): every particle carries ``b_s`` per site, drawn from ``N(0, var0)``,
-  propagated with the model's exact discrete transition ``b ← φ_b b + √q_b · N(0,1)`` (φ_b,
-  q_b from ``SiteBias.transition(Δt, ω̂)`` at the mean rate), and the likelihood uses
-  ``m(q_i) + b_i,site``. The Estimate carries ``bias`` / ``bias_sigma`` (weighted mean and
-  standard deviation, mag) like the Kalman filters.
-* Model 3 (``facets=``, :class:`~lightcurve.filters.facet_states.FacetParameterStates`):
-  every particle carries the D unbounded facet parameters z (logit ξ, logit a, ln m, ln A;
-  24 for a 6-facet cube) drawn from the shape file's prior, constant dynamics (eq. 8.39; the
-  optional process noise of ``FacetParameterStates``), and the magnitude is evaluated with
-  per-particle facet arrays by :func:`~lightcurve.filters._kernels.facet_mag_particles_nb`
-  (the attitude-only kernel path is unchanged). The Estimate carries ``refl_p`` /
-  ``refl_p_sigma`` (weighted mean / standard deviation of p(z)) and ``refl_z`` /
-  ``refl_z_sigma`` per epoch.
-* ``attitude="truth"``: q and ω are held at the file's truth at every epoch (Bernard §10.7
-  parameter-only runs) and only the extra states are filtered.
-* Roughening of the extra states: after every resampling they are jittered with the
-  Liu & West (2001) kernel shrinkage ``e ← a e + (1−a) ē + h L ε`` (``a = (3δ−1)/(2δ)``,
-  ``h² = 1 − a²``, L L^T the cloud's covariance, δ = ``param_discount``, 0.98 by default).
-  This is our choice, not the thesis's table 7.9: table 7.9's jitter ``𝒢 E_j N^(−1/d)`` with
-  d = 30 states is about one cloud standard deviation per resampling and would inflate a
-  constant parameter's spread at every step; the shrinkage keeps the cloud's mean and
-  covariance, with a jitter scaled by the cloud's own spread. The attitude/rate roughening is
-  unchanged (table 7.9).
-* Resample-move (attitude known, Model 3; ``mcmc_moves``): after every resampling each
-  particle's z takes Metropolis random-walk steps (Gilks & Berzuini 2001) whose target is the
-  exact posterior given the known attitude history, ``π(z) Π_{j<k} L_j(z) L_k(z)^φ`` (φ the
-  tempering exponent reached), proposal scale ``2.38/√D`` times the cloud's covariance
-  square root; this replaces the Liu–West jitter there. It costs a pass over the past
-  measurements per move (O(k N)) and is possible only because the attitude is known. With
-  the attitude estimated the past likelihood depends on each particle's attitude path, which
-  the filter does not keep, so the combined runs use the joint kernel below.
-* Rejuvenation of the combined state (``rejuvenation=``; default "auto" = "joint" whenever the
-  attitude is estimated, "separate" when it is held at the truth): after every resampling — at the end of
-  an epoch and between progressive-correction stages — the full state ``x = [δp, ω, z]``
-  (GRP about the mean attitude, rate, the 24 facet parameters: d = 30) is moved with one
-  Liu & West (2001) shrinkage kernel ``x ← a x + (1−a) x̄ + h L ε``, ``L Lᵀ`` the cloud's
-  full covariance, ``a = √(1 − h²)``, and ``h`` the optimal Gaussian-kernel bandwidth of the
-  regularised particle filter, ``h = (4/(d+2))^(1/(d+4)) N^(−1/(d+4))`` (Musso, Oudjane &
-  Le Gland 2001; ≈ 0.72 for d = 30, N = 10⁴), or ``kernel_bandwidth``. Mean and covariance
-  (with the attitude–parameter cross-covariances) are kept in expectation. Why (measured
-  with benchmarks/reflection_bpf.py --combined, session 3): with the "separate" scheme the
-  rate is roughened only by the end-of-epoch resampling, which progressive correction makes
-  rare (it leaves N_eff ≥ the threshold), while the tempering stages resample and jitter
-  the attitude only — so the controlled filter's rate cloud (no process noise) degenerates
-  to a single value within ≈ 12 epochs, the attitude then drifts with the frozen rate error
-  and the small Liu–West jitter (δ = 0.98, h = 0.14) cannot keep 24 parameters spread in
-  30 dimensions: the cloud collapsed. LEO fast spin, seeds 2000–2009, 10⁴ particles,
-  σθ = 3°/10°: final attitude inside 3σ 0/10 → 10/10 (both), parameters inside 3σ
-  20 %/11 % → 99 %/98 %, median final error 1.27°/2.11° → 0.85°/0.86°; the joint kernel
-  with the old small bandwidth (h = 0.14) still fails (0/10), h = 0.33–0.5 works (9–10/10).
-  The wide joint kernel is our choice (not the thesis's table 7.9, which roughens [δp, ω]
-  only, with the range E_j; with "joint" the ``roughening`` constant is not used).
-  "separate" keeps the previous scheme bit for bit. The attitude-only filter showed the same
-  rate collapse, so "joint" is its default too since session 3 — but only while the resampled
-  attitude cloud is compact (largest per-axis σ of its GRP error < ``joint_max_spread_deg``,
-  default 25°); a wider cloud gets the separate roughening. Applied at every resampling, the
-  kernel's shrinkage toward the mean merged the modes of wide multimodal clouds: σθ = 60°
-  attitude-only runs (the thesis LEO fast-spin case, seeds 0–19) then ended ≈ 170° off in 19 of 20.
-  Measured, 10⁴ particles, 20 seeds per row; final attitude inside 3σ (diverged) and median
-  final RSS error for separate → auto with the threshold at 10° / 25° (default):
-  LEO fast spin controlled 1 site (seeds 3000–3019) σθ 3°: 10/20 → 19/20 / 19/20, 0.67° →
-  0.73°; σθ 10°: 4/20 → 20/20 / 20/20, 0.79° → 0.73° / 0.80°; uncontrolled 2 sites σθ 3°:
-  0/20 (4) → 19/20 (1), 1.00° → 0.20°; σθ 10°: 0/20 (6) → 17/20 (3) / 13/20 (5), 0.95° →
-  0.27° / 0.26°; default scenario σθ = 60° (seeds 0–19): below 5° 20/20 → 20/20 / 20/20,
-  inside 9/20 → 16/20 / 17/20, 0.86° → 0.67° / 0.64°. Model 3 combined σθ 10° (seeds
-  2000–2009): 10° threshold 8/10 inside, attitude+rate NEES sum 205 (χ²₆₀ 99.9 % bound 99.6),
-  parameters inside 3σ 94.6 %; 25° threshold 10/10, NEES 81.9, 97.9 % — hence 25°.
-* Random draws: the extra-state initial draw follows the attitude draw, the extra-state noise
-  follows the attitude noise at each step, the jitter follows the attitude roughening, so the
-  attitude-only filter is unchanged bit for bit and every run is deterministic per seed.
+Variants (DESIGN.md "Source variant and robust variant"): ``BPFConfig(variant="thesis")`` is the
+plain bootstrap filter of Bernard ch. 7 — multinomial resampling (table 6.3), table 7.9
+roughening, no progressive correction, no innovation gate, the estimate about the heaviest
+particle. The text leaves the resampling threshold open (§6.3, "a matter of judgment and
+tuning") and does not print 𝒢 (§9.1: tuned once per test setup): both are chosen once,
+``ess_threshold = 0.5`` and ``𝒢 = 0.2``, for every case. ``variant="robust"`` (default) is the
+progressive-correction filter with the joint kernel and the outlier gate. Measurements behind
+these choices: docs/bpf.md.
 
-Hot loops (propagation + predicted magnitudes fused, GRP charts) are ``numba.njit(parallel)``
-kernels over particles; all random numbers come from one ``numpy.random.Generator`` seeded by
-``seed`` and are drawn in a fixed order, so a run is reproducible bit for bit for a given seed
-(independent of the thread count). :func:`run_bpf_numpy` is the same algorithm in plain
+Random numbers: every draw comes from :class:`_Draws` — by default counter-based
+(Philox4x32-10, :mod:`lightcurve.core.particles`), drawn in parallel, a pure function of the
+seed, the particle and the draw, so a run is reproducible bit for bit for a given seed on any
+number of threads; ``rng="numpy"`` draws from one ``numpy.random.Generator`` in a fixed serial
+order (the order of the earlier implementation, whose stored results the tests compare with).
+
+Hot loops are ``numba.njit(parallel)`` kernels over particles
+(:mod:`lightcurve.filters._bpf_kernels`, :mod:`lightcurve.core.particles`) on buffers allocated
+once per run. :func:`run_bpf_numpy` is the same algorithm with the per-particle stages in plain
 vectorised NumPy (the benchmark's reference; also used for shapes whose BRDFs have no kernel).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from .. import rotations as rot
+from ..core import particles as CP
+from ..core.rotations import from_grp_rel_nb
 from ..errors import InputError
-from ..estimation.particles import multinomial_resample, roughening_sigma, systematic_resample
-from . import _kernels as K
+from ..memory import check_allocation
+from ..threads import limited_threads
+from . import _bpf_kernels as BK
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
+from .config import ConfigBase, register_filter_config
 from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
-__all__ = ["run_bpf", "run_bpf_numpy"]
+__all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS"]
 
-_RESAMPLERS = {"systematic": systematic_resample, "multinomial": multinomial_resample}
+VARIANTS = ("robust", "thesis")
+RESAMPLERS = ("systematic", "multinomial")
+REJUVENATIONS = ("auto", "joint", "separate", "table7.9", "none")
+RNGS = ("philox", "numpy")
+
+# variant → defaults of the fields left None (module docstring, "Variants")
+_VARIANT_DEFAULTS = {
+    "robust": dict(resampling="systematic", progressive=True, rejuvenation="auto", gating=True,
+                   reference="refined"),
+    "thesis": dict(resampling="multinomial", progressive=False, rejuvenation="table7.9",
+                   gating=False, reference="heaviest"),
+}
 
 
-def _check(particles, roughening, resampling, ess_threshold):
-    n = int(particles)
-    if n < 2:
-        raise ValueError(f"particles must be >= 2, got {particles}")
-    g = float(roughening)
-    if not (g >= 0 and np.isfinite(g)):
-        raise ValueError(f"roughening must be finite and >= 0, got {roughening}")
-    if resampling not in _RESAMPLERS:
-        raise ValueError(f"resampling must be one of {', '.join(_RESAMPLERS)}, got {resampling!r}")
-    e = float(ess_threshold)
-    if not 0.0 <= e <= 1.0:
-        raise ValueError(f"ess_threshold must lie in [0, 1], got {ess_threshold}")
-    return n, g, e
+@register_filter_config
+@dataclass(frozen=True)
+class BPFConfig(ConfigBase):
+    """Settings of one bootstrap particle filter (validated on construction; the particle
+    filter's configuration object of :mod:`lightcurve.filters.config`).
+
+    Fields left ``None`` take the defaults of ``variant`` (module docstring, "Variants"); a field
+    given explicitly overrides the variant (a named departure, recorded in the Estimate's meta).
+
+    Attributes
+    ----------
+    particles : int ≥ 2 — N.
+    variant : {"robust", "thesis"}
+    resampling : {"systematic", "multinomial"} (thesis: multinomial, table 6.3)
+    ess_threshold : float in [0, 1] — resample when N_eff < ess_threshold · N.
+    roughening : float ≥ 0 — 𝒢 of table 7.9 (0: no roughening).
+    progressive : bool — progressive correction (module docstring, step 3b).
+    max_stages : int ≥ 1 — most tempering stages per measurement.
+    rejuvenation : {"auto", "joint", "separate", "table7.9", "none"} (module docstring, step 5).
+    kernel_bandwidth : float in [0, 1) or None — h of the joint kernel; None: the optimal
+        Gaussian-kernel bandwidth ``(4/(d+2))^(1/(d+4)) N^(−1/(d+4))`` (Musso, Oudjane & Le
+        Gland 2001).
+    joint_max_spread_deg : float > 0 — largest per-axis σ (deg) of the resampled attitude
+        cloud's GRP error for which "auto" uses the joint kernel.
+    param_discount : float in (0, 1] — Liu–West discount δ of the extra states' jitter
+        (separate rejuvenation; 1 disables it).
+    mcmc_moves : int ≥ 0 or None — attitude-known Model 3 runs: Metropolis resample-move steps
+        per resampling (None: 1 there, else 0).
+    gating : bool — the outlier gate of :mod:`lightcurve.filters.gating` (False: none, as ch. 7;
+        the gate's own settings are the problem's ``gate``).
+    reference : {"refined", "heaviest"} — reference attitude of the estimate (step 4).
+    rng : {"philox", "numpy"} — random-number source (module docstring).
+    keep_clouds : tuple of int — epochs (negative from the end) at which to keep the error
+        rotation vectors of ``cloud_size`` particles (needs truth; fig. 9.6-style plots).
+    cloud_size : int ≥ 1
+    device : {"cpu", "gpu"} — numba CPU kernels or the CUDA kernels of
+        :mod:`lightcurve.filters.bpf_gpu`.
+    """
+
+    method: ClassVar[str] = "bpf"
+    particles: int = 10_000
+    variant: str = "robust"
+    resampling: str | None = None
+    ess_threshold: float = 0.5
+    roughening: float = 0.2
+    progressive: bool | None = None
+    max_stages: int = 30
+    rejuvenation: str | None = None
+    kernel_bandwidth: float | None = None
+    joint_max_spread_deg: float = 25.0
+    param_discount: float = 0.98
+    mcmc_moves: int | None = None
+    gating: bool | None = None
+    reference: str | None = None
+    rng: str = "philox"
+    keep_clouds: tuple = ()
+    cloud_size: int = 2000
+    device: str = "cpu"
+
+    def __post_init__(self):
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}")
+        for k, v in _VARIANT_DEFAULTS[self.variant].items():
+            if getattr(self, k) is None:
+                object.__setattr__(self, k, v)
+        n = self.particles
+        if isinstance(n, bool) or int(n) != n or n < 2:
+            raise ValueError(f"particles must be an integer >= 2, got {n}")
+        object.__setattr__(self, "particles", int(n))
+        g = float(self.roughening)
+        if not (g >= 0 and np.isfinite(g)):
+            raise ValueError(f"roughening must be finite and >= 0, got {self.roughening}")
+        if self.resampling not in RESAMPLERS:
+            raise ValueError(f"resampling must be one of {', '.join(RESAMPLERS)}, "
+                             f"got {self.resampling!r}")
+        if not 0.0 <= float(self.ess_threshold) <= 1.0:
+            raise ValueError(f"ess_threshold must lie in [0, 1], got {self.ess_threshold}")
+        if int(self.max_stages) < 1:
+            raise ValueError(f"max_stages must be >= 1, got {self.max_stages}")
+        if self.rejuvenation not in REJUVENATIONS:
+            raise ValueError(f"rejuvenation must be one of {', '.join(map(repr, REJUVENATIONS))}, "
+                             f"got {self.rejuvenation!r}")
+        h = self.kernel_bandwidth
+        if h is not None and not 0.0 <= float(h) < 1.0:
+            raise ValueError(f"kernel_bandwidth must lie in [0, 1), got {h}")
+        if not float(self.joint_max_spread_deg) > 0.0:
+            raise ValueError(f"joint_max_spread_deg must be > 0, got {self.joint_max_spread_deg}")
+        if not 0.0 < float(self.param_discount) <= 1.0:
+            raise ValueError(f"param_discount must lie in (0, 1], got {self.param_discount}")
+        if self.mcmc_moves is not None and int(self.mcmc_moves) < 0:
+            raise ValueError(f"mcmc_moves must be >= 0, got {self.mcmc_moves}")
+        if self.reference not in ("refined", "heaviest"):
+            raise ValueError(f"reference must be 'refined' or 'heaviest', got {self.reference!r}")
+        if self.rng not in RNGS:
+            raise ValueError(f"rng must be one of {', '.join(RNGS)}, got {self.rng!r}")
+        object.__setattr__(self, "keep_clouds", tuple(int(k) for k in self.keep_clouds))
+        if int(self.cloud_size) < 1:
+            raise ValueError(f"cloud_size must be >= 1, got {self.cloud_size}")
+        if self.device not in ("cpu", "gpu"):
+            raise ValueError(f"device must be 'cpu' or 'gpu', got {self.device!r}")
+
+    @classmethod
+    def thesis(cls, **kw) -> "BPFConfig":
+        """The plain bootstrap filter of Bernard ch. 7 (module docstring, "Variants")."""
+        return cls(variant="thesis", **kw)
+
+    @classmethod
+    def robust(cls, **kw) -> "BPFConfig":
+        """Our default: progressive correction, joint kernel, outlier gate."""
+        return cls(variant="robust", **kw)
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields."""
+        return dataclasses.asdict(self)
+
+
+class _Draws:
+    """The random numbers of one run (module docstring, "Random numbers").
+
+    ``normals_into(out)`` fills a C-contiguous (N, r) array with standard normals,
+    ``uniform()`` returns one uniform, ``sorted_uniforms_into(u)`` fills ``u`` with ascending
+    uniforms, ``normal(shape)`` / ``random(n)`` return new arrays (extra states).
+    """
+
+    def __init__(self, seed, kind):
+        self.kind = kind
+        if kind == "numpy":
+            self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xB9F]))
+        else:
+            k = np.random.SeedSequence([int(seed), 0xB9F, 0x9417]).generate_state(2, np.uint32)
+            self.k0, self.k1 = int(k[0]), int(k[1])
+            self.call = 0
+            self._one = np.empty(1)
+
+    def normals_into(self, out):
+        if out.size == 0:
+            return out
+        if self.kind == "numpy":
+            self.rng.standard_normal(out=out)
+        else:
+            CP.philox_normals(self.k0, self.k1, self.call, out)
+            self.call += 1
+        return out
+
+    def normal(self, shape):
+        return self.normals_into(np.empty(shape))
+
+    def uniform(self):
+        if self.kind == "numpy":
+            return float(self.rng.random())
+        CP.philox_uniforms(self.k0, self.k1, self.call, self._one)
+        self.call += 1
+        return float(self._one[0])
+
+    def random(self, n):
+        if self.kind == "numpy":
+            return self.rng.random(n)
+        out = np.empty(n)
+        CP.philox_uniforms(self.k0, self.k1, self.call, out)
+        self.call += 1
+        return out
+
+    def sorted_uniforms_into(self, u):
+        if self.kind == "numpy":
+            self.rng.random(out=u)
+        else:
+            CP.philox_uniforms(self.k0, self.k1, self.call, u)
+            self.call += 1
+        u.sort()
+        return u
+
+
+def _flat(buf, n, r):
+    """A C-contiguous (n, r) view of the first n·r entries of the 1-D buffer ``buf``."""
+    return buf[:n * r].reshape(n, r)
+
+
+def run_bpf(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0, bias=None,
+            facets=None, attitude="estimate", keep_clouds=None, cloud_size=None,
+            initial_cloud=None, **overrides) -> Estimate:
+    """Run the bootstrap particle filter (module docstring) with numba kernels → Estimate.
+
+    Parameters
+    ----------
+    problem : FilterProblem
+    config : BPFConfig, optional — the filter settings; ``overrides`` (any BPFConfig field,
+        e.g. ``particles=2000, progressive=False``) replace fields of it (or of the default).
+    seed : int — seeds every random draw (reproducible bit for bit).
+    bias : :class:`lightcurve.filters.reflection.SiteBias` or None — per-site magnitude-bias
+        states (random walk, Model 1, Model 2); the Estimate then carries ``bias`` and
+        ``bias_sigma`` (N,S), mag.
+    facets : :class:`lightcurve.filters.facet_states.FacetParameterStates` or None — Model 3
+        facet-parameter states; the Estimate then carries ``refl_names``, ``refl_p`` /
+        ``refl_p_sigma`` (weighted particle mean / standard deviation of p(z)) and ``refl_z``
+        / ``refl_z_sigma`` per epoch (N,D).
+    attitude : {"estimate", "truth"} — "truth" (or ``problem.attitude_known``) holds q and ω
+        at the lightcurve's truth (§10.7 parameter-only runs) and estimates only the extra
+        states.
+    keep_clouds, cloud_size : override the configuration's (None: the configuration's).
+    initial_cloud : (Q (N,4), W (N,3)) or None — start from these particles instead of the
+        draw from ``P₀`` (N must equal ``particles``).
+    """
+    cfg = _config(config, overrides)
+    if keep_clouds is not None or cloud_size is not None:
+        cfg = cfg.replace(**{k: v for k, v in (("keep_clouds", keep_clouds),
+                                               ("cloud_size", cloud_size)) if v is not None})
+    if cfg.device == "gpu":
+        from .bpf_gpu import run_bpf_gpu
+
+        return run_bpf_gpu(problem, cfg, seed=seed, bias=bias, facets=facets,
+                           attitude=attitude, initial_cloud=initial_cloud)
+    backend = "numba" if problem.model.kernel_ok else "numpy"
+    run = _Run(problem, cfg, seed, backend, bias, facets, attitude, cfg.keep_clouds,
+               cfg.cloud_size, initial_cloud)
+    # one chunk of particles per thread at most: a small cloud runs on fewer threads (waking
+    # idle threads costs more than its work, most of all on a busy machine)
+    with limited_threads(CP.n_chunks(cfg.particles)):
+        return run.run()
+
+
+def run_bpf_numpy(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0,
+                  bias=None, facets=None, attitude="estimate", initial_cloud=None,
+                  **overrides) -> Estimate:
+    """The same bootstrap particle filter with its per-particle stages in plain vectorised
+    NumPy (the benchmark reference; :func:`run_bpf` for the arguments). With the same draws
+    (``rng``) its results agree with :func:`run_bpf` to floating-point round-off."""
+    cfg = _config(config, overrides)
+    return _Run(problem, cfg, seed, "numpy", bias, facets, attitude, cfg.keep_clouds,
+                cfg.cloud_size, initial_cloud).run()
+
+
+def _config(config, overrides):
+    if config is None:
+        return BPFConfig(**overrides)
+    if not isinstance(config, BPFConfig):
+        raise TypeError(f"config must be a BPFConfig, got {type(config).__name__}")
+    return config.replace(**overrides) if overrides else config
 
 
 # --------------------------------------------------------------------------------------------
-# chart helpers: numba (parallel) and numpy versions of the same maps
+# NumPy versions of the per-particle stages (backend "numpy")
 # --------------------------------------------------------------------------------------------
 
 def _grp_rel_np(Q, qref):
@@ -161,32 +343,6 @@ def _from_grp_np(P, qref):
     dq = rot.grp_to_quat(P, GRP_A, GRP_F)
     out = rot.quat_mult(dq, np.broadcast_to(qref, dq.shape))
     return out / np.linalg.norm(out, axis=1, keepdims=True)
-
-
-class _NumbaOps:
-    @staticmethod
-    def grp_rel(Q, qref):
-        return K.grp_rel_nb(Q, np.ascontiguousarray(qref), GRP_A, GRP_F)
-
-    @staticmethod
-    def from_grp(P, qref):
-        return K.from_grp_rel_nb(np.ascontiguousarray(P), np.ascontiguousarray(qref), GRP_A, GRP_F)
-
-    innov = staticmethod(K.innovation_loglik_nb)
-    addnorm = staticmethod(K.add_normalize_nb)
-    ess = staticmethod(K.ess_tempered_nb)
-
-    @staticmethod
-    def stats(dp, W, w):
-        return K.weighted_stats_nb(np.ascontiguousarray(dp), np.ascontiguousarray(W),
-                                   np.ascontiguousarray(w))
-
-
-def _stats_np(dp, W, w):
-    X = np.hstack([dp, W])
-    mean = w @ X
-    D = X - mean
-    return mean, (D * w[:, None]).T @ D
 
 
 def _innov_np(logw, mpred, y, sig, ll):
@@ -223,112 +379,197 @@ def _ess_np(logw, ll, phi):
     return float(e.sum() ** 2 / np.dot(e, e))
 
 
-class _NumpyOps:
-    grp_rel = staticmethod(_grp_rel_np)
-    from_grp = staticmethod(_from_grp_np)
-    stats = staticmethod(_stats_np)
+def _temper_np(logw, ll, rest, target, steps):
+    lo, hi = 0.0, rest
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        if _ess_np(logw, ll, mid) >= target:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _wstats_np(X, w):
+    mean = w @ X
+    D = X - mean
+    return mean, (D * w[:, None]).T @ D
+
+
+class _HostOps:
+    """Array handling shared by the two CPU backends (host NumPy arrays)."""
+
+    @staticmethod
+    def empty(shape, dtype=np.float64):
+        return np.empty(shape, dtype=dtype)
+
+    @staticmethod
+    def full(shape, value):
+        return np.full(shape, float(value))
+
+    @staticmethod
+    def from_host(a):
+        return np.ascontiguousarray(a, dtype=np.float64).copy()
+
+    @staticmethod
+    def to_host(a):
+        return a
+
+    @staticmethod
+    def fill(a, value):
+        a[...] = value
+
+    @staticmethod
+    def row(a, i):
+        return a[i].copy()
+
+    @staticmethod
+    def scale(a, f):
+        a *= f
+
+    @staticmethod
+    def normals(draws, out):
+        return draws.normals_into(out)
+
+    systematic = staticmethod(CP.systematic_resample_into)
+    sorted_merge = staticmethod(CP.sorted_resample_into)
+
+    @staticmethod
+    def ranges(Xc):
+        E = np.empty(Xc.shape[1])
+        CP.column_ranges(Xc, E)
+        return E
+
+
+class _NumbaOps(_HostOps):
+    """Stages of the filter on numba kernels (in place on the run's buffers)."""
+
+    gather = staticmethod(CP.gather_rows)
+    mean_cov = staticmethod(CP.mean_cov_rows)
+
+    @staticmethod
+    def predict(run, k, dt, z, L, zeta, s):
+        """Propagate the cloud over dt (process noise z Lᵀ) and, for finite s, predict the
+        magnitudes of epoch k into ``run.mpred`` (module docstring, step 2)."""
+        m = run.p.model
+        n_arr, a_arr, ids, prm = m._karrs
+        BK.bpf_predict_nb(run.Q, run.W, dt, run.mode, run.J, run.Ji,
+                          run.p.dynamics.nsub(dt) if (run.mode and dt != 0.0) else 1, z, L,
+                          zeta, s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
+                          run.mpred)
+
+    innov = staticmethod(CP.innovation_loglik)
+    addnorm = staticmethod(CP.add_loglik_normalize)
+    ess = staticmethod(CP.ess_tempered)
+    temper = staticmethod(CP.temper_exponent)
+    argmax = staticmethod(BK.argmax_weights)
+    wstats = staticmethod(CP.weighted_mean_cov_rows)
+    nearest = staticmethod(BK.min_abs_residual)
+
+    @staticmethod
+    def grp_mean(Q, qref, w):
+        return BK.grp_weighted_mean(Q, qref, w, GRP_A, GRP_F)
+
+    @staticmethod
+    def chart(Q, W, qref, X):
+        BK.chart_rows(Q, W, qref, GRP_A, GRP_F, X)
+
+    @staticmethod
+    def chart_stats(Q, W, w, qref, w0, X):
+        return BK.chart_stats(Q, W, w, qref, GRP_A, GRP_F, w0, X)
+
+    @staticmethod
+    def roughen_chart(X, z, sig, ncols, qref, Q, W):
+        BK.roughen_chart(X, z, sig, ncols, qref, GRP_A, GRP_F, Q, W)
+
+    @staticmethod
+    def roughen_compose(Q, W, z, sig):
+        BK.roughen_compose(Q, W, z, sig, GRP_A, GRP_F)
+
+    @staticmethod
+    def liu_west(X, eps, M, sa, c, qref, Q, W, E):
+        BK.liu_west_attitude(X, eps, M, sa, c, qref, GRP_A, GRP_F, Q, W, E)
+
+
+class _NumpyOps(_HostOps):
+    """The same stages in plain NumPy (new arrays, copied into the run's buffers)."""
+
+    @staticmethod
+    def gather(src, idx, dst):
+        dst[:] = src[idx]
+
+    @staticmethod
+    def mean_cov(X):
+        mean = X.mean(axis=0)
+        D = X - mean
+        return mean, D.T @ D / X.shape[0]
+
+    @staticmethod
+    def predict(run, k, dt, z, L, zeta, s):
+        Qn, Wn = _propagate_np(run.p.dynamics, run.Q, run.W, dt)
+        if z.shape[0]:
+            noise = z @ L.T
+            Qn = rot.quat_mult(rot.rotvec_to_quat(noise[:, :3]), Qn)
+            Qn = Qn / np.linalg.norm(Qn, axis=1, keepdims=True)
+            Wn = Wn + noise[:, 3:]
+        run.Q[:] = Qn
+        run.W[:] = Wn
+        if not np.isnan(s[0]):
+            Qm = run.Q
+            if zeta.shape[0]:
+                Qm = rot.quat_mult(rot.rotvec_to_quat(zeta), Qm)
+            run.mpred[:] = _predict_np(run.p.model, Qm, k)
+
     innov = staticmethod(_innov_np)
     addnorm = staticmethod(_addnorm_np)
     ess = staticmethod(_ess_np)
+    temper = staticmethod(_temper_np)
+    wstats = staticmethod(_wstats_np)
 
+    @staticmethod
+    def argmax(w):
+        return int(np.argmax(w))
 
-def _mean_cov(ops, Q, W, w):
-    """GRP mean and covariance of [δp, ω] (eq. 7.100–7.105).
+    @staticmethod
+    def nearest(mpred, y):
+        f = np.isfinite(mpred)
+        return float(np.min(np.abs(y - mpred[f]))) if np.any(f) else np.inf
 
-    The chart is centred on one refinement of the heaviest particle: ``q_ref = grp2q(Σ w δp)
-    ⊗ q_max``; returns ``(q̂, ω̂, C, δp about q_ref, q_ref)`` with ``q̂ = grp2q(δp̄) ⊗ q_ref``.
-    """
-    qmax = Q[int(np.argmax(w))].copy()
-    dp = ops.grp_rel(Q, qmax)
-    qref = rot.quat_mult(rot.grp_to_quat(w @ dp, GRP_A, GRP_F), qmax)
-    qref = qref / np.linalg.norm(qref)
-    dp = ops.grp_rel(Q, qref)
-    mean, C = ops.stats(dp, W, w)
-    qhat = rot.quat_mult(rot.grp_to_quat(mean[:3], GRP_A, GRP_F), qref)
-    return qhat / np.linalg.norm(qhat), mean[3:].copy(), 0.5 * (C + C.T), dp, qref
+    @staticmethod
+    def grp_mean(Q, qref, w):
+        return w @ _grp_rel_np(Q, qref)
 
+    @staticmethod
+    def chart(Q, W, qref, X):
+        X[:, :3] = _grp_rel_np(Q, qref)
+        X[:, 3:6] = W
 
-# --------------------------------------------------------------------------------------------
-# the filter (one loop; `backend` selects numba kernels or numpy)
-# --------------------------------------------------------------------------------------------
+    @staticmethod
+    def chart_stats(Q, W, w, qref, w0, X):
+        _NumpyOps.chart(Q, W, qref, X)
+        return _wstats_np(X[:, :6], w)
 
-def run_bpf(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
-            resampling="systematic", ess_threshold=0.5, progressive=True,
-            max_stages=30, keep_clouds=(), cloud_size=2000, bias=None, facets=None,
-            attitude="estimate", param_discount=0.98, mcmc_moves=None,
-            rejuvenation="auto", kernel_bandwidth=None,
-            joint_max_spread_deg=25.0) -> Estimate:
-    """Run the bootstrap particle filter with numba kernels (module docstring) → Estimate.
+    @staticmethod
+    def roughen_chart(X, z, sig, ncols, qref, Q, W):
+        x = X[:, :ncols] + z * sig[None, :ncols]
+        Q[:] = _from_grp_np(x[:, :3], qref)
+        if ncols == 6:
+            W[:] = x[:, 3:6]
 
-    Parameters
-    ----------
-    problem : FilterProblem
-    particles : int ≥ 2
-    seed : int — seeds every random draw (reproducible bit for bit).
-    roughening : float ≥ 0 — the constant 𝒢 of table 7.9 (0 disables roughening).
-    resampling : {"systematic", "multinomial"}
-    ess_threshold : float in [0, 1] — resample when N_eff < ess_threshold · N.
-    progressive : bool — progressive correction of peaked likelihoods (step 3b); False gives
-        the plain bootstrap filter of the thesis.
-    max_stages : int — most tempering stages per measurement.
-    keep_clouds : sequence of int — epochs (negative from the end) at which to keep the error
-        rotation vectors of ``cloud_size`` particles (needs truth; for fig. 9.6-style plots).
-    bias : :class:`lightcurve.filters.reflection.SiteBias` or None — per-site magnitude-bias
-        states (random walk, Model 1, Model 2); the Estimate then carries ``bias`` and
-        ``bias_sigma`` (N,S), mag.
-    facets : :class:`lightcurve.filters.facet_states.FacetParameterStates` or None — Model 3
-        facet-parameter states; the Estimate then carries ``refl_names`` and per epoch
-        ``refl_p`` / ``refl_p_sigma`` (physical; weighted particle mean and standard
-        deviation of p(z)) and ``refl_z`` / ``refl_z_sigma`` (unbounded), each (N,D).
-    attitude : {"estimate", "truth"} — "truth" (or ``problem.attitude_known``) holds q and ω
-        at the lightcurve's truth (§10.7 parameter-only runs; needs truth in the file) and
-        estimates only the extra states.
-    param_discount : float in (0, 1] — Liu–West discount δ of the extra states' roughening
-        (1 disables it); module docstring, "Extra states". Used by the "separate"
-        rejuvenation only (the joint kernel takes ``kernel_bandwidth``).
-    mcmc_moves : int ≥ 0 or None — attitude-known Model 3 runs only: Metropolis resample-move
-        steps per resampling instead of the Liu–West jitter (module docstring; 0: off, the
-        plain bootstrap filter). None (default): 1 for attitude-known Model 3 runs, where the
-        plain filter's posterior collapses (benchmarks/reflection_bpf.py --acceptance), else 0.
-    rejuvenation : {"auto", "separate", "joint"} — how the cloud is moved after resampling
-        (module docstring, "Rejuvenation of the combined state"): "separate" = table 7.9 on
-        [δp, ω] (attitude only between tempering stages) plus the Liu–West jitter (or
-        resample-move) of the extra states; "joint" = one Liu–West kernel on the full state
-        (attitude estimated only; ``roughening`` unused while it applies); "auto" = "joint"
-        when the attitude is estimated, "separate" when it is held at the truth.
-    kernel_bandwidth : float in [0, 1) or None — h of the joint kernel; None = the Musso et
-        al. (2001) optimum for d = 6 + extra states and N particles (0 disables the kernel).
-    joint_max_spread_deg : float > 0 — the joint kernel is applied only while the resampled
-        attitude cloud is compact: largest per-axis standard deviation of its GRP error below
-        this (deg, default 25; module docstring for the measurements); a wider cloud gets the "separate" roughening (a wide cloud
-        is often multimodal, and the kernel's shrinkage toward the mean would merge the
-        modes: with the joint kernel at every resampling, σθ = 60° attitude-only runs ended
-        ≈ 170° off in 19 of 20 seeds). ``meta["rejuvenation"]["joint_applied"]`` counts the
-        resamplings that used the kernel.
-    """
-    backend = "numba" if problem.model.kernel_ok else "numpy"
-    return _run(problem, particles, seed, roughening, resampling, ess_threshold, backend,
-                progressive, max_stages, keep_clouds, cloud_size, bias=bias, facets=facets,
-                attitude=attitude, param_discount=param_discount, mcmc_moves=mcmc_moves,
-                rejuvenation=rejuvenation, kernel_bandwidth=kernel_bandwidth,
-                joint_max_spread_deg=joint_max_spread_deg)
+    @staticmethod
+    def roughen_compose(Q, W, z, sig):
+        c = z[:, :sig.size] * sig[None, :z.shape[1]]
+        Qn = rot.quat_mult(rot.grp_to_quat(c[:, :3], GRP_A, GRP_F), Q)
+        Q[:] = Qn / np.linalg.norm(Qn, axis=1, keepdims=True)
+        if c.shape[1] >= 6:
+            W += c[:, 3:6]
 
-
-def run_bpf_numpy(problem: FilterProblem, *, particles=10_000, seed=0, roughening=0.2,
-                  resampling="systematic", ess_threshold=0.5, progressive=True,
-                  max_stages=30, bias=None, facets=None, attitude="estimate",
-                  param_discount=0.98, mcmc_moves=None, rejuvenation="auto",
-                  kernel_bandwidth=None, joint_max_spread_deg=25.0) -> Estimate:
-    """The same bootstrap particle filter in plain vectorised NumPy (benchmark reference).
-
-    Uses the same random draws in the same order as :func:`run_bpf`; results agree with it up
-    to floating-point round-off (which can change a resampling decision late in a run).
-    """
-    return _run(problem, particles, seed, roughening, resampling, ess_threshold, "numpy",
-                progressive, max_stages, bias=bias, facets=facets, attitude=attitude,
-                param_discount=param_discount, mcmc_moves=mcmc_moves,
-                rejuvenation=rejuvenation, kernel_bandwidth=kernel_bandwidth,
-                joint_max_spread_deg=joint_max_spread_deg)
+    @staticmethod
+    def liu_west(X, eps, M, sa, c, qref, Q, W, E):
+        x = sa * X + c[None, :] + eps @ M.T
+        Q[:] = _from_grp_np(x[:, :3], qref)
+        W[:] = x[:, 3:6]
+        E[:] = x[:, 6:]
 
 
 def _propagate_np(dyn, Q, W, dt):
@@ -440,11 +681,11 @@ class _Extra:
         self.site = np.asarray(p.model.site, np.int64)
         if self.kind == "bias":
             self.ne = bias.n_sites
-            self.E = rng.standard_normal((N, self.ne)) * np.sqrt(bias.var0)[None, :]
+            self.E = rng.normal((N, self.ne)) * np.sqrt(bias.var0)[None, :]
         elif self.kind == "facets":
             self.ne = facets.dim
             L0 = np.linalg.cholesky(facets.P0)
-            self.E = facets.z0[None, :] + rng.standard_normal((N, self.ne)) @ L0.T
+            self.E = facets.z0[None, :] + rng.normal((N, self.ne)) @ L0.T
             self.kc = np.ascontiguousarray(facets.kind_col, dtype=np.int64)
             self.fc = np.ascontiguousarray(facets.facet, dtype=np.int64)
             self.lg = np.ascontiguousarray(facets.logit, dtype=np.bool_)
@@ -472,11 +713,11 @@ class _Extra:
             if np.any(phi != 1.0):
                 self.E *= phi[None, :]
             if np.any(qb > 0.0):
-                self.E += rng.standard_normal(self.E.shape) * np.sqrt(qb)[None, :]
+                self.E += rng.normal(self.E.shape) * np.sqrt(qb)[None, :]
         else:
             qz = self.facets.process_noise * abs(dt)
             if qz > 0.0:
-                self.E += rng.standard_normal(self.E.shape) * np.sqrt(qz)
+                self.E += rng.normal(self.E.shape) * np.sqrt(qz)
 
     def add_bias(self, mpred, k):
         """``m_i ← m_i + b_i,site(k)`` in place (site-bias model only)."""
@@ -495,13 +736,13 @@ class _Extra:
         are separated. The jitter scale is set by the cloud's own spread."""
         if not self.ne or self.h == 0.0:
             return
-        mean, V = K.mean_cov_nb(self.E)
+        mean, V = CP.mean_cov_rows(self.E)
         L = psd_sqrt(V)
         if not L.shape[1]:
             return
-        eps = rng.standard_normal((self.E.shape[0], L.shape[1]))
+        eps = rng.normal((self.E.shape[0], L.shape[1]))
         out = np.empty_like(self.E)
-        K.affine_rows_nb(eps, np.ascontiguousarray(self.h * L), self.a, (1.0 - self.a) * mean,
+        CP.liu_west_rows(eps, np.ascontiguousarray(self.h * L), self.a, (1.0 - self.a) * mean,
                          self.E, out)
         self.E = out
 
@@ -527,10 +768,10 @@ class _Extra:
     def _log_post(self, Z, k, phi):
         Qs, S, O, offs, y, sig, n_arr, ids = self._hist
         ll = np.empty(Z.shape[0])
-        K.facet_loglik_history_nb(Z, k, phi, Qs, S, O, offs, y, sig, self.fc, self.kc,
+        BK.facet_loglik_history_nb(Z, k, phi, Qs, S, O, offs, y, sig, self.fc, self.kc,
                                   self.lg, n_arr, self.areas0, ids, self.params0, ll)
         r = np.empty_like(Z)
-        K.affine_rows_nb(Z, self._Linv, 0.0, -(self._Linv @ self.facets.z0), Z, r)
+        CP.liu_west_rows(Z, self._Linv, 0.0, -(self._Linv @ self.facets.z0), Z, r)
         return ll - 0.5 * np.sum(r * r, axis=1)
 
     def move(self, k, phi, rng):
@@ -542,7 +783,7 @@ class _Extra:
         if not self.n_moves:
             return
         D = self.ne
-        L = psd_sqrt(K.mean_cov_nb(self.E)[1])
+        L = psd_sqrt(CP.mean_cov_rows(self.E)[1])
         if not L.shape[1]:
             return
         cL = np.ascontiguousarray(2.38 / np.sqrt(D) * L)
@@ -550,7 +791,7 @@ class _Extra:
         lp0 = self._log_post(self.E, k, phi)
         for _ in range(self.n_moves):
             Zp = np.empty_like(self.E)
-            K.affine_rows_nb(rng.standard_normal((self.E.shape[0], L.shape[1])), cL, 1.0, zero,
+            CP.liu_west_rows(rng.normal((self.E.shape[0], L.shape[1])), cL, 1.0, zero,
                              self.E, Zp)
             lp1 = self._log_post(Zp, k, phi)
             u = rng.random(self.E.shape[0])
@@ -567,7 +808,7 @@ class _Extra:
         if not self.ne:
             return
         if self.kind == "facets":
-            zm, zv, pm, pv = K.weighted_param_stats_nb(self.E, np.ascontiguousarray(w), self.lg)
+            zm, zv, pm, pv = BK.weighted_param_stats_nb(self.E, np.ascontiguousarray(w), self.lg)
             self.mean[k], self.sd[k] = zm, np.sqrt(zv)
             self.pmean[k], self.psd[k] = pm, np.sqrt(pv)
         else:
@@ -603,7 +844,7 @@ def _predict_facets(backend, p, ext, k, Q, zeta, out):
     m = p.model
     if backend == "numba":
         n_arr, _, ids, _ = m._karrs
-        K.facet_mag_particles_nb(Q, zeta, ext.E, ext.fc, ext.kc, ext.lg, m.s_eci[k], m.o_eci[k],
+        BK.facet_mag_particles_nb(Q, zeta, ext.E, ext.fc, ext.kc, ext.lg, m.s_eci[k], m.o_eci[k],
                                  n_arr, ext.areas0, ids, ext.params0, float(m.offset[k]), out)
         return out
     N = ext.E.shape[0]
@@ -622,219 +863,413 @@ def _predict_facets(backend, p, ext, k, Q, zeta, out):
     return out
 
 
-def _run(p: FilterProblem, particles, seed, roughening, resampling, ess_threshold, backend,
-         progressive=True, max_stages=30, keep_clouds=(), cloud_size=2000, bias=None,
-         facets=None, attitude="estimate", param_discount=0.98, mcmc_moves=None,
-         rejuvenation="auto", kernel_bandwidth=None, joint_max_spread_deg=25.0):
-    N, G, ess_thr = _check(particles, roughening, resampling, ess_threshold)
-    if bias is not None and facets is not None:
-        raise ValueError("site biases and Model 3 facet states are alternatives; give one")
-    if attitude not in ("estimate", "truth"):
-        raise ValueError(f"attitude must be 'estimate' or 'truth', got {attitude!r}")
-    fixed = attitude == "truth" or bool(getattr(p, "attitude_known", False))
-    if fixed and (p.truth_q is None or p.truth_omega is None):
-        raise InputError("attitude='truth' needs the truth attitude and rate in the lightcurve",
-                         field="attitude", value=attitude)
-    max_stages = int(max_stages)
-    keep = {int(k) % p.n for k in keep_clouds} if (p.truth_q is not None and not fixed) else set()
-    clouds = {}
-    t0 = time.perf_counter()
-    m = p.model
-    dyn = p.dynamics
-    rec = Recorder(p, "bpf")
-    gate = InnovationGate(p, auto="inflate")   # outlier gate + unlit/below-horizon screening
-    rec.stages = np.zeros(p.n, dtype=np.int64)
-    ops = _NumbaOps if backend == "numba" else _NumpyOps
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xB9F]))
-    resample = _RESAMPLERS[resampling]
-    mode = 0 if dyn.kind == "controlled" else 1
-    J = np.ascontiguousarray(dyn.J if dyn.J is not None else np.eye(3))
-    Ji = np.ascontiguousarray(dyn.J_inv if dyn.J_inv is not None else np.eye(3))
-    n_arr, a_arr, ids, prm = m._karrs
-    zc = dyn.zeta_cov
 
-    if fixed:
-        tq = p.truth_q / np.linalg.norm(p.truth_q, axis=1, keepdims=True)
-        Q = np.ascontiguousarray(tq[:1])
-        W = np.ascontiguousarray(p.truth_omega[:1])
-    else:
-        X0 = rng.standard_normal((N, 6)) @ psd_sqrt(p.P0).T
-        Q = np.ascontiguousarray(ops.from_grp(X0[:, :3], p.q0))
-        W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
-    ext = _Extra(p, bias, facets, N, rng, param_discount)
-    if mcmc_moves is None:
-        mcmc_moves = 1 if (fixed and facets is not None) else 0
-    ext.setup_moves(p, mcmc_moves, tq if fixed else None)
-    joint = _resolve_rejuvenation(rejuvenation, ext, fixed)
-    kern = _joint_bandwidth(kernel_bandwidth, N, 6 + ext.ne) if joint else None
-    joint_spread = float(np.radians(joint_max_spread_deg))
-    if not joint_spread > 0.0:
-        raise ValueError(f"joint_max_spread_deg must be > 0, got {joint_max_spread_deg}")
-    n_joint = 0
-    logw = np.full(N, -np.log(N))
-    w_mean = p.omega0.copy() if not fixed else p.truth_omega[0].copy()
-    empty6 = np.zeros((0, 6))
-    empty3 = np.zeros((0, 3))
-    nan3 = np.full(3, np.nan)
-    mpred = np.empty(N)
-    ll = np.zeros(N)
-    w = np.full(N, 1.0 / N)
-    zero6 = np.zeros((6, 6))
-    for k in range(p.n):
-        dt = float(m.t[k] - m.t[k - 1]) if k > 0 else 0.0
-        z = empty6
-        L = np.zeros((6, 6))
-        if dt != 0.0 and not fixed:
-            _, Qd = dyn.transition(w_mean, dt)
-            if p.random_walk_zeta():
-                Qd = Qd.copy()
-                Qd[:3, :3] += zc
-            L = np.ascontiguousarray(psd_sqrt(Qd))
-            if L.shape[1]:
-                z = rng.standard_normal((N, L.shape[1]))   # noise sample = z Lᵀ
-        y = m.y[k]
-        has_y = bool(np.isfinite(y))
-        skipped = has_y and gate.skip_epoch(k, rec)   # object unlit / below the horizon
-        has_y = has_y and not skipped
-        zeta = empty3
-        if has_y and p.jitter_zeta() and not fixed:
-            zeta = rng.standard_normal((N, 3)) * dyn.acs_sigma
-        ext.propagate(dt, w_mean, rng)
-        if fixed:
-            Q = np.ascontiguousarray(tq[k:k + 1])
-            W = np.ascontiguousarray(p.truth_omega[k:k + 1])
-            if has_y:
-                mpred = _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, mpred)
-        elif backend == "numba":
-            s = m.s_eci[k] if (has_y and ext.kind != "facets") else nan3
-            K.bpf_predict_nb(Q, W, dt, mode, J, Ji, dyn.nsub(dt) if mode else 1, z, L, zeta,
-                             s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]), mpred)
-            if has_y and ext.kind == "facets":
-                _predict_facets(backend, p, ext, k, Q, zeta, mpred)
-            elif has_y:
-                ext.add_bias(mpred, k)
+# --------------------------------------------------------------------------------------------
+# the filter run
+# --------------------------------------------------------------------------------------------
+
+class _Run:
+    """One filter run: buffers allocated once, then one pass over the epochs (module
+    docstring, steps 1–5)."""
+
+    def __init__(self, p, cfg, seed, backend, bias, facets, attitude, keep_clouds, cloud_size,
+                 initial_cloud):
+        if bias is not None and facets is not None:
+            raise ValueError("site biases and Model 3 facet states are alternatives; give one")
+        if attitude not in ("estimate", "truth"):
+            raise ValueError(f"attitude must be 'estimate' or 'truth', got {attitude!r}")
+        fixed = attitude == "truth" or bool(getattr(p, "attitude_known", False))
+        if fixed and (p.truth_q is None or p.truth_omega is None):
+            raise InputError("attitude='truth' needs the truth attitude and rate in the "
+                             "lightcurve", field="attitude", value=attitude)
+        if fixed and cfg.rejuvenation == "joint":
+            raise ValueError("rejuvenation='joint' needs the attitude estimated (attitude='truth' "
+                             "holds q and ω at the truth; use 'separate' or mcmc_moves there)")
+        self.p, self.cfg, self.seed, self.backend, self.fixed = p, cfg, int(seed), backend, fixed
+        self.ops = _BACKENDS[backend]()
+        self.draws = _Draws(seed, cfg.rng)
+        self.N = N = cfg.particles
+        # the run's buffers: ≈ 32 + 3 (6 + e) doubles per particle (refused before allocating)
+        ne = bias.n_sites if bias is not None else (facets.dim if facets is not None else 0)
+        check_allocation(8 * N * (32 + 3 * (6 + ne)), "particle-filter buffers",
+                         field="particles", value=N)
+        self.keep = ({int(k) % p.n for k in keep_clouds}
+                     if (p.truth_q is not None and not fixed) else set())
+        self.cloud_size = int(cloud_size)
+        self.rec = Recorder(p, "bpf")
+        self.rec.stages = np.zeros(p.n, dtype=np.int64)
+        self.gate = InnovationGate(p, auto="inflate")
+        if not cfg.gating:
+            self.gate.cfg = dataclasses.replace(self.gate.cfg, mode="off")
+        dyn = p.dynamics
+        self.mode = 0 if dyn.kind == "controlled" else 1
+        self.J = np.ascontiguousarray(dyn.J if dyn.J is not None else np.eye(3))
+        self.Ji = np.ascontiguousarray(dyn.J_inv if dyn.J_inv is not None else np.eye(3))
+        self.thr = float(cfg.ess_threshold) * N
+        self.G = float(cfg.roughening)
+        # buffers (allocated once per run)
+        ops = self.ops
+        self.logw = ops.full(N, -np.log(N))
+        self.w = ops.full(N, 1.0 / N)
+        self.ll = ops.full(N, 0.0)
+        self.mpred = ops.empty(N)
+        self.mpred2 = None            # allocated when a stage keeps the copies' predictions
+        self.C = ops.empty(N)
+        self.idx = ops.empty(N, np.int64)
+        nz = N if (p.jitter_zeta() and not fixed) else 0
+        self.zeta = ops.empty((nz, 3))
+        self.zeta2 = ops.empty((nz, 3))
+        self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
+        self._init_cloud(initial_cloud)
+        self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
+        mm = cfg.mcmc_moves
+        if mm is None:
+            mm = 1 if (fixed and facets is not None) else 0
+        self.ext.setup_moves(p, mm, self.tq if fixed else None)
+        D = 6 + self.ext.ne
+        self.X = ops.full((N, D), 0.0)
+        self.X2 = ops.full((N, D), 0.0)
+        # normals of the process noise, the roughening and the kernel moves (never at once)
+        self.ebuf = ops.empty(N * max(D, 6))
+        self.zbuf = self.ebuf
+        self.joint = cfg.rejuvenation in ("auto", "joint") and not fixed
+        self.kern = _joint_bandwidth(cfg.kernel_bandwidth, N, D) if self.joint else None
+        self.spread = float(np.radians(cfg.joint_max_spread_deg))
+        self.n_joint = 0
+        self._empty6 = ops.empty((0, 6))
+        self._zero6 = np.zeros((6, 6))
+
+    def _init_cloud(self, initial_cloud):
+        p, N = self.p, self.N
+        if self.fixed:
+            self.tq = p.truth_q / np.linalg.norm(p.truth_q, axis=1, keepdims=True)
+            self.Q = np.ascontiguousarray(self.tq[:1])
+            self.W = np.ascontiguousarray(p.truth_omega[:1])
+            self.Q2, self.W2 = self.Q.copy(), self.W.copy()
+            return
+        if initial_cloud is not None:
+            Q0 = np.asarray(initial_cloud[0], float)
+            W0 = np.asarray(initial_cloud[1], float)
+            if Q0.shape != (N, 4) or W0.shape != (N, 3):
+                raise ValueError(f"initial_cloud must be (Q ({N},4), W ({N},3)), got "
+                                 f"{Q0.shape}, {W0.shape}")
+            if not (np.all(np.isfinite(Q0)) and np.all(np.isfinite(W0))):
+                raise ValueError("initial_cloud contains NaN or inf")
+            self.Q = np.ascontiguousarray(Q0 / np.linalg.norm(Q0, axis=1, keepdims=True))
+            self.W = np.ascontiguousarray(W0).copy()
         else:
-            Q, W = _propagate_np(dyn, Q, W, dt)
-            if z.shape[0]:
-                noise = z @ L.T
-                Q = rot.quat_mult(rot.rotvec_to_quat(noise[:, :3]), Q)
-                Q = Q / np.linalg.norm(Q, axis=1, keepdims=True)
-                W = W + noise[:, 3:]
-            if has_y:
-                mpred = _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, mpred)
-        if skipped:
-            neff, _ = ops.addnorm(logw, ll, 0.0, w)
-        elif not has_y:
-            rec.flags[k] |= FLAG_NAN
-            rec.skipped_nan += 1
-            neff, _ = ops.addnorm(logw, ll, 0.0, w)
-        else:
-            sig = float(m.sigma[k])
-            yhat, var_m, any_fin = ops.innov(logw, mpred, float(y), sig, ll)
-            # innovation gate: S = particle variance of the predictions + R (gating.py)
-            # (and no particle explains y: its own |y − m(q_i)| > √(γ R); gating docstring)
-            R = (gate.check(k, y - yhat, var_m + sig * sig, sig * sig, rec,
-                            nu_nearest=np.min(np.abs(y - mpred[np.isfinite(mpred)])))
-                 if any_fin else sig * sig)
-            if R is None:
-                ll[:] = 0.0   # outlier rejected: the weights are left unchanged
-            elif R != sig * sig:
-                sig = float(np.sqrt(R))   # gate mode "inflate": the inflated noise
-                ops.innov(logw, mpred, float(y), sig, ll)
-            if any_fin and R is not None:
-                rec.innovation(k, y - yhat, var_m + sig * sig)
-            if progressive:
-                # progressive correction (module docstring, step 3b): temper the likelihood in
-                # stages while the full update would leave N_eff below the threshold
-                rest = 1.0
-                for _stage in range(max_stages):
-                    if ops.ess(logw, ll, rest) >= ess_thr * N:
-                        break
-                    phi = _temper_exponent(ops, logw, ll, rest, ess_thr * N)
-                    if not phi > 0.0:
-                        break
-                    _, ok = ops.addnorm(logw, ll, phi, w)
-                    if not ok:
-                        break
-                    rest -= phi
-                    idx = resample(w, rng)
-                    if not fixed:
-                        Q = np.ascontiguousarray(Q[idx])
-                        W = np.ascontiguousarray(W[idx])
-                    ext.take(idx)
-                    if zeta.shape[0]:
-                        zeta = np.ascontiguousarray(zeta[idx])
-                    logw = np.full(N, -np.log(N))
-                    rec.flags[k] |= FLAG_RESAMPLED
-                    if not fixed:
-                        _, _, _, dps, qst = _mean_cov(ops, Q, W, np.full(N, 1.0 / N))
-                    if joint and _joint_applies(dps, joint_spread):
-                        Q, W = _joint_kernel(ops, Q, W, ext, qst, dps, rng, kern)
-                        n_joint += 1
-                    else:
-                        if not fixed:
-                            Q, W = _roughen(ops, Q, W, qst, G, rng, attitude_only=True, dp=dps)
-                        if ext.n_moves:
-                            ext.move(k, 1.0 - rest, rng)
-                        else:
-                            ext.jitter(rng)
-                    mpred = _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, mpred)
-                    ops.innov(logw, mpred, float(y), sig, ll)
-                    rec.stages[k] += 1
+            X0 = self.draws.normal((N, 6)) @ psd_sqrt(p.P0).T
+            P0 = np.ascontiguousarray(X0[:, :3])
+            if self.backend != "numpy":
+                self.Q = from_grp_rel_nb(P0, np.ascontiguousarray(p.q0), GRP_A, GRP_F)
             else:
-                rest = 1.0
-            neff, ok = ops.addnorm(logw, ll, rest, w)
-            if not ok:
-                rec.flags[k] |= FLAG_COLLAPSE
-                logw = np.full(N, -np.log(N))
-                neff, _ = ops.addnorm(logw, ll, 0.0, w)
-        rec.neff[k] = neff
-        if fixed:
-            qhat, what, C = tq[k], p.truth_omega[k].copy(), zero6
-        else:
-            qhat, what, C, dp, qref = _mean_cov(ops, Q, W, w)
-        ext.record(k, w)
-        if k in keep:
-            # weighted draw of cloud_size particles (separate stream: does not perturb the run)
-            crng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xC10D, k]))
-            sel = crng.choice(N, size=min(int(cloud_size), N), p=w)
-            tqk = np.broadcast_to(p.truth_q[k] / np.linalg.norm(p.truth_q[k]), (sel.size, 4))
-            clouds[k] = np.degrees(rot.attitude_error_rotvec(tqk, Q[sel]))
-        w_mean = what
-        rec.store(k, qhat, what, C)
-        if has_y and neff < ess_thr * N:
-            idx = resample(w, rng)
-            logw = np.full(N, -np.log(N))
-            rec.flags[k] |= FLAG_RESAMPLED
-            ext.take(idx)
-            if joint and _joint_applies(dp[idx], joint_spread):
-                Q = np.ascontiguousarray(Q[idx])
-                W = np.ascontiguousarray(W[idx])
-                Q, W = _joint_kernel(ops, Q, W, ext, qref, dp[idx], rng, kern)
-                n_joint += 1
+                self.Q = np.ascontiguousarray(_from_grp_np(P0, p.q0))
+            self.W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
+        self.Q = self.ops.from_host(self.Q)
+        self.W = self.ops.from_host(self.W)
+        self.Q2 = self.ops.empty(self.Q.shape)
+        self.W2 = self.ops.empty(self.W.shape)
+
+    # ---------------------------------------------------------------------------------
+    def run(self) -> Estimate:
+        p, cfg, N, ops, rec, gate, ext = (self.p, self.cfg, self.N, self.ops, self.rec,
+                                          self.gate, self.ext)
+        m, dyn = p.model, p.dynamics
+        t0 = time.perf_counter()
+        clouds = {}
+        w_mean = p.omega0.copy() if not self.fixed else p.truth_omega[0].copy()
+        empty6 = ops.empty((0, 6))
+        empty3 = ops.empty((0, 3))
+        nan3 = np.full(3, np.nan)
+        zero6 = np.zeros((6, 6))
+        for k in range(p.n):
+            dt = float(m.t[k] - m.t[k - 1]) if k > 0 else 0.0
+            z = empty6
+            L = zero6
+            if dt != 0.0 and not self.fixed:
+                _, Qd = dyn.transition(w_mean, dt)
+                if p.random_walk_zeta():
+                    Qd = Qd.copy()
+                    Qd[:3, :3] += dyn.zeta_cov
+                L = np.ascontiguousarray(psd_sqrt(Qd))
+                if L.shape[1]:
+                    z = ops.normals(self.draws, _flat(self.zbuf, N, L.shape[1]))
+            y = m.y[k]
+            has_y = bool(np.isfinite(y))
+            skipped = has_y and gate.skip_epoch(k, rec)   # object unlit / below the horizon
+            has_y = has_y and not skipped
+            zeta = empty3
+            if has_y and p.jitter_zeta() and not self.fixed:
+                zeta = ops.normals(self.draws, self.zeta)
+                ops.scale(zeta, dyn.acs_sigma)
+            ext.propagate(dt, w_mean, self.draws)
+            mpred = self.mpred
+            if self.fixed:
+                self.Q = np.ascontiguousarray(self.tq[k:k + 1])
+                self.W = np.ascontiguousarray(p.truth_omega[k:k + 1])
+                if has_y:
+                    self._predict(k, zeta)
             else:
-                if not fixed:
-                    Q = np.ascontiguousarray(Q[idx])
-                    W = np.ascontiguousarray(W[idx])
-                    Q, W = _roughen(ops, Q, W, qref, G, rng, dp=dp[idx])
-                if ext.n_moves:
-                    ext.move(k, 1.0, rng)
-                else:
-                    ext.jitter(rng)
-    est = gate.finish(rec.finish(time.perf_counter() - t0))
-    est.meta["tempering_stages"] = rec.stages.tolist()
-    if fixed:
-        est.meta["attitude"] = "truth"
-    ext.attach(est)
-    if joint:
-        est.meta["rejuvenation"] = {"kind": "joint", "bandwidth_h": kern[1],
-                                    "shrinkage_a": kern[0], "dimension": 6 + ext.ne,
-                                    "max_spread_deg": float(joint_max_spread_deg),
-                                    "joint_applied": n_joint}
-        if ext.kind is not None:
-            est.meta["reflection"]["roughening"] = "joint-liu-west"
-    est.clouds = clouds or None
-    return est
+                s = m.s_eci[k] if (has_y and ext.kind != "facets") else nan3
+                ops.predict(self, k, dt, z, L, zeta, s)
+                if has_y and ext.kind == "facets":
+                    _predict_facets(self.backend, p, ext, k, self.Q, zeta, mpred)
+                elif has_y:
+                    ext.add_bias(mpred, k)
+            if skipped:
+                neff, _ = ops.addnorm(self.logw, self.ll, 0.0, self.w)
+            elif not has_y:
+                rec.flags[k] |= FLAG_NAN
+                rec.skipped_nan += 1
+                neff, _ = ops.addnorm(self.logw, self.ll, 0.0, self.w)
+            else:
+                neff, zeta = self._update(k, float(y), zeta)
+            rec.neff[k] = neff
+            if self.fixed:
+                qhat, what, Cov = self.tq[k], p.truth_omega[k].copy(), zero6
+            else:
+                qhat, what, Cov, qref = self._estimate(self.w)
+            ext.record(k, self.w)
+            if k in self.keep:
+                clouds[k] = self._cloud(k)
+            w_mean = what
+            rec.store(k, qhat, what, Cov)
+            if has_y and neff < self.thr:
+                self._resample_move(k, None if self.fixed else qref, qhat)
+        est = gate.finish(rec.finish(time.perf_counter() - t0))
+        est.meta["tempering_stages"] = rec.stages.tolist()
+        est.meta["bpf"] = dict(cfg.as_dict(), backend=self.backend)
+        if self.fixed:
+            est.meta["attitude"] = "truth"
+        ext.attach(est)
+        if self.joint:
+            est.meta["rejuvenation"] = {"kind": "joint", "bandwidth_h": self.kern[1],
+                                        "shrinkage_a": self.kern[0], "dimension": 6 + ext.ne,
+                                        "max_spread_deg": float(cfg.joint_max_spread_deg),
+                                        "joint_applied": self.n_joint}
+            if ext.kind is not None:
+                est.meta["reflection"]["roughening"] = "joint-liu-west"
+        est.clouds = clouds or None
+        return est
+
+    # ---------------------------------------------------------------------------------
+    def _predict(self, k, zeta):
+        """Predicted magnitudes of the current cloud at epoch k into ``self.mpred``."""
+        if self.fixed or self.ext.kind is not None:
+            _predict_any(self.backend, self.p, self.ext, k, self.Q, self.W, zeta, self.J,
+                         self.Ji, self.mpred)
+        else:
+            self.ops.predict(self, k, 0.0, self._empty6, self._zero6, zeta, self.p.model.s_eci[k])
+
+    def _update(self, k, y, zeta):
+        """Measurement update of epoch k (steps 3, 3b) → (N_eff, ζ after resamplings)."""
+        p, cfg, ops, rec, gate, N = self.p, self.cfg, self.ops, self.rec, self.gate, self.N
+        logw, ll, w, mpred = self.logw, self.ll, self.w, self.mpred
+        sig = float(p.model.sigma[k])
+        yhat, var_m, any_fin = ops.innov(logw, mpred, y, sig, ll)
+        # innovation gate: S = particle variance of the predictions + R (gating.py)
+        R = (gate.check(k, y - yhat, var_m + sig * sig, sig * sig, rec,
+                        nu_nearest=ops.nearest(mpred, y)) if any_fin else sig * sig)
+        if R is None:
+            ops.fill(ll, 0.0)   # outlier rejected: the weights are left unchanged
+        elif R != sig * sig:
+            sig = float(np.sqrt(R))   # gate mode "inflate": the inflated noise
+            ops.innov(logw, mpred, y, sig, ll)
+        if any_fin and R is not None:
+            rec.innovation(k, y - yhat, var_m + sig * sig)
+        rest = 1.0
+        if cfg.progressive:
+            for _stage in range(int(cfg.max_stages)):
+                if ops.ess(logw, ll, rest) >= self.thr:
+                    break
+                phi = ops.temper(logw, ll, rest, self.thr, 24)
+                if not phi > 0.0:
+                    break
+                _, ok = ops.addnorm(logw, ll, phi, w)
+                if not ok:
+                    break
+                rest -= phi
+                zeta, moved = self._stage_move(k, rest, zeta)
+                if moved:
+                    self._predict(k, zeta)
+                else:     # no particle moved: the copies keep their predictions
+                    if self.mpred2 is None:
+                        self.mpred2 = ops.empty(N)
+                    ops.gather(mpred.reshape(N, 1), self.idx, self.mpred2.reshape(N, 1))
+                    self.mpred, self.mpred2 = self.mpred2, self.mpred
+                    mpred = self.mpred
+                ops.innov(logw, mpred, y, sig, ll)
+                rec.stages[k] += 1
+        neff, ok = ops.addnorm(logw, ll, rest, w)
+        if not ok:
+            rec.flags[k] |= FLAG_COLLAPSE
+            ops.fill(logw, -np.log(N))
+            neff, _ = ops.addnorm(logw, ll, 0.0, w)
+        return neff, zeta
+
+    def _resample(self):
+        """Resampling indices into ``self.idx`` from the weights ``self.w`` (False: all zero)."""
+        if self.cfg.resampling == "systematic":
+            return self.ops.systematic(self.w, self.draws.uniform(), self.C, self.idx)
+        u = self.draws.sorted_uniforms_into(self.ubuf)
+        return self.ops.sorted_merge(self.w, u, self.C, self.idx)
+
+    def _gather_qw(self):
+        """Q, W ← Q[idx], W[idx] (double buffers swapped)."""
+        self.ops.gather(self.Q, self.idx, self.Q2)
+        self.ops.gather(self.W, self.idx, self.W2)
+        self.Q, self.Q2 = self.Q2, self.Q
+        self.W, self.W2 = self.W2, self.W
+
+    def _reset_weights(self, k):
+        self.ops.fill(self.logw, -np.log(self.N))
+        self.rec.flags[k] |= FLAG_RESAMPLED
+
+    def _stage_move(self, k, rest, zeta):
+        """Resampling and attitude move between tempering stages (step 3b) → (ζ resampled,
+        whether any particle moved: without a move the copies keep their predictions)."""
+        ext, cfg = self.ext, self.cfg
+        self._resample()
+        if not self.fixed:
+            self._gather_qw()
+        ext.take(self.idx)
+        if zeta.shape[0]:
+            self.ops.gather(zeta, self.idx, self.zeta2)
+            self.zeta, self.zeta2 = self.zeta2, self.zeta
+            zeta = self.zeta
+        self._reset_weights(k)
+        rej = cfg.rejuvenation
+        if self.fixed:
+            self._move_extras(k, 1.0 - rest)
+            return zeta, True
+        if not self.joint and not ext.ne and (rej == "none" or not self.G > 0.0):
+            return zeta, False
+        self.ops.fill(self.w, 1.0 / self.N)
+        _, _, _, qst = self._estimate(self.w)
+        if ext.ne:
+            self.X[:, 6:] = ext.E
+        if self.joint and self._joint_move(self.X, qst):
+            return zeta, True
+        if rej != "none" and self.G > 0.0:
+            if rej == "table7.9":
+                sig = self._sigma(self.X[:, :3], 3)
+                z = self.ops.normals(self.draws, _flat(self.zbuf, self.N, 3))
+                sig6 = np.concatenate([sig, np.zeros(3)])
+                self.ops.roughen_compose(self.Q, self.W, z, sig6)
+            else:
+                sig = self._sigma(self.X[:, :3], 3)
+                z = self.ops.normals(self.draws, _flat(self.zbuf, self.N, 3))
+                self.ops.roughen_chart(self.X, z, sig, 3, qst, self.Q, self.W)
+        if rej != "none":
+            self._move_extras(k, 1.0 - rest)
+        return zeta, True
+
+    def _sigma(self, Xc, n):
+        """Table 7.9 roughening σ of the cloud columns Xc (ranges, 𝒢, N, dimension n)."""
+        return CP.roughening_sigma_nb(self.ops.ranges(Xc), self.G, self.N, n)
+
+    def _move_extras(self, k, phi):
+        if self.ext.n_moves:
+            self.ext.move(k, phi, self.draws)
+        else:
+            self.ext.jitter(self.draws)
+
+    def _resample_move(self, k, qref, qhat):
+        """End-of-epoch resampling and rejuvenation (step 5)."""
+        ext, cfg, N = self.ext, self.cfg, self.N
+        self._resample()
+        self._reset_weights(k)
+        if self.fixed:
+            ext.take(self.idx)
+            if cfg.rejuvenation == "table7.9":
+                self._table79_extras()
+            elif cfg.rejuvenation != "none":
+                self._move_extras(k, 1.0)
+            return
+        if ext.ne:
+            self.X[:, 6:] = ext.E
+        self.ops.gather(self.X, self.idx, self.X2)     # [δp about qref, ω, e] of the new cloud
+        ext.take(self.idx)
+        if self.joint and self._joint_move(self.X2, qref):
+            return
+        rej = cfg.rejuvenation
+        if rej == "table7.9":
+            self._gather_qw()
+            if ext.ne:
+                self.X[:, 6:] = ext.E
+            self.ops.chart(self.Q, self.W, np.ascontiguousarray(qhat), self.X)
+            if self.G > 0.0:
+                D = 6 + ext.ne
+                sig = self._sigma(self.X, D)
+                z = self.ops.normals(self.draws, _flat(self.ebuf, N, D))
+                self.ops.roughen_compose(self.Q, self.W, z, np.ascontiguousarray(sig[:6]))
+                if ext.ne:
+                    ext.E = np.ascontiguousarray(ext.E + z[:, 6:] * sig[None, 6:])
+            return
+        if rej == "none" or not self.G > 0.0:
+            self._gather_qw()
+        else:
+            sig = self._sigma(self.X2[:, :6], 6)
+            z = self.ops.normals(self.draws, _flat(self.zbuf, N, 6))
+            self.ops.roughen_chart(self.X2, z, sig, 6, qref, self.Q, self.W)
+        if rej != "none":
+            self._move_extras(k, 1.0)
+
+    def _table79_extras(self):
+        """Table 7.9 roughening of the extra states alone (attitude held at the truth)."""
+        ext = self.ext
+        if not (ext.ne and self.G > 0.0):
+            return
+        sig = self._sigma(ext.E, ext.ne)
+        z = self.draws.normal(ext.E.shape)
+        ext.E = np.ascontiguousarray(ext.E + z * sig[None, :])
+
+    def _joint_move(self, X, qref):
+        """The Liu–West kernel on the resampled chart rows X (N, 6 + ne) when the attitude
+        cloud is compact (module docstring, step 5) → True when applied."""
+        mean, C = self.ops.mean_cov(X)
+        if not float(np.sqrt(max(0.0, np.max(np.diag(C)[:3])))) < self.spread:
+            return False
+        a, h = self.kern
+        self.n_joint += 1
+        if h == 0.0:
+            self.ops.liu_west(X, self.ops.empty((self.N, 0)), np.zeros((X.shape[1], 0)), 1.0,
+                              np.zeros(X.shape[1]), np.ascontiguousarray(qref), self.Q, self.W,
+                              self.ext.E)
+            return True
+        L = _kernel_factor(C)
+        eps = self.ops.normals(self.draws, _flat(self.ebuf, self.N, L.shape[1]))
+        self.ops.liu_west(X, eps, np.ascontiguousarray(h * L), a, (1.0 - a) * mean,
+                          np.ascontiguousarray(qref), self.Q, self.W, self.ext.E)
+        return True
+
+    def _estimate(self, w):
+        """Posterior mean and covariance (step 4) → ``(q̂, ω̂, C, q_ref)``; leaves the chart
+        ``[δp about q_ref, ω]`` of the cloud in ``self.X[:, :6]``."""
+        ops, Q = self.ops, self.Q
+        imax = int(ops.argmax(w))
+        qmax = ops.row(Q, imax)
+        if self.cfg.reference == "refined":
+            qref = rot.quat_mult(rot.grp_to_quat(ops.grp_mean(Q, qmax, w), GRP_A, GRP_F), qmax)
+            qref = qref / np.linalg.norm(qref)
+        else:
+            qref = qmax
+        qref = np.ascontiguousarray(qref)
+        mean, C = ops.chart_stats(Q, self.W, w, qref, ops.row(self.W, imax), self.X)
+        qhat = rot.quat_mult(rot.grp_to_quat(mean[:3], GRP_A, GRP_F), qref)
+        return qhat / np.linalg.norm(qhat), mean[3:6].copy(), 0.5 * (C + C.T), qref
+
+    def _cloud(self, k):
+        """Error rotation vectors (deg) of a weighted draw of ``cloud_size`` particles at
+        epoch k (separate random stream: does not perturb the run)."""
+        p, N = self.p, self.N
+        crng = np.random.default_rng(np.random.SeedSequence([self.seed, 0xC10D, k]))
+        sel = crng.choice(N, size=min(self.cloud_size, N), p=self.ops.to_host(self.w))
+        tqk = np.broadcast_to(p.truth_q[k] / np.linalg.norm(p.truth_q[k]), (sel.size, 4))
+        return np.degrees(rot.attitude_error_rotvec(tqk, self.ops.to_host(self.Q)[sel]))
+
+
+_BACKENDS = {"numba": _NumbaOps, "numpy": _NumpyOps}
 
 
 def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
@@ -846,25 +1281,38 @@ def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
     if Q.shape[0] != out.shape[0]:       # attitude known, no per-particle state changes m(q)
         Q = np.ascontiguousarray(np.broadcast_to(Q, (out.shape[0], 4)))
         W = np.ascontiguousarray(np.broadcast_to(W, (out.shape[0], 3)))
-    n_arr, a_arr, ids, prm = m._karrs
-    mp = _predict_only(backend, m, k, Q, W, zeta, n_arr, a_arr, ids, prm, J, Ji)
-    out[:] = mp
+    if backend == "numba":
+        n_arr, a_arr, ids, prm = m._karrs
+        BK.bpf_predict_nb(Q, W, 0.0, 0, J, Ji, 1, np.zeros((0, 6)), np.zeros((6, 6)), zeta,
+                          m.s_eci[k], m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
+                          out)
+    else:
+        Qm = Q
+        if zeta.shape[0]:
+            Qm = rot.quat_mult(rot.rotvec_to_quat(zeta), Q)
+        out[:] = _predict_np(m, Qm, k)
     ext.add_bias(out, k)
     return out
 
 
-def _resolve_rejuvenation(rejuvenation, ext, fixed):
-    """True for the joint Liu–West kernel on the full state (module docstring, "Rejuvenation
-    of the combined state"), False for the separate table-7.9 / extra-state roughening."""
-    if rejuvenation not in ("auto", "separate", "joint"):
-        raise ValueError("rejuvenation must be 'auto', 'separate' or 'joint', "
-                         f"got {rejuvenation!r}")
-    if rejuvenation == "auto":
-        return not fixed
-    if rejuvenation == "joint" and fixed:
-        raise ValueError("rejuvenation='joint' needs the attitude estimated (attitude='truth' "
-                         "holds q and ω at the truth; use 'separate' or mcmc_moves there)")
-    return rejuvenation == "joint"
+def _kernel_factor(C):
+    """L (D, r) with ``L Lᵀ = C`` for the joint kernel, formed in standardised coordinates
+    (the components' scales differ by ~10⁴): Cholesky of the correlation matrix of the
+    components with a spread, or its eigen-decomposition square root when singular; rows of
+    components without spread are zero."""
+    D = C.shape[0]
+    sd = np.sqrt(np.clip(np.diag(C), 0.0, None))
+    live = sd > 0.0
+    L = np.zeros((D, 0))
+    if np.any(live):
+        Cl = C[np.ix_(live, live)] / np.outer(sd[live], sd[live])
+        try:                 # Cholesky: ~20× cheaper than eigh for d = 30 on a busy machine
+            Ll = sd[live][:, None] * np.linalg.cholesky(Cl)
+        except np.linalg.LinAlgError:       # singular (e.g. a collapsed component)
+            Ll = sd[live][:, None] * psd_sqrt(Cl)
+        L = np.zeros((D, Ll.shape[1]))
+        L[live] = Ll
+    return L
 
 
 def _joint_bandwidth(h, N, d):
@@ -878,93 +1326,3 @@ def _joint_bandwidth(h, N, d):
     if not 0.0 <= h < 1.0:
         raise ValueError(f"kernel_bandwidth must lie in [0, 1), got {h}")
     return float(np.sqrt(1.0 - h * h)), h
-
-
-def _joint_applies(dp, max_spread_rad):
-    """True when the resampled attitude cloud is compact enough for the joint kernel: the
-    largest per-axis standard deviation of its GRP error ``dp`` (≈ rad for small angles, a = 1,
-    f = 4) is below ``max_spread_rad``. A wide cloud is often multimodal (the symmetric-shape
-    ambiguities of a cube), and shrinking it toward its mean would merge the modes."""
-    return float(np.max(np.std(dp, axis=0))) < max_spread_rad
-
-
-def _joint_kernel(ops, Q, W, ext, qref, dp, rng, kern):
-    """Liu–West (2001) shrinkage kernel on the full resampled state ``x = [δp, ω, e]``.
-
-    ``x_i ← a x_i + (1 − a) x̄ + h L ε_i``, ``ε_i ~ N(0, I)``, with ``L Lᵀ`` the
-    equal-weight covariance of the resampled cloud (δp the GRP about ``qref``, e the extra
-    states) and ``kern = (a, h)``, ``a = √(1 − h²)`` (:func:`_joint_bandwidth`). Mean and
-    covariance, including the attitude–rate–parameter cross-covariances, are kept in
-    expectation; every component (also the rate, which the controlled dynamics never
-    perturbs) is spread again (module docstring, "Rejuvenation of the combined state"). L is
-    formed in standardised coordinates (correlation matrix), since the components' scales
-    differ by ~10⁴.
-    """
-    a, h = kern
-    if h == 0.0:
-        return Q, W
-    X = np.ascontiguousarray(np.hstack([dp, W, ext.E]))
-    mean, C = K.mean_cov_nb(X)
-    sd = np.sqrt(np.clip(np.diag(C), 0.0, None))
-    live = sd > 0.0
-    L = np.zeros((X.shape[1], 0))
-    if np.any(live):
-        Cl = C[np.ix_(live, live)] / np.outer(sd[live], sd[live])
-        try:                 # Cholesky: ~20× cheaper than eigh for d = 30 on a busy machine
-            Ll = sd[live][:, None] * np.linalg.cholesky(Cl)
-        except np.linalg.LinAlgError:       # singular (e.g. a collapsed component)
-            Ll = sd[live][:, None] * psd_sqrt(Cl)
-        L = np.zeros((X.shape[1], Ll.shape[1]))
-        L[live] = Ll
-    eps = rng.standard_normal((X.shape[0], L.shape[1]))
-    out = np.empty_like(X)
-    K.affine_rows_nb(eps, np.ascontiguousarray(h * L), a, (1.0 - a) * mean, X, out)
-    ext.E = np.ascontiguousarray(out[:, 6:])
-    return (np.ascontiguousarray(ops.from_grp(np.ascontiguousarray(out[:, :3]), qref)),
-            np.ascontiguousarray(out[:, 3:6]))
-
-
-def _roughen(ops, Q, W, qref, G, rng, attitude_only=False, dp=None):
-    """Roughening (table 7.9): jitter σ_j = 𝒢 E_j N^(−1/d) on [δp (GRP about qref), ω] (d = 6).
-
-    ``attitude_only``: jitter only δp (d = 3) — used between tempering stages of one
-    measurement, which constrains the attitude but not the rate (jittering ω there would
-    inflate its spread stage after stage). ``dp``: the GRP of Q about qref if already known.
-    """
-    if not G > 0.0:
-        return Q, W
-    if dp is None:
-        dp = ops.grp_rel(Q, qref)
-    if attitude_only:
-        sg = roughening_sigma(dp, G, d=3)
-        dp = dp + rng.standard_normal(dp.shape) * sg[None, :]
-        return np.ascontiguousarray(ops.from_grp(dp, qref)), W
-    X = np.hstack([dp, W])
-    sg = roughening_sigma(X, G, d=6)
-    X = X + rng.standard_normal(X.shape) * sg[None, :]
-    return np.ascontiguousarray(ops.from_grp(X[:, :3], qref)), np.ascontiguousarray(X[:, 3:])
-
-
-def _temper_exponent(ops, logw, ll, rest, target):
-    """Largest φ ∈ (0, rest] with N_eff(logw + φ ll) ≥ target (bisection, 24 steps)."""
-    lo, hi = 0.0, rest
-    for _ in range(24):
-        mid = 0.5 * (lo + hi)
-        if ops.ess(logw, ll, mid) >= target:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-def _predict_only(backend, m, k, Q, W, zeta, n_arr, a_arr, ids, prm, J, Ji):
-    """Predicted magnitudes (N,) of the particles at epoch k without moving them."""
-    out = np.empty(Q.shape[0])
-    if backend == "numba":
-        K.bpf_predict_nb(Q, W, 0.0, 0, J, Ji, 1, np.zeros((0, 6)), np.zeros((6, 6)), zeta,
-                         m.s_eci[k], m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]), out)
-        return out
-    Qm = Q
-    if zeta.shape[0]:
-        Qm = rot.quat_mult(rot.rotvec_to_quat(zeta), Q)
-    return _predict_np(m, Qm, k)

@@ -376,7 +376,9 @@ def invert(curve, config="mekf", *, problem: ProblemConfig | None = None, method
     bias, facets = _extra_states(fp, pcfg, variant)
     if fconf is not None:
         run = run_ukf_thesis if (method == "ukf" and variant == "thesis") else _RUNNERS[method]
-        est = run(fp, fconf, bias=bias, facets=facets)
+        # the particle filter also takes its random seed and the attitude-known mode
+        extra = {"seed": pcfg.seed, "attitude": pcfg.attitude} if method == "bpf" else {}
+        est = run(fp, fconf, bias=bias, facets=facets, **extra)
         attach_measurements(est, curve, fp.model)
         return est
     # the particle filter's keyword form (no registered configuration class)

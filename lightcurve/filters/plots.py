@@ -137,7 +137,10 @@ def estimate_figure(est, curve=None, title=None):
 
         curve = source_lightcurve(est)
     x, is_utc, epoch = _time_axis(est, curve)
-    truth = est.att_error_deg is not None
+    attitude_known = (est.meta or {}).get("attitude") == "truth"  # reflection-only runs
+    truth = est.att_error_deg is not None and not attitude_known
+    has_nees = est.nees is not None and bool(np.any(np.isfinite(est.nees)))
+    refl = _reflection_info(est, curve)
     tq = tw = None
     if curve is not None and curve.has_truth and len(curve) == len(est):
         tq, tw = curve.truth_q, curve.truth_omega_rad_s
@@ -147,9 +150,11 @@ def estimate_figure(est, curve=None, title=None):
     # rows: angles, rates, [lightcurve + sky], innovations + (rate | sky), [truth errors]
     r_lc = 2 if has_lc else None
     r_nu = 3 if has_lc else 2
-    r_err = r_nu + 1
-    nrow = r_nu + 1 + (1 if truth else 0)
-    ratios = [1, 1] + ([1.25] if has_lc else []) + [0.9 if has_lc else 1.1] + ([1] if truth else [])
+    r_refl = r_nu + 1 if refl else None
+    r_err = r_nu + 1 + (1 if refl else 0)
+    nrow = r_err + (1 if truth else 0)
+    ratios = ([1, 1] + ([1.25] if has_lc else []) + [0.9 if has_lc else 1.1] + ([1.1] if refl else [])
+              + ([1] if truth else []))
     fig = plt.figure(figsize=figsize(12, 2.3 * nrow + 0.9), dpi=DPI, layout="constrained")
     gs = GridSpec(nrow, 3, figure=fig, height_ratios=ratios)
     ax_all = []
@@ -265,7 +270,7 @@ def estimate_figure(est, curve=None, title=None):
     fig.colorbar(sc, ax=a, label="epoch index", shrink=0.8)
 
     # ---- row 3: innovations with the NIS band -------------------------------------------------
-    a = fig.add_subplot(gs[r_nu, 0:2] if has_lc else gs[r_nu, 0], sharex=ax_all[0])
+    a = fig.add_subplot(gs[r_nu, 0:2] if has_lc else gs[r_nu, 0])
     ax_all.append(a)
     band = 3 * np.sqrt(S)
     okb = np.isfinite(band)
@@ -291,15 +296,26 @@ def estimate_figure(est, curve=None, title=None):
     a.set_ylabel("spin rate |ω| [deg/s]")
     a.legend(fontsize=7, loc="best")
 
-    # ---- row 4 (truth only): errors against the truth --------------------------------------
+    # ---- reflection states (Bernard ch. 8): Model 3 parameters or per-site biases -----------
+    non_time = {id(ax_sky)}
+    if refl:
+        a = fig.add_subplot(gs[r_refl, :])
+        ax_all.append(a)
+        if refl["kind"] == "model3":
+            non_time.add(id(a))
+            _model3_panel(a, refl)
+        else:
+            _bias_panel(a, x, refl)
+
+    # ---- errors against the truth (when there is one and the attitude was estimated) --------
     if truth:
         _error_panel(axis(r_err, 0), x, est.att_error_deg, 3 * est.att_sigma_deg, "δθ",
                      "attitude error [deg]")
         ax_all[-1].set_title("errors against the truth", loc="left", fontsize=9)
         _error_panel(axis(r_err, 1), x, np.degrees(est.omega_error_rad_s),
                      np.degrees(3 * est.omega_sigma_rad_s), "δω", "rate error [deg/s]")
-        a = axis(r_err, 2)
-        if est.nees is not None and np.any(np.isfinite(est.nees)):
+        if has_nees:
+            a = axis(r_err, 2)
             from scipy.stats import chi2
 
             lo, hi = chi2.ppf([0.005, 0.995], 6)
@@ -316,19 +332,86 @@ def estimate_figure(est, curve=None, title=None):
             a.legend(fontsize=7, loc="upper right")
 
     # ---- axes, title -------------------------------------------------------------------------
-    last = [a for a in ax_all if a is not ax_sky][-3:] if truth else \
-        [a for a in ax_all if a is not ax_sky][-2:]
-    bottom = {id(a) for a in last}
+    time_axes = [a for a in ax_all if id(a) not in non_time]
+    last_row = max(a.get_subplotspec().rowspan.stop for a in time_axes)
+    bottom = {id(a) for a in time_axes if a.get_subplotspec().rowspan.stop == last_row}
     for a in ax_all:
-        if a is not ax_sky:  # the sky panel has its own axes
+        if id(a) not in non_time:  # the sky and Model 3 panels have their own x axes
             if is_utc:
                 utc_axis(a, label="UTC" if id(a) in bottom else "", offset=id(a) in bottom)
             elif id(a) in bottom:
                 a.set_xlabel("t − t₀ [s]")
         a.grid(True, alpha=0.3)
+    import textwrap
+
     head = _title(est, sp, eul, eul_s, frac_in, epoch)
-    fig.suptitle(f"{title} · {head}" if title else head, fontsize=10, ha="left", x=0.01)
+    head = f"{title} · {head}" if title else head
+    head = "\n".join(textwrap.fill(line, 140) for line in head.split("\n"))
+    fig.suptitle(head, fontsize=10, ha="left", x=0.01)
     return fig
+
+
+def _reflection_info(est, curve):
+    """What the reflection panel draws, or None: Model 3 facet parameters at the last epoch
+    (with the prior from the estimate's meta and the truth the lightcurve records), or the
+    per-site magnitude biases of Models 1–2 over time."""
+    if est.refl_p is not None and est.refl_names is not None:
+        r = (est.meta or {}).get("reflection") or {}
+        r = r.get("facet_states", r)
+        p0 = r.get("p_nominal")
+        s0 = r.get("prior_sigma_p")
+        if p0 is None or s0 is None:
+            return None
+        truth = None
+        rt = ((curve.attrs or {}).get("reflection_truth") if curve is not None else None)
+        if rt:
+            import json
+
+            try:
+                tv = json.loads(str(rt))
+                truth = np.array([float(tv[n.split("[")[0]][int(n.split("[")[1][:-1])])
+                                  for n in est.refl_names])
+            except (ValueError, KeyError, IndexError, TypeError):
+                truth = None
+        return {"kind": "model3", "names": list(est.refl_names), "p": est.refl_p[-1],
+                "sd": est.refl_p_sigma[-1], "p0": np.asarray(p0, float),
+                "s0": np.asarray(s0, float), "truth": truth}
+    if est.bias is not None and est.bias_sigma is not None:
+        names = list(est.site_names) if getattr(est, "site_names", None) else \
+            [f"site {k}" for k in range(est.bias.shape[1])]
+        return {"kind": "bias", "b": est.bias, "sd": est.bias_sigma, "names": names}
+    return None
+
+
+def _model3_panel(a, r):
+    """Model 3: each facet parameter's final estimate in units of its prior σ from the shape
+    file's value, ±3 posterior σ; truth (when recorded) as red crosses."""
+    k = np.arange(len(r["names"]))
+    z = (r["p"] - r["p0"]) / r["s0"]
+    a.axhspan(-3, 3, color="0.92", lw=0, label="prior ±3σ")
+    a.errorbar(k, z, yerr=3 * r["sd"] / r["s0"], fmt="o", ms=3, color="C0", lw=1,
+               label="final estimate ±3σ")
+    if r["truth"] is not None:
+        a.plot(k, (r["truth"] - r["p0"]) / r["s0"], "x", color="C3", ms=6, label="truth")
+    a.axhline(0, color="0.4", lw=0.6)
+    a.set_xticks(k, r["names"], fontsize=7, rotation=90 if len(k) > 16 else 0)
+    a.set_xlim(-0.7, len(k) - 0.3)
+    a.set_ylabel("(p − shape value) / prior σ")
+    a.set_title("reflection parameters at the last epoch (Model 3), in prior σ from the shape "
+                "file's values", loc="left", fontsize=9)
+    a.legend(fontsize=7, loc="upper right", ncol=3)
+
+
+def _bias_panel(a, x, r):
+    """Models 1–2: per-site magnitude bias with its ±3σ band over time."""
+    for j, name in enumerate(r["names"]):
+        b, sd = r["b"][:, j], r["sd"][:, j]
+        a.fill_between(x, b - 3 * sd, b + 3 * sd, color=f"C{j}", alpha=0.15, lw=0)
+        a.plot(x, b, color=f"C{j}", lw=1.2, label=f"bias, {name} (±3σ shaded)")
+    a.axhline(0, color="0.4", lw=0.6)
+    a.set_ylabel("magnitude bias [mag]")
+    a.set_title("reflection bias states (Bernard ch. 8, Models 1–2)", loc="left", fontsize=9)
+    a.legend(fontsize=7, loc="upper right")
 
 
 def _error_panel(a, x, err, s3, sym, ylabel):
@@ -350,6 +433,13 @@ def _error_panel(a, x, err, s3, sym, ylabel):
 def _title(est, sp, eul, eul_s, frac_in, epoch):
     name = _NAMES.get(est.method, est.method)
     s = est.summary()
+    if (est.meta or {}).get("attitude") == "truth":
+        n_refl = len(est.refl_names) if est.refl_names is not None else 0
+        return (f"{name}: {len(est)} epochs"
+                + (f" from {str(epoch).replace('T', ' ').rstrip('Z')} UTC" if epoch else "")
+                + "; attitude and rate HELD AT THE TRUTH (reflection-only run, Bernard §10.7)"
+                + (f"; {n_refl} reflection parameters estimated" if n_refl else "")
+                + f"\n{100 * frac_in:.0f} % of innovations inside ±3√S (expected 99.7 %)")
     s3 = 3 * np.linalg.norm(est.att_sigma_deg[-1])
     line1 = (f"{name}: {len(est)} epochs"
              + (f" from {str(epoch).replace('T', ' ').rstrip('Z')} UTC" if epoch else "")

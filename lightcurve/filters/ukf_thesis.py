@@ -41,12 +41,23 @@ import time
 
 import numpy as np
 
+from ..core.rotations import perturb_rotvec_nb
 from ..estimation.kalman import safe_cholesky
 from ..estimation.sigma_points import unscented_weights
-from . import _kernels as K
-from ._common import (FilterProblem, Recorder, StateLayout, apply_grp, attach_bias,
-                      attach_facets, grp_rel, initial_state_ext, layout_transition,
-                      reflection_histories, single_thread, truth_state)
+from ._common import (
+    FilterProblem,
+    Recorder,
+    StateLayout,
+    apply_grp,
+    attach_bias,
+    attach_facets,
+    grp_rel,
+    initial_state_ext,
+    layout_transition,
+    reflection_histories,
+    single_thread,
+    truth_state,
+)
 from .gating import InnovationGate
 from .result import FLAG_INVISIBLE, FLAG_NAN, FLAG_REFUSED, Estimate
 
@@ -179,7 +190,7 @@ def _measurement(k, y, R, Qs, chi, D, xm, Pm, wts, L, nq, controlled, bias, face
     nx = L.nx
     Qm = Qs
     if L.na and nq and controlled:
-        Qm = K.perturb_rotvec_nb(np.ascontiguousarray(Qs),
+        Qm = perturb_rotvec_nb(np.ascontiguousarray(Qs),
                                  np.ascontiguousarray(chi[:, nx:nx + 3]))        # eq. 7.87
     Y = facets.magnitudes(m, Qm, z + chi[:, L.iz], k) if L.nz else m.predict_q(Qm, k)
     if not np.all(np.isfinite(Y)):

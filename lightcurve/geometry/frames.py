@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sites import Site, enu_matrix, get_site, site_itrs_m
+from .sites import enu_matrix, get_site, site_itrs_m
 from .time import is_time, skyfield_times
 
 __all__ = [

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import stat
 from pathlib import Path
 
 from ..errors import InputError
@@ -23,11 +24,13 @@ LOCK_NAME = ".lightcurve.lock"
 
 
 def _holder(path: Path) -> str:
+    from .safe_open import read_bytes
+
     try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            text = fh.read(200).strip()
-    except OSError:
+        text = read_bytes(path, max_bytes=4096, what="lock file", track=False)
+    except InputError:
         return "another process"
+    text = text.decode("utf-8", "replace").strip()[:200]
     return f"process {text}" if text else "another process"
 
 
@@ -48,9 +51,15 @@ def folder_lock(folder, *, what: str = "output folder"):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0)
-                 | getattr(os, "O_NOFOLLOW", 0), 0o666)
     try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0)
+                     | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0), 0o666)
+    except OSError as exc:
+        raise InputError(f"cannot open the lock file: {exc.strerror}", file=path) from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise InputError("the lock file is not a regular file", file=path,
+                             allowed="a regular file (remove it)")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

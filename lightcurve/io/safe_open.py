@@ -37,7 +37,8 @@ from ..errors import InputError
 __all__ = ["open_regular", "read_bytes", "read_text", "check_regular", "open_hdf5",
            "read_dataset", "read_attr", "TOML_MAX_BYTES", "CSV_MAX_BYTES", "MESH_MAX_BYTES",
            "BRDF_MAX_BYTES", "ALBEDO_MAX_BYTES", "HDF5_MAX_BYTES", "HDF5_MAX_LINKS",
-           "HDF5_ALLOWED_FILTERS", "is_regular_file", "track_inputs", "check_not_input"]
+           "HDF5_ALLOWED_FILTERS", "is_regular_file", "track_inputs", "check_not_input",
+           "read_json", "JSON_MAX_BYTES"]
 
 MiB = 1024 * 1024
 #: TOML files (scenarios, shapes, materials, sites, CSS configurations and studies)
@@ -50,6 +51,8 @@ MESH_MAX_BYTES = 200 * MiB
 BRDF_MAX_BYTES = 64 * MiB
 #: albedo maps (CERES CSV, TOMS .dat)
 ALBEDO_MAX_BYTES = 16 * MiB
+#: JSON files (study and batch summaries, diagnosis results)
+JSON_MAX_BYTES = 256 * MiB
 #: HDF5 files (a lightcurve of the 5·10⁷-epoch cap with truth is about 8.4 GB)
 HDF5_MAX_BYTES = 16 * 1024 * MiB
 #: links visited in one HDF5 file (the package's files hold fewer than 40)
@@ -211,6 +214,21 @@ def read_text(path, *, max_bytes: int, what: str = "file", encoding: str = "utf-
         return raw.decode(encoding)
     except UnicodeDecodeError as exc:
         raise InputError(f"not UTF-8 text (byte {exc.start})", file=path) from None
+
+
+def read_json(path, *, max_bytes: int = JSON_MAX_BYTES, what: str = "JSON file",
+              track: bool = True):
+    """A JSON document from a regular file of at most ``max_bytes``; invalid JSON (or
+    nesting deeper than Python's recursion limit) is an InputError naming the file."""
+    import json
+
+    text = read_text(path, max_bytes=max_bytes, what=what, track=track)
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise InputError(f"not valid JSON: {exc}", file=path) from None
+    except RecursionError:
+        raise InputError("not valid JSON: nested too deeply", file=path) from None
 
 
 # ----------------------------------------------------------------------------------------

@@ -20,13 +20,13 @@ so; a file of unknown kind is an :class:`~lightcurve.errors.InputError` naming w
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import atomic_path
+from ..io.safe_open import read_json
 
 __all__ = ["plot_file", "file_kind", "plot_css_recording", "plot_css_estimate_csv",
            "plot_invert_summary", "plot_study_summary", "study_summary_figure", "plot_reflection_summary", "KINDS"]
@@ -46,7 +46,7 @@ def _plt():
 
 def file_kind(path) -> str:
     """The kind of a file written by the package (one of :data:`KINDS`); InputError otherwise."""
-    from ..io.safe_open import HDF5_MAX_BYTES, open_hdf5, open_regular, read_text
+    from ..io.safe_open import HDF5_MAX_BYTES, open_hdf5, open_regular
 
     path = Path(path)
     # a regular file only (no FIFO or device), its first bytes read from the checked descriptor
@@ -68,10 +68,7 @@ def file_kind(path) -> str:
         raise InputError("already a figure or report: open it in an image viewer or browser",
                          file=path)
     if path.suffix.lower() == ".json":
-        try:
-            doc = json.loads(read_text(path, max_bytes=256 * 1024 * 1024, what="JSON file"))
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise InputError(f"not valid JSON: {exc}", file=path) from None
+        doc = read_json(path)
         if isinstance(doc, dict) and "cells" in doc and "study" in doc:
             return "study-summary"
         if isinstance(doc, dict) and "parameters" in doc and "diagnostics" in doc:
@@ -243,7 +240,12 @@ def plot_css_estimate_csv(path, out) -> Path:
     """``css estimate`` CSV: the estimated Sun direction (body axes) versus time."""
     from .style import figsize
 
-    d = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    import io
+
+    from ..io.safe_open import CSV_MAX_BYTES, read_bytes
+
+    d = np.loadtxt(io.BytesIO(read_bytes(path, max_bytes=CSV_MAX_BYTES, what="CSV file")),
+                   delimiter=",", skiprows=1, ndmin=2)
     if d.shape[1] != 4:
         raise InputError("expected 4 columns t_s,s_hat_x,s_hat_y,s_hat_z", file=path,
                          value=d.shape[1])
@@ -264,7 +266,7 @@ def plot_invert_summary(path, out) -> Path:
     """invert ``summary.json``: final RSS attitude error and final 3σ (RSS) per file."""
     from .style import figsize
 
-    doc = json.loads(Path(path).read_text())
+    doc = read_json(path)
     keys = list(doc)
     plt = _plt()
     fig, ax = plt.subplots(figsize=figsize(10, 1.2 + 0.28 * max(4, len(keys))),
@@ -294,7 +296,7 @@ def plot_invert_summary(path, out) -> Path:
 def plot_study_summary(path, out) -> Path:
     """compare ``summary.json``: median and 95th-percentile final RSS attitude error per cell,
     coloured by the cell's traffic light (:func:`study_summary_figure`)."""
-    return _save(study_summary_figure(json.loads(Path(path).read_text())), out)
+    return _save(study_summary_figure(read_json(path)), out)
 
 
 def study_summary_figure(doc):
@@ -328,7 +330,7 @@ def plot_reflection_summary(path, out) -> Path:
     prior (value / prior centre), with the truth when the file has it."""
     from .style import figsize
 
-    doc = json.loads(Path(path).read_text())
+    doc = read_json(path)
     rows = doc["parameters"]
     plt = _plt()
     fig, ax = plt.subplots(figsize=figsize(9, 1.3 + 0.3 * max(4, len(rows))), layout="constrained")

@@ -388,10 +388,9 @@ def read_study_summary(path) -> StudySummary:
     p = Path(path)
     if p.is_dir():
         p = p / "summary.json"
-    try:
-        doc = json.loads(p.read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read the study summary: {exc}", file=p) from None
+    from ..io.safe_open import read_json
+
+    doc = read_json(p, what="study summary")
     if not isinstance(doc, dict) or "cells" not in doc or "study" not in doc:
         raise InputError("not a study summary.json (no 'cells' / 'study')", file=p)
     return StudySummary(doc)

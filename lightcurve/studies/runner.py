@@ -41,7 +41,7 @@ from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
 from .metrics import cell_summary, run_metrics
 from .study import GRID_KEYS, RunTask, Study
 
-__all__ = ["limit_blas_threads", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
+__all__ = ["limit_blas_threads", "init_worker", "execute_task", "run_study", "summarize", "write_run", "read_run", "finished_runs",
            "prepare_output", "iter_results", "progress_bar", "RUN_FORMAT"]
 
 RUN_FORMAT = "lightcurve-study-run"
@@ -117,7 +117,7 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
         return simulate(sc, seed=sim_seed)
 
 
-def execute_task(task: RunTask) -> dict:
+def execute_task(task: RunTask, device: str = "cpu") -> dict:
     """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
     ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
 
@@ -155,6 +155,8 @@ def execute_task(task: RunTask) -> dict:
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])
+        if c.filter == "bpf" and device != "cpu":
+            kw["device"] = device
         if "acs_mode" in opts:
             kw["acs_mode"] = opts["acs_mode"]
         if "variant" in opts:
@@ -314,14 +316,18 @@ def _iter_inline(tasks, fn=None):
         yield fn(t)
 
 
-def init_worker(parent_pid: int) -> None:
+def init_worker(parent_pid: int, numba_threads: int | None = None) -> None:
     """Initialiser of every pool worker: die with the main process
     (:func:`lightcurve.process.watch_parent`), single-threaded BLAS
-    (:func:`limit_blas_threads`)."""
+    (:func:`limit_blas_threads`), at most ``numba_threads`` numba threads
+    (:mod:`lightcurve.threads`: workers × threads ≤ cores)."""
     from ..process import watch_parent
+    from ..threads import limit_numba_threads
 
     watch_parent(parent_pid)
     limit_blas_threads()
+    if numba_threads is not None:
+        limit_numba_threads(numba_threads)
 
 
 def process_pool(workers: int):
@@ -331,6 +337,9 @@ def process_pool(workers: int):
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
+    from ..threads import threads_per_worker
+
+    nt = threads_per_worker(workers)   # set in each worker by init_worker
     # forkserver, not fork: forking a process that already ran OpenMP (numba parallel
     # kernels, BLAS) aborts the child; the server starts clean and preloads the filters once
     if "forkserver" in mp.get_all_start_methods():
@@ -339,7 +348,34 @@ def process_pool(workers: int):
     else:
         ctx = mp.get_context("spawn")
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=init_worker,
-                               initargs=(os.getpid(),))
+                               initargs=(os.getpid(), nt))
+
+
+class _ThreadLimited:
+    """``fn(task)`` run with at most n numba threads in the calling thread (Dask tasks run in
+    the worker's executor threads, where a limit set at worker start does not apply). ``n``
+    comes from the cores of the worker's host and the Dask threads on it (``host_threads``:
+    host → threads of all workers there; a worker not listed divides by its own threads)."""
+
+    def __init__(self, fn, host_threads):
+        self.fn = fn
+        self.host_threads = dict(host_threads)
+
+    def __call__(self, task):
+        from ..threads import available_cores, limited_threads, user_thread_limit
+
+        try:
+            import distributed
+
+            w = distributed.get_worker()
+            host = str(w.address).split("://")[-1].rsplit(":", 1)[0]
+            busy = self.host_threads.get(host) or int(w.state.nthreads)
+        except (ImportError, ValueError, AttributeError):
+            busy = 1
+        n = max(1, available_cores() // max(1, int(busy)))
+        u = user_thread_limit()
+        with limited_threads(min(n, u) if u is not None else n):
+            return self.fn(task)
 
 
 def _iter_pool(tasks, workers, fn=None):
@@ -385,13 +421,17 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
     distributed = _import_distributed()
     fn = execute_task if fn is None else fn
     key = (lambda t: f"lightcurve-run-{t.run_id}-{t.filter_seed}") if key is None else key
+    from ..threads import threads_per_worker
+
     cluster = None
     if address is None:
         import logging
 
+        nt = threads_per_worker(int(n_workers))
         cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
                                            processes=True, dashboard_address=None,
-                                           silence_logs=logging.ERROR)
+                                           silence_logs=logging.ERROR,
+                                           env={"NUMBA_NUM_THREADS": str(nt)})
         client = distributed.Client(cluster)
     else:
         try:
@@ -408,6 +448,11 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
             window = max(64, 4 * sum(client.nthreads().values()))
         except Exception:  # noqa: BLE001 - a scheduler without workers yet
             window = 64
+        hosts = {}
+        for addr, info in client.scheduler_info().get("workers", {}).items():
+            h = str(addr).split("://")[-1].rsplit(":", 1)[0]
+            hosts[h] = hosts.get(h, 0) + int(info.get("nthreads", 1))
+        fn = _ThreadLimited(fn, hosts)
         it = iter(tasks)
         ac = distributed.as_completed()
         # bounded in flight: tasks are generated lazily and submitted as results come back
@@ -470,7 +515,7 @@ def progress_bar(total: int, *, initial: int = 0, desc: str = "", progress: bool
 # ----------------------------------------------------------------------------------------
 def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | None = None,
               scheduler: str | None = None, dask_local: int | None = None, force: bool = False,
-              progress: bool = True, write_report: bool = True) -> dict:
+              progress: bool = True, write_report: bool = True, device: str = "cpu") -> dict:
     """Run (or resume) a study and write ``summary.json`` and ``report.html``.
 
     Parameters
@@ -483,6 +528,9 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
     dask_local : int, optional — start a Dask LocalCluster with this many worker processes
     force : bool — discard stored runs of a different study instead of refusing
     progress : bool — tqdm progress bar (runs done, failures, time left) on stderr
+    device : {"cpu", "gpu"} — where the particle-filter cells run
+        (:func:`lightcurve.filters.invert`, ``device``); the results of a cell do not depend
+        on it beyond round-off
 
     Returns
     -------
@@ -514,7 +562,9 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         limit_blas_threads()  # before any worker starts (inherited) and for inline runs
         failures = 0
         if n_done < total:
-            it = iter_results(todo, execute_task, workers=workers, scheduler=scheduler,
+            fn = execute_task if device == "cpu" else functools.partial(execute_task,
+                                                                        device=device)
+            it = iter_results(todo, fn, workers=workers, scheduler=scheduler,
                               dask_local=dask_local)
             bar = progress_bar(total, initial=n_done, desc=study.name, progress=progress)
             h = study.hash

@@ -135,3 +135,18 @@ def test_help_lines_do_not_leak_defaults_as_python_reprs():
     for words, p in COMMANDS:
         text = p.format_help()
         assert not re.search(r"default: None\b|\(default None\)", text), words
+
+
+def test_help_and_parsing_import_no_numerical_stack():
+    """`lightcurve --help`, `sites list` … start fast: building the parser imports neither numba,
+    scipy, matplotlib nor h5py (the handlers import what they need)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, lightcurve.cli as c; c.build_parser(); "
+            "print(sorted(m for m in ('numba', 'scipy', 'matplotlib', 'h5py', 'skyfield') "
+            "if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]"

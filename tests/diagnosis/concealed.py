@@ -115,9 +115,9 @@ class Geometry:
     def __init__(self, a_m, inc_deg, raan_deg, u0_deg, sites, sun_dir, q0, w_body):
         self.a = a_m
         self.n = np.sqrt(MU / a_m ** 3)
-        i, O = np.radians(inc_deg), np.radians(raan_deg)
-        self.P = np.array([np.cos(O), np.sin(O), 0.0])
-        self.Q = np.array([-np.sin(O) * np.cos(i), np.cos(O) * np.cos(i), np.sin(i)])
+        i, raan = np.radians(inc_deg), np.radians(raan_deg)
+        self.P = np.array([np.cos(raan), np.sin(raan), 0.0])
+        self.Q = np.array([-np.sin(raan) * np.cos(i), np.cos(raan) * np.cos(i), np.sin(i)])
         self.u0 = np.radians(u0_deg)
         self.sites = [(np.radians(lat), np.radians(lon)) for lat, lon in sites]
         self.sun = AU * unit(sun_dir)

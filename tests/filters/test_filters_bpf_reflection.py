@@ -7,7 +7,9 @@ import pytest
 from filters_synth import make_curve
 
 from lightcurve import rotations as rot
-from lightcurve.filters import _kernels as K
+from lightcurve.core import photometry as CPh
+from lightcurve.core import rotations as CR
+from lightcurve.filters import _bpf_kernels as BK
 from lightcurve.filters import build_problem, run_bpf, run_bpf_numpy
 from lightcurve.filters.facet_states import FacetParameterStates
 from lightcurve.filters.models import MagnitudeModel
@@ -75,10 +77,10 @@ def test_model3_kernel_equals_attitude_only_kernel_at_nominal_parameters():
     Q = _random_attitudes(rng, 400)
     n, a, ids, prm = m._karrs
     for k in range(len(c)):
-        ref = K.mag_kernel_nb(Q, m.s_eci[k], m.o_eci[k], n, a, ids, prm, float(m.offset[k]))
+        ref = CPh.mag_kernel_nb(Q, m.s_eci[k], m.o_eci[k], n, a, ids, prm, float(m.offset[k]))
         for Z in (np.tile(fs.z0, (400, 1)), fs.z0[None, :].copy()):
             out = np.empty(400)
-            K.facet_mag_particles_nb(Q, np.zeros((0, 3)), Z, fs.facet, fs.kind_col, fs.logit,
+            BK.facet_mag_particles_nb(Q, np.zeros((0, 3)), Z, fs.facet, fs.kind_col, fs.logit,
                                      m.s_eci[k], m.o_eci[k], n, a, ids, prm,
                                      float(m.offset[k]), out)
             fin = np.isfinite(ref)
@@ -87,9 +89,9 @@ def test_model3_kernel_equals_attitude_only_kernel_at_nominal_parameters():
         # jitter: the kernel applies exp(ζ) ⊗ q like the fused attitude-only prediction
         zeta = rng.standard_normal((400, 3)) * 0.05
         out = np.empty(400)
-        K.facet_mag_particles_nb(Q, zeta, fs.z0[None, :].copy(), fs.facet, fs.kind_col, fs.logit,
+        BK.facet_mag_particles_nb(Q, zeta, fs.z0[None, :].copy(), fs.facet, fs.kind_col, fs.logit,
                                  m.s_eci[k], m.o_eci[k], n, a, ids, prm, float(m.offset[k]), out)
-        ref = K.mag_kernel_nb(K.perturb_rotvec_nb(Q, zeta), m.s_eci[k], m.o_eci[k], n, a, ids,
+        ref = CPh.mag_kernel_nb(CR.perturb_rotvec_nb(Q, zeta), m.s_eci[k], m.o_eci[k], n, a, ids,
                               prm, float(m.offset[k]))
         fin = np.isfinite(ref)
         np.testing.assert_allclose(out[fin], ref[fin], rtol=0, atol=1e-12)
@@ -113,11 +115,11 @@ def test_model3_kernel_vs_photometry_magnitude_random_parameters():
     n, _, ids, _ = m._karrs
     for k in range(len(c)):
         out = np.empty(S)
-        K.facet_mag_particles_nb(Q, np.zeros((0, 3)), Z, fs.facet, fs.kind_col, fs.logit,
+        BK.facet_mag_particles_nb(Q, np.zeros((0, 3)), Z, fs.facet, fs.kind_col, fs.logit,
                                  m.s_eci[k], m.o_eci[k], n, fs._areas0, ids, fs._params0,
                                  float(m.offset[k]), out)
         shared = np.empty(S)
-        K.facet_mag_particles_nb(Q[:1].copy(), np.zeros((0, 3)), Z, fs.facet, fs.kind_col,
+        BK.facet_mag_particles_nb(Q[:1].copy(), np.zeros((0, 3)), Z, fs.facet, fs.kind_col,
                                  fs.logit, m.s_eci[k], m.o_eci[k], n, fs._areas0, ids,
                                  fs._params0, float(m.offset[k]), shared)
         ref = np.empty(S)
@@ -255,7 +257,9 @@ def test_joint_kernel_keeps_mean_and_covariance_and_separates_duplicates():
     the extra Monte Carlo spread of the jitter) of the input cloud's, and no duplicate rows
     remain. h for d = 30, N = 10⁴ is A N^(−1/(d+4)), A = (4/(d+2))^(1/(d+4)):
     0.9407 × 0.7627 = 0.7174."""
-    from lightcurve.filters.bpf import _joint_bandwidth, _joint_kernel, _NumbaOps
+    from lightcurve.core.particles import mean_cov_rows
+    from lightcurve.filters._bpf_kernels import liu_west_attitude
+    from lightcurve.filters.bpf import _joint_bandwidth, _kernel_factor
 
     a, h = _joint_bandwidth(None, 10_000, 30)
     assert h == pytest.approx((4 / 32) ** (1 / 34) * 1e4 ** (-1 / 34), rel=1e-12)
@@ -269,18 +273,16 @@ def test_joint_kernel_keeps_mean_and_covariance_and_separates_duplicates():
     X[:, 3:6] += np.array([0.03, 0.02, 0.06])
     X = X[rng.integers(0, N // 4, N)]                  # a resampled cloud: many duplicates
     qref = rot.euler321_to_quat(np.radians([10.0, -20.0, 30.0]))
-    Q = _NumbaOps.from_grp(np.ascontiguousarray(X[:, :3]), qref)
-
-    class _Ext:
-        E = np.ascontiguousarray(X[:, 6:])
-        ne = 2
-
-    ext = _Ext()
-    dp = _NumbaOps.grp_rel(Q, qref)
+    Q = CR.from_grp_rel_nb(np.ascontiguousarray(X[:, :3]), qref, 1.0, 4.0)
+    dp = CR.grp_rel_nb(Q, qref, 1.0, 4.0)
     np.testing.assert_allclose(dp, X[:, :3], atol=1e-12)        # the chart round trip
-    Qn, Wn = _joint_kernel(_NumbaOps, Q, np.ascontiguousarray(X[:, 3:6]), ext, qref, dp,
-                           np.random.default_rng(5), (a, h))
-    Y = np.hstack([_NumbaOps.grp_rel(Qn, qref), Wn, ext.E])
+    Xc = np.ascontiguousarray(np.hstack([dp, X[:, 3:]]))
+    mean, Cx = mean_cov_rows(Xc)
+    L = _kernel_factor(Cx)
+    eps = np.random.default_rng(5).standard_normal((N, L.shape[1]))
+    Qn, Wn, En = np.empty((N, 4)), np.empty((N, 3)), np.empty((N, 2))
+    liu_west_attitude(Xc, eps, h * L, a, (1.0 - a) * mean, qref, 1.0, 4.0, Qn, Wn, En)
+    Y = np.hstack([CR.grp_rel_nb(Qn, qref, 1.0, 4.0), Wn, En])
     m0, C0 = X.mean(axis=0), np.cov(X.T, bias=True)
     m1, C1 = Y.mean(axis=0), np.cov(Y.T, bias=True)
     se = np.sqrt(np.diag(C0) / N)

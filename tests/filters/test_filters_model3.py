@@ -9,8 +9,8 @@ import pytest
 from filters_synth import make_curve
 from scipy import stats
 
+from lightcurve.core import rotations as CR
 from lightcurve.errors import InputError
-from lightcurve.filters import _kernels as K
 from lightcurve.filters.facet_states import (FacetParameterStates, dp_dz, from_unbounded,
                                              mag_states_nb, to_unbounded)
 from lightcurve.filters.invert import invert
@@ -156,7 +156,7 @@ def test_partials_against_central_differences(cube):
         fd = (mz[:fs.dim] - mz[fs.dim:]) / (2 * h)
         np.testing.assert_allclose(dz, fd, rtol=1e-6, atol=1e-8)
         d = np.concatenate([h * np.eye(3), -h * np.eye(3)])
-        Qp = K.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
+        Qp = CR.perturb_rotvec_nb(np.ascontiguousarray(np.tile(q, (6, 1))), d)
         mq = fs.magnitudes(mm, Qp, z, k)
         np.testing.assert_allclose(dth, (mq[:3] - mq[3:]) / (2 * h), rtol=1e-6, atol=1e-8)
         checked += 1

@@ -10,7 +10,8 @@ from transition_oracle import discretize, error_F
 
 from lightcurve import rotations as rot
 from lightcurve.core import dynamics as CD
-from lightcurve.filters import _kernels as K
+from lightcurve.core import particles as CP
+from lightcurve.filters import _bpf_kernels as BK
 from lightcurve.filters._common import apply_grp, grp_rel
 from lightcurve.filters.models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
 from lightcurve.photometry import apparent_magnitude, load_shape
@@ -161,7 +162,7 @@ def test_bpf_fused_kernel_equals_separate_steps(curve):
     n, a, ids, p = m._karrs
     k = 7
     L = np.tril(rng.standard_normal((6, 6))) * 0.5
-    K.bpf_predict_nb(Q1, W1, 5.0, 0, np.eye(3), np.eye(3), 1, noise, L, zeta, m.s_eci[k],
+    BK.bpf_predict_nb(Q1, W1, 5.0, 0, np.eye(3), np.eye(3), 1, noise, L, zeta, m.s_eci[k],
                      m.o_eci[k], n, a, ids, p, float(m.offset[k]), out)
     noise = noise @ L.T   # the kernel applies the sample L · z_i
     Q2 = rot.quat_mult(rot.rotvec_to_quat(W * 5.0), Q)
@@ -199,8 +200,8 @@ def test_tempered_ess_kernel_matches_definition():
     for phi in (0.0, 0.01, 0.3, 1.0):
         a = logw + (phi * ll if phi else 0.0)
         ref = effective_sample_size_log(a)
-        assert K.ess_tempered_nb(logw, ll, phi) == pytest.approx(ref, rel=1e-10)
-    assert K.ess_tempered_nb(np.full(5, -np.inf), np.zeros(5), 1.0) == 0.0
+        assert CP.ess_tempered(logw, ll, phi) == pytest.approx(ref, rel=1e-10)
+    assert CP.ess_tempered(np.full(5, -np.inf), np.zeros(5), 1.0) == 0.0
 
 
 def test_weight_kernels_match_numpy_versions():
@@ -215,12 +216,12 @@ def test_weight_kernels_match_numpy_versions():
     m = 12.0 + rng.standard_normal(N) * 0.3
     m[::50] = np.inf
     ll1, ll2 = np.empty(N), np.empty(N)
-    a = K.innovation_loglik_nb(logw, m, 12.1, 0.05, ll1)
+    a = CP.innovation_loglik(logw, m, 12.1, 0.05, ll1)
     b = B._innov_np(logw, m, 12.1, 0.05, ll2)
     np.testing.assert_allclose(a[:2], b[:2], rtol=1e-10)
     np.testing.assert_array_equal(ll1, ll2)
     lw1, lw2, w1, w2 = logw.copy(), logw.copy(), np.empty(N), np.empty(N)
-    e1, _ = K.add_normalize_nb(lw1, ll1, 0.3, w1)
+    e1, _ = CP.add_loglik_normalize(lw1, ll1, 0.3, w1)
     e2, _ = B._addnorm_np(lw2, ll2, 0.3, w2)
     ref, _ = normalize_log_weights(logw + 0.3 * ll1)
     np.testing.assert_allclose(w1, ref, rtol=1e-9, atol=1e-300)
@@ -228,8 +229,8 @@ def test_weight_kernels_match_numpy_versions():
     assert e1 == pytest.approx(1.0 / np.sum(ref**2), rel=1e-9) and e2 == pytest.approx(e1)
     dp = rng.standard_normal((N, 3))
     W = rng.standard_normal((N, 3))
-    mu1, C1 = K.weighted_stats_nb(dp, W, w1)
-    mu2, C2 = B._stats_np(dp, W, w1)
+    mu1, C1 = CP.weighted_mean_cov_rows(np.hstack([dp, W]), w1)
+    mu2, C2 = B._wstats_np(np.hstack([dp, W]), w1)
     np.testing.assert_allclose(mu1, mu2, atol=1e-13)
     np.testing.assert_allclose(C1, C2, atol=1e-13)
 

@@ -7,7 +7,6 @@ import shlex
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from lightcurve.cli import main
 from lightcurve.io.lightcurve_h5 import read_lightcurve

@@ -99,7 +99,7 @@ def test_mapping_for_another_layout(tmp_path):
              "h_km;mag_v;when;err;A;Z   % trailing comment"]
     for k in range(3):
         lines.append(f"{h_m[k] / 1000:.6f};{5.0 + k};{utc[k]};0.0{k + 2};{az[k]};{alt[k]}")
-    lines.insert(5, f"500.0;nan;2022-03-03T03:01:00;0.05;10.0;30.0")  # skipped and counted
+    lines.insert(5, "500.0;nan;2022-03-03T03:01:00;0.05;10.0;30.0")  # skipped and counted
     f = tmp_path / "other.csv"
     f.write_text("\n".join(lines) + "\n")
     spec = recording_spec_from_section({

@@ -76,7 +76,9 @@ def test_parse_effects_values_and_errors():
 def _default_text():
     from lightcurve._paths import data_dir
 
-    return (data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text()
+    text = (data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml").read_text()
+    assert "[effects" not in text
+    return text + "\n[effects]\n"
 
 
 def test_scenario_rejects_bad_effects():

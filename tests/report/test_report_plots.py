@@ -136,3 +136,31 @@ def test_study_summary_views_and_report(tmp_path):
     write_study_report(tmp_path / "report.html", summary, [])
     page = (tmp_path / "report.html").read_text()
     assert page.index("Verdict:") < page.index("Which filter is better") < page.index("fig. 9.4")
+
+
+def test_estimate_figure_reflection_states(default_pass):
+    """Reflection runs show their states; an attitude-known run has no (trivial) error row and
+    no empty NEES panel, and says that the attitude was held at the truth."""
+    import matplotlib.pyplot as plt
+
+    import lightcurve
+    from lightcurve.filters.plots import estimate_figure
+
+    lc, _ = default_pass
+    est = lightcurve.invert(lc, "ukf", seed=1, reflection="model3", attitude="truth",
+                            reflection_kinds=("xi", "m"))
+    fig = estimate_figure(est, curve=lc)
+    _visible_axes_have_data(fig)
+    titles = " ".join(a.get_title(loc="left") for a in fig.axes)
+    assert "reflection parameters at the last epoch (Model 3)" in titles
+    assert "errors against the truth" not in titles
+    assert "HELD AT THE TRUTH" in fig._suptitle.get_text()
+    ax = next(a for a in fig.axes if a.get_title(loc="left").startswith("reflection parameters"))
+    assert [t.get_text() for t in ax.get_xticklabels()] == list(est.refl_names)
+    plt.close(fig)
+    est = lightcurve.invert(lc, "ukf", seed=1, reflection="model1")
+    fig = estimate_figure(est, curve=lc)
+    _visible_axes_have_data(fig)
+    titles = " ".join(a.get_title(loc="left") for a in fig.axes)
+    assert "reflection bias states" in titles and "errors against the truth" in titles
+    plt.close(fig)

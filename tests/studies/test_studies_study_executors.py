@@ -51,10 +51,10 @@ def test_failures_recorded_and_study_goes_on(tmp_path, study_file, monkeypatch):
     study = load_study(study_file)
     real = runner._lightcurve
 
-    def flaky(text, file, r, seed):
+    def flaky(text, file, r, seed, *rest):
         if seed == study.tasks()[1].sim_seed:
             raise RuntimeError("injected failure")
-        return real(text, file, r, seed)
+        return real(text, file, r, seed, *rest)
 
     monkeypatch.setattr(runner, "_lightcurve", flaky)
     s = run_study(study, tmp_path / "o", workers=1, progress=False, write_report=False)

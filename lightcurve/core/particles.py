@@ -1,0 +1,696 @@
+"""Particle-filter kernels on plain float arrays: weights, ESS, resampling, roughening, moves.
+
+Every equation of the particle machinery exists here once; the bootstrap attitude filter
+(:mod:`lightcurve.filters.bpf`) and the checked object layer :mod:`lightcurve.estimation.particles`
+call these kernels.
+
+* Log weights with log-sum-exp (Bernard 2021 eq. 6.56–6.57 in log form): ``log w_i += φ ℓ_i``
+  then ``log w_i −= log Σ exp(log w_j)``; ``ℓ_i = −½ ((y − m_i)/σ)²`` is the Gaussian
+  log-likelihood of one scalar measurement without its constant (the constant cancels in the
+  normalisation); ``ℓ_i = −inf`` where the prediction ``m_i`` is not finite.
+* Effective sample size (eq. 6.61): ``N_eff = 1/Σ w_i² = (Σ e^{a_i})² / Σ e^{2 a_i}``.
+* Resampling into caller-owned index arrays: systematic (Kitagawa 1996; positions
+  ``(u₀ + j)/N``) and multinomial (Bernard table 6.3: N independent uniforms, here sorted and
+  merged with the cumulative weights, which returns the particles table 6.3 returns, in sorted
+  order).
+* Roughening (Bernard eq. 6.63 / 7.106, tables 6.6 and 7.9): ``σ_l = 𝒢 E_l N^(−1/n)`` with
+  ``E_l`` the range (max − min) of component l over the cloud and n the state dimension.
+* Liu & West (2001) shrinkage kernel: ``x_i ← a x_i + (1 − a) x̄ + h L ε_i`` with
+  ``L Lᵀ`` the cloud covariance.
+* Counter-based random numbers (Philox4x32-10, Salmon et al. 2011, "Parallel random numbers:
+  as easy as 1, 2, 3", SC'11) with ziggurat normals (Marsaglia & Tsang 2000, Doornik 2005):
+  normal draw j of row i of call c is a pure function of ``(key, i, j, c)``, so the draws do not depend on the number of threads, the chunking, or the
+  device (the same function runs in the CUDA kernels of :mod:`lightcurve.filters.bpf_gpu`).
+
+Parallel reductions use a fixed number of chunks that depends on N only (:func:`n_chunks`), and
+sum the chunk partials in order: the results are the same for any thread count.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+__all__ = [
+    "n_chunks", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
+    "ess_tempered", "temper_exponent", "innovation_loglik", "cumulative_weights",
+    "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
+    "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
+    "philox4x32", "philox_normals", "philox_uniforms", "ziggurat_normal",
+]
+
+_CHUNK = 2048      # particles per reduction chunk (fixed: results independent of threads)
+_MAX_CHUNKS = 512
+
+
+@nb.njit(cache=True, inline="always")
+def n_chunks(N):
+    """Number of work chunks for N items: ``ceil(N / 2048)`` capped at 512 (≥ 1).
+
+    Depends on N only, so chunked reductions give the same sums on any thread count.
+    """
+    c = (N + _CHUNK - 1) // _CHUNK
+    if c < 1:
+        c = 1
+    if c > _MAX_CHUNKS:
+        c = _MAX_CHUNKS
+    return c
+
+
+# --------------------------------------------------------------------------------------------
+# log weights, ESS
+# --------------------------------------------------------------------------------------------
+
+@nb.njit(cache=True, parallel=True)
+def _max_tempered(logw, ll, phi):
+    """max_i (logw_i + φ ll_i) (φ = 0: max logw); −inf for an empty or all −inf array."""
+    N = logw.shape[0]
+    nch = n_chunks(N)
+    part = np.full(nch, -np.inf)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        m = -np.inf
+        for i in range(lo, hi):
+            a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
+            if a > m:
+                m = a
+        part[c] = m
+    m = -np.inf
+    for c in range(nch):
+        if part[c] > m:
+            m = part[c]
+    return m
+
+
+@nb.njit(cache=True)
+def max_finite(a):
+    """Largest entry of a 1-D array (−inf if empty or every entry is −inf; NaN ignored)."""
+    return _max_tempered(a, a, 0.0)
+
+
+@nb.njit(cache=True)
+def logsumexp_nb(a):
+    """``log Σ exp(a_i)`` of a 1-D float64 array, stable for very negative entries.
+
+    Returns −inf when every entry is −inf (or the array is empty); NaN when an entry is NaN;
+    +inf when an entry is +inf.
+    """
+    n = a.shape[0]
+    m = -np.inf
+    for i in range(n):
+        if np.isnan(a[i]):
+            return np.nan
+        if a[i] > m:
+            m = a[i]
+    if m == -np.inf:
+        return -np.inf
+    if m == np.inf:
+        return np.inf
+    s = 0.0
+    for i in range(n):
+        s += math.exp(a[i] - m)
+    return m + math.log(s)
+
+
+@nb.njit(cache=True, parallel=True)
+def _sum_exp(logw, ll, phi, m):
+    """``(Σ e^{a−m}, Σ e^{2(a−m)})`` with ``a = logw + φ ll`` (chunked, ordered)."""
+    N = logw.shape[0]
+    nch = n_chunks(N)
+    p1 = np.zeros(nch)
+    p2 = np.zeros(nch)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        s1 = 0.0
+        s2 = 0.0
+        for i in range(lo, hi):
+            a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
+            if a > -np.inf:
+                e = math.exp(a - m)
+                s1 += e
+                s2 += e * e
+        p1[c] = s1
+        p2[c] = s2
+    s1 = 0.0
+    s2 = 0.0
+    for c in range(nch):
+        s1 += p1[c]
+        s2 += p2[c]
+    return s1, s2
+
+
+@nb.njit(cache=True)
+def ess_tempered(logw, ll, phi):
+    """Effective sample size of the weights ``exp(logw + φ ll)`` (unnormalised logs).
+
+    ``N_eff = (Σ e^{a−m})² / Σ e^{2(a−m)}`` (Bernard eq. 6.61) with ``a = logw + φ ll``,
+    m = max a (φ = 0 ignores ``ll``; −inf entries count as zero weight). Returns 0 when every
+    weight is zero. No temporary arrays of size N.
+    """
+    m = _max_tempered(logw, ll, phi)
+    if m == -np.inf or np.isnan(m):
+        return 0.0
+    s1, s2 = _sum_exp(logw, ll, phi, m)
+    return s1 * s1 / s2
+
+
+@nb.njit(cache=True)
+def temper_exponent(logw, ll, rest, target, steps):
+    """Largest φ ∈ (0, rest] with ``N_eff(logw + φ ll) ≥ target`` by bisection (``steps``
+    halvings of [0, rest]; the progressive correction of Oudjane & Musso 2000). Returns the
+    lower end of the final bracket (0 when even tiny φ falls below the target).
+
+    Each N_eff evaluation is one pass: the exponentials are shifted by the bound
+    ``max logw + φ max ll ≥ max (logw + φ ll)`` (exact once the weights are uniform), with
+    the exact two-pass :func:`ess_tempered` when that shift would underflow every weight.
+    """
+    mw = _max_tempered(logw, ll, 0.0)
+    ml = _max_tempered(ll, ll, 0.0)
+    lo = 0.0
+    hi = rest
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        e = 0.0
+        if mw > -np.inf and ml > -np.inf:
+            s1, s2 = _sum_exp(logw, ll, mid, mw + mid * ml)
+            if s1 > 1e-150 and s2 > 0.0:
+                e = s1 * s1 / s2
+            else:
+                e = ess_tempered(logw, ll, mid)
+        if e >= target:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@nb.njit(cache=True, parallel=True)
+def _add_scaled_exp(logw, ll, phi, mx, w):
+    """``logw += φ ll`` is done by the caller; here ``w = exp(logw − mx)`` and its chunk sums."""
+    N = logw.shape[0]
+    nch = n_chunks(N)
+    part = np.zeros(nch)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        s = 0.0
+        for i in range(lo, hi):
+            e = math.exp(logw[i] - mx)
+            w[i] = e
+            s += e
+        part[c] = s
+    s = 0.0
+    for c in range(nch):
+        s += part[c]
+    return s
+
+
+@nb.njit(cache=True, parallel=True)
+def _finish_normalize(logw, w, lse, s):
+    N = logw.shape[0]
+    nch = n_chunks(N)
+    part = np.zeros(nch)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        s2 = 0.0
+        for i in range(lo, hi):
+            logw[i] -= lse
+            w[i] /= s
+            s2 += w[i] * w[i]
+        part[c] = s2
+    s2 = 0.0
+    for c in range(nch):
+        s2 += part[c]
+    return s2
+
+
+@nb.njit(cache=True, parallel=True)
+def _add_scaled(logw, ll, phi):
+    N = logw.shape[0]
+    for i in nb.prange(N):
+        logw[i] += phi * ll[i]
+
+
+@nb.njit(cache=True)
+def add_loglik_normalize(logw, ll, phi, w):
+    """In place ``logw ← logw + φ ll`` then normalise with log-sum-exp; fills ``w = exp(logw)``.
+
+    Bernard eq. 6.56–6.57 in log form (φ = 1: the full likelihood; φ < 1: one stage of the
+    progressive correction; φ = 0 only normalises). Returns ``(N_eff, ok)`` with
+    ``N_eff = 1/Σ w²`` (eq. 6.61); ``ok`` False (logw after the addition, w untouched) when
+    every weight is zero.
+    """
+    if phi != 0.0:
+        _add_scaled(logw, ll, phi)
+    mx = _max_tempered(logw, ll, 0.0)
+    if not mx > -np.inf:
+        return 0.0, False
+    s = _add_scaled_exp(logw, ll, phi, mx, w)
+    lse = mx + math.log(s)
+    s2 = _finish_normalize(logw, w, lse, s)
+    return 1.0 / s2, True
+
+
+@nb.njit(cache=True)
+def normalize_log_weights_nb(logw, w):
+    """Normalise ``logw`` in place (log-sum-exp) and fill ``w``; returns ``(log Σ e^{logw}, ok)``
+    (the log total before normalising; ``ok`` False when every weight is zero)."""
+    mx = _max_tempered(logw, logw, 0.0)
+    if not mx > -np.inf:
+        return -np.inf, False
+    s = _add_scaled_exp(logw, logw, 0.0, mx, w)
+    lse = mx + math.log(s)
+    _finish_normalize(logw, w, lse, s)
+    return lse, True
+
+
+@nb.njit(cache=True, parallel=True)
+def _innov_pass1(logw, mpred, y, sig, ll, mx):
+    N = logw.shape[0]
+    nch = n_chunks(N)
+    p0 = np.zeros(nch)
+    p1 = np.zeros(nch)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        s0 = 0.0
+        s1 = 0.0
+        for i in range(lo, hi):
+            m = mpred[i]
+            if np.isfinite(m):
+                e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+                s0 += e
+                s1 += e * m
+                r = (y - m) / sig
+                ll[i] = -0.5 * r * r
+            else:
+                ll[i] = -np.inf
+        p0[c] = s0
+        p1[c] = s1
+    s0 = 0.0
+    s1 = 0.0
+    for c in range(nch):
+        s0 += p0[c]
+        s1 += p1[c]
+    return s0, s1
+
+
+@nb.njit(cache=True, parallel=True)
+def _innov_pass2(logw, mpred, mean, mx):
+    N = logw.shape[0]
+    nch = n_chunks(N)
+    p2 = np.zeros(nch)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        s2 = 0.0
+        for i in range(lo, hi):
+            m = mpred[i]
+            if np.isfinite(m):
+                e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+                s2 += e * (m - mean) * (m - mean)
+        p2[c] = s2
+    s2 = 0.0
+    for c in range(nch):
+        s2 += p2[c]
+    return s2
+
+
+@nb.njit(cache=True)
+def innovation_loglik(logw, mpred, y, sig, ll):
+    """Per-particle log-likelihoods and the prior-weighted predictive moments of one scalar
+    measurement.
+
+    Fills ``ll[i] = −½ ((y − m_i)/σ)²`` (Bernard eq. 6.55–6.56 without the constant; −inf where
+    ``m_i`` is not finite: the particle reflects no light). Returns ``(ŷ, var_m, ok)``: mean
+    and variance of the finite predictions under the prior weights ``exp(logw)``
+    (renormalised over them); ``ok`` False when no prediction is finite. Magnitudes, mag².
+    """
+    mx = _max_tempered(logw, logw, 0.0)
+    s0, s1 = _innov_pass1(logw, mpred, y, sig, ll, mx)
+    if not s0 > 0.0:
+        return np.nan, np.nan, False
+    mean = s1 / s0
+    s2 = _innov_pass2(logw, mpred, mean, mx)
+    return mean, s2 / s0, True
+
+
+# --------------------------------------------------------------------------------------------
+# resampling
+# --------------------------------------------------------------------------------------------
+
+@nb.njit(cache=True)
+def cumulative_weights(w, C):
+    """Running sums ``C_i = Σ_{j≤i} w_j`` (serial, in order) → ``(total, last)``: the total and
+    the index of the last positive weight (−1 when none)."""
+    N = w.shape[0]
+    c = 0.0
+    last = -1
+    for i in range(N):
+        c += w[i]
+        C[i] = c
+        if w[i] > 0.0:
+            last = i
+    return c, last
+
+
+@nb.njit(cache=True, inline="always")
+def _first_above(C, last, u):
+    """Smallest i with ``u < C_i``, capped at ``last`` (binary search; C non-decreasing)."""
+    lo = 0
+    hi = last
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if u < C[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@nb.njit(cache=True, parallel=True)
+def _merge_sorted(C, total, last, u0, u, systematic, idx):
+    """Indices for sorted positions against the cumulative weights, chunked in parallel.
+
+    Position j is ``(u0 + j)/n · total`` (systematic) or ``u[j] · total`` (sorted uniforms);
+    it selects the smallest i with position < C_i (capped at the last positive weight). Each
+    chunk finds its first index by binary search and merges from there, which gives the
+    indices of one serial merge.
+    """
+    n = idx.shape[0]
+    nch = n_chunks(n)
+    for c in nb.prange(nch):
+        lo = c * n // nch
+        hi = (c + 1) * n // nch
+        if lo >= hi:
+            continue
+        p = (u0 + lo) / n * total if systematic else u[lo] * total
+        i = _first_above(C, last, p)
+        for j in range(lo, hi):
+            p = (u0 + j) / n * total if systematic else u[j] * total
+            while p >= C[i] and i < last:
+                i += 1
+            idx[j] = i
+
+
+@nb.njit(cache=True)
+def systematic_resample_into(w, u0, C, idx):
+    """Systematic resampling: ``idx[j]`` (j < len(idx)) picks particle i when
+    ``C_{i−1} ≤ (u₀ + j)/n · Σw < C_i`` (Kitagawa 1996), u₀ ∈ [0, 1) the single uniform.
+
+    ``w`` ≥ 0 need not sum to one; ``C`` (N,) is work space for the cumulative sums. Zero-weight
+    particles are never selected; indices are non-decreasing. Returns False (idx untouched)
+    when every weight is zero.
+    """
+    total, last = cumulative_weights(w, C)
+    if last < 0:
+        return False
+    _merge_sorted(C, total, last, u0, C, True, idx)
+    return True
+
+
+@nb.njit(cache=True)
+def sorted_resample_into(w, u_sorted, C, idx):
+    """Multinomial resampling merge (Bernard table 6.3): ``idx[j]`` is the particle i with
+    ``C_{i−1} ≤ u_j Σw < C_i`` for ascending uniforms ``u_sorted`` in [0, 1). Returns False
+    when every weight is zero."""
+    total, last = cumulative_weights(w, C)
+    if last < 0:
+        return False
+    _merge_sorted(C, total, last, 0.0, u_sorted, False, idx)
+    return True
+
+
+@nb.njit(cache=True, parallel=True)
+def gather_rows(src, idx, dst):
+    """``dst[j] = src[idx[j]]`` for 2-D float arrays (rows copied in parallel)."""
+    n = idx.shape[0]
+    D = src.shape[1]
+    for j in nb.prange(n):
+        k = idx[j]
+        for d in range(D):
+            dst[j, d] = src[k, d]
+
+
+# --------------------------------------------------------------------------------------------
+# roughening and kernel moves
+# --------------------------------------------------------------------------------------------
+
+@nb.njit(cache=True, parallel=True)
+def column_ranges(X, E):
+    """``E_l = max_i X_il − min_i X_il`` for every column l of X (N, D) (chunked, parallel)."""
+    N, D = X.shape
+    nch = n_chunks(N)
+    mn = np.full((nch, D), np.inf)
+    mxs = np.full((nch, D), -np.inf)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        for i in range(lo, hi):
+            for d in range(D):
+                v = X[i, d]
+                if v < mn[c, d]:
+                    mn[c, d] = v
+                if v > mxs[c, d]:
+                    mxs[c, d] = v
+    for d in range(D):
+        a = np.inf
+        b = -np.inf
+        for c in range(nch):
+            if mn[c, d] < a:
+                a = mn[c, d]
+            if mxs[c, d] > b:
+                b = mxs[c, d]
+        E[d] = b - a
+
+
+@nb.njit(cache=True)
+def roughening_sigma_nb(E, G, N, n):
+    """Table 7.9 / eq. 7.106: ``σ_l = 𝒢 E_l N^(−1/n)`` for the ranges ``E`` (D,) of a cloud of N
+    particles in an n-dimensional state. Returns a new (D,) array."""
+    f = float(N) ** (-1.0 / n)
+    out = np.empty(E.shape[0])
+    for d in range(E.shape[0]):
+        out[d] = G * E[d] * f
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _mean_cov_partials(X, w, use_w, mean, P):
+    N, D = X.shape
+    nch = P.shape[0]
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        x = np.empty(D)
+        for i in range(lo, hi):
+            wi = w[i] if use_w else 1.0
+            for d in range(D):
+                x[d] = X[i, d] - mean[d]
+            for a in range(D):
+                xa = wi * x[a]
+                for b in range(a + 1):
+                    P[c, a, b] += xa * x[b]
+
+
+@nb.njit(cache=True, parallel=True)
+def _mean_partials(X, w, use_w, M):
+    N, D = X.shape
+    nch = M.shape[0]
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        for i in range(lo, hi):
+            wi = w[i] if use_w else 1.0
+            for d in range(D):
+                M[c, d] += wi * X[i, d]
+
+
+@nb.njit(cache=True)
+def _mean_cov(X, w, use_w):
+    N, D = X.shape
+    nch = n_chunks(N)
+    M = np.zeros((nch, D))
+    _mean_partials(X, w, use_w, M)
+    mean = np.zeros(D)
+    for c in range(nch):
+        for d in range(D):
+            mean[d] += M[c, d]
+    if not use_w:
+        for d in range(D):
+            mean[d] /= N
+    P = np.zeros((nch, D, D))
+    _mean_cov_partials(X, w, use_w, mean, P)
+    C = np.zeros((D, D))
+    for c in range(nch):
+        for a in range(D):
+            for b in range(a + 1):
+                C[a, b] += P[c, a, b]
+    for a in range(D):
+        for b in range(a + 1):
+            if not use_w:
+                C[a, b] /= N
+            C[b, a] = C[a, b]
+    return mean, C
+
+
+@nb.njit(cache=True)
+def mean_cov_rows(X):
+    """Equal-weight mean (D,) and covariance (D,D) (divisor N) of the rows of X (N,D)."""
+    return _mean_cov(X, X[:, 0], False)
+
+
+@nb.njit(cache=True)
+def weighted_mean_cov_rows(X, w):
+    """Weighted mean ``Σ w_i x_i`` and covariance ``Σ w_i (x_i − x̄)(x_i − x̄)ᵀ`` of the rows of
+    X (N,D) for normalised weights w (Bernard eq. 6.58–6.60)."""
+    return _mean_cov(X, w, True)
+
+
+@nb.njit(cache=True, parallel=True)
+def liu_west_rows(eps, M, a, c, base, out):
+    """``out[i] = a · base[i] + c + M eps[i]`` for eps (N,r), M (D,r), base (N,D), c (D,).
+
+    With ``c = (1 − a) x̄`` and ``M = h L`` (``L Lᵀ`` the cloud covariance) this is the Liu &
+    West (2001) shrinkage kernel; with a = 1, c = 0 a random-walk proposal. Parallel over rows.
+    """
+    N, r = eps.shape
+    D = M.shape[0]
+    for i in nb.prange(N):
+        for d in range(D):
+            acc = a * base[i, d] + c[d]
+            for j in range(r):
+                acc += M[d, j] * eps[i, j]
+            out[i, d] = acc
+
+
+# --------------------------------------------------------------------------------------------
+# counter-based random numbers (Philox4x32-10)
+# --------------------------------------------------------------------------------------------
+
+_M0 = np.uint64(0xD2511F53)
+_M1 = np.uint64(0xCD9E8D57)
+_W0 = np.uint64(0x9E3779B9)
+_W1 = np.uint64(0xBB67AE85)
+_MASK = np.uint64(0xFFFFFFFF)
+_S32 = np.uint64(32)
+
+
+@nb.njit(cache=True, inline="always")
+def philox4x32(c0, c1, c2, c3, k0, k1):
+    """Philox4x32-10 (Salmon et al. 2011) of the counter (c0…c3) under the key (k0, k1); all
+    arguments and the four results are 32-bit values held in uint64."""
+    for _ in range(10):
+        p0 = _M0 * c0
+        p1 = _M1 * c2
+        hi0 = p0 >> _S32
+        lo0 = p0 & _MASK
+        hi1 = p1 >> _S32
+        lo1 = p1 & _MASK
+        c0 = (hi1 ^ c1 ^ k0) & _MASK
+        c1 = lo1
+        c2 = (hi0 ^ c3 ^ k1) & _MASK
+        c3 = lo0
+        k0 = (k0 + _W0) & _MASK
+        k1 = (k1 + _W1) & _MASK
+    return c0, c1, c2, c3
+
+
+def _ziggurat_tables(n=128, r=3.442619855899, v=9.91256303526217e-3):
+    """Layer edges ``x`` (n+1,) and ratios ``x[i+1]/x[i]`` (n,) of the 128-layer ziggurat of the
+    standard normal density (Marsaglia & Tsang 2000; layer constants r, v and the layout with
+    x[0] = v/f(r) for the base strip from Doornik 2005, "An improved ziggurat method to generate
+    normal random samples")."""
+    x = np.zeros(n + 1)
+    f = math.exp(-0.5 * r * r)
+    x[0] = v / f
+    x[1] = r
+    for i in range(2, n):
+        x[i] = math.sqrt(-2.0 * math.log(v / x[i - 1] + f))
+        f = math.exp(-0.5 * x[i] * x[i])
+    return x, x[1:] / x[:-1]
+
+
+_ZIG_X, _ZIG_R = _ziggurat_tables()
+_ZIG_TAIL = 3.442619855899
+
+
+@nb.njit(cache=True, inline="always")
+def _u01_open(a, b):
+    """A double in (0, 1) from two 32-bit words (never 0 or 1)."""
+    hi = np.float64(a >> np.uint64(5))
+    lo = np.float64(b >> np.uint64(6))
+    return (hi * 67108864.0 + lo + 0.5) * (1.0 / 9007199254740992.0)
+
+
+@nb.njit(cache=True, inline="always")
+def ziggurat_normal(c0, c1, c2, c3, k0, k1, zx, zr):
+    """One standard normal by the ziggurat method (Doornik 2005 variant, 128 layers) from the
+    Philox4x32-10 stream of the counter (c0, c1 + 2¹⁶·attempt, c2, c3) under (k0, k1).
+
+    Each attempt uses one Philox block: a uniform u ∈ (−1, 1) from two words, the layer from the
+    third; ≈ 99 % of draws end in the first attempt with one multiply and one comparison. The
+    base strip samples the tail beyond r by Marsaglia's (1964) method, the wedges by rejection
+    against the density. ``zx``, ``zr``: :data:`_ZIG_X`, :data:`_ZIG_R`.
+    """
+    att = np.uint64(0)
+    while True:
+        a, b, c, d = philox4x32(c0, (c1 + (att << np.uint64(16))) & _MASK, c2, c3, k0, k1)
+        att += np.uint64(1)
+        u = 2.0 * _u01_open(a, b) - 1.0
+        i = np.int64(c & np.uint64(127))
+        if abs(u) < zr[i]:
+            return u * zx[i]
+        if i == 0:                      # the tail beyond r (Marsaglia 1964)
+            while True:
+                a, b, c, d = philox4x32(c0, (c1 + (att << np.uint64(16))) & _MASK, c2, c3,
+                                        k0, k1)
+                att += np.uint64(1)
+                x = math.log(_u01_open(a, b)) / _ZIG_TAIL
+                y = math.log(_u01_open(c, d))
+                if -2.0 * y >= x * x:
+                    return x - _ZIG_TAIL if u < 0.0 else _ZIG_TAIL - x
+        x = u * zx[i]
+        f0 = math.exp(-0.5 * (zx[i] * zx[i] - x * x))
+        f1 = math.exp(-0.5 * (zx[i + 1] * zx[i + 1] - x * x))
+        v = np.float64(d >> np.uint64(11)) * (1.0 / 2097152.0)   # 21-bit uniform in [0, 1)
+        if f1 + v * (f0 - f1) < 1.0:
+            return x
+
+
+@nb.njit(cache=True, parallel=True)
+def philox_normals(k0, k1, call, out):
+    """Fill ``out`` (N, r) with standard normals: entry (i, j) is the ziggurat normal
+    (:func:`ziggurat_normal`) of the Philox4x32-10 counter ``(i, j, call mod 2³², call div
+    2³²)`` under the key (k0, k1) — a pure function of (key, i, j, call), independent of the
+    number of threads."""
+    N, r = out.shape
+    kk0 = np.uint64(k0)
+    kk1 = np.uint64(k1)
+    cl = np.uint64(call) & _MASK
+    ch = np.uint64(call) >> _S32
+    zx = _ZIG_X
+    zr = _ZIG_R
+    for i in nb.prange(N):
+        ci = np.uint64(i) & _MASK
+        for j in range(r):
+            out[i, j] = ziggurat_normal(ci, np.uint64(j), cl, ch, kk0, kk1, zx, zr)
+
+
+@nb.njit(cache=True, parallel=True)
+def philox_uniforms(k0, k1, call, out):
+    """Fill ``out`` (N,) with uniforms in (0, 1): entry i from Philox4x32-10 of the counter
+    ``(i, 2³² − 1, call mod 2³², call div 2³²)`` under (k0, k1) (the first two words)."""
+    N = out.shape[0]
+    kk0 = np.uint64(k0)
+    kk1 = np.uint64(k1)
+    cl = np.uint64(call) & _MASK
+    ch = np.uint64(call) >> _S32
+    for i in nb.prange(N):
+        a, b, c, d = philox4x32(np.uint64(i) & _MASK, _MASK, cl, ch, kk0, kk1)
+        out[i] = _u01_open(a, b)

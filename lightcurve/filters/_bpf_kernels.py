@@ -1,0 +1,521 @@
+"""Numba kernels of the bootstrap attitude particle filter (Bernard 2021 tables 7.7–7.11).
+
+Particles are rows of ``Q`` (N,4) inertial→body quaternions (scalar first) and ``W`` (N,3) body
+rates (rad/s). The attitude chart of a cloud about a reference ``q_ref`` is the GRP
+(Bernard eq. 7.1, a = 1, f = 4) of ``δq_i = q_i ⊗ q_ref⁻¹`` with the sign ``δq1 ≥ 0``; a chart
+buffer ``X`` (N, 6 + e) holds ``[δp_i, ω_i, extra states]`` per row. Model 3 particles carry
+facet parameters ``Z`` (N, D) (Bernard ch. 8).
+
+The rotation algebra, the rigid-body step and the BRDFs are the core's
+(:mod:`lightcurve.core.rotations`, :mod:`lightcurve.core.dynamics`,
+:mod:`lightcurve.core.photometry`). Every kernel is parallel over particles (``prange``),
+allocation-free per particle, and its result does not depend on the number of threads
+(reductions sum fixed chunks in order, :func:`lightcurve.core.particles.n_chunks`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..core.dynamics import const_rate_xyz, mat9, rk4_step_xyz
+from ..core.particles import n_chunks
+from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, brdf_product_nb,
+                               cook_torrance_fresnel_xyz, facet_flux_nb, fresnel_xyz)
+from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
+from .facet_states import fill_facet_arrays_nb
+
+__all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
+           "chart_rows", "chart_stats", "roughen_chart", "roughen_compose", "liu_west_attitude",
+           "min_abs_residual", "facet_mag_particles_nb", "weighted_param_stats_nb",
+           "facet_loglik_history_nb"]
+
+
+@nb.njit(cache=True)
+def flux_invariants(s, o, ids, params, Fr):
+    """Attitude-independent parts of the facet sum at one geometry: returns ``(ĥ, c)`` with
+    ĥ = (ŝ+ô)/|ŝ+ô| (3-tuple, ECI) and c = ô·ĥ, and fills ``Fr[f]`` with the Cook–Torrance
+    Fresnel factor F(c, F0_f) (:func:`~lightcurve.core.photometry.fresnel_xyz`) of every
+    Cook–Torrance facet (0 for the others). c = −1 when ŝ = −ô (no facet sees both)."""
+    hx = s[0] + o[0]
+    hy = s[1] + o[1]
+    hz = s[2] + o[2]
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    h = (0.0, 0.0, 0.0)
+    c = -1.0
+    if hn > 0.0:
+        h = (hx / hn, hy / hn, hz / hn)
+        c = o[0] * h[0] + o[1] * h[1] + o[2] * h[2]
+    for f in range(ids.shape[0]):
+        ct = ids[f] == COOK_TORRANCE or ids[f] == COOK_TORRANCE_THESIS
+        Fr[f] = fresnel_xyz(c, params[f, 1])[0] if (ct and c > 0.0) else 0.0
+    return h, c
+
+
+@nb.njit(cache=True, inline="always")
+def _flux_pre(q0, q1, q2, q3, s, o, h, c, Fr, normals, areas, ids, params):
+    """Facet sum ``Σ_i A_i (n̂·ŝ)⁺(n̂·ô)⁺ f_r,i`` of one attitude with the invariants of
+    :func:`flux_invariants` (the sum of :func:`~lightcurve.core.photometry.facet_flux_nb`;
+    Cook–Torrance through ``cook_torrance_fresnel_xyz`` with the epoch's F, the other models
+    through ``brdf_product_nb``)."""
+    sx, sy, sz = qrot_xyz_nb(q0, q1, q2, q3, s[0], s[1], s[2])
+    ox, oy, oz = qrot_xyz_nb(q0, q1, q2, q3, o[0], o[1], o[2])
+    hx, hy, hz = qrot_xyz_nb(q0, q1, q2, q3, h[0], h[1], h[2])
+    acc = 0.0
+    for fct in range(normals.shape[0]):
+        mid = ids[fct]
+        if mid < 0:
+            continue
+        nx = normals[fct, 0]
+        ny = normals[fct, 1]
+        nz = normals[fct, 2]
+        ns = nx * sx + ny * sy + nz * sz
+        if ns <= 0.0:
+            continue
+        no = nx * ox + ny * oy + nz * oz
+        if no <= 0.0:
+            continue
+        if mid == COOK_TORRANCE or mid == COOK_TORRANCE_THESIS:
+            nh = nx * hx + ny * hy + nz * hz
+            p = params[fct]
+            acc += areas[fct] * cook_torrance_fresnel_xyz(
+                ns, no, nh, c, Fr[fct], 0.0, 0.0, p[0], p[1], p[2],
+                mid == COOK_TORRANCE_THESIS)[0]
+        else:
+            acc += areas[fct] * brdf_product_nb(mid, params[fct], nx, ny, nz, sx, sy, sz,
+                                                ox, oy, oz)
+    return acc
+
+
+@nb.njit(cache=True, inline="always")
+def _grp_of(q, r, a, f, out):
+    """GRP (3,) of ``q ⊗ r⁻¹`` (Bernard eq. 7.100 and 7.1) with the sign of the scalar part
+    made ≥ 0, into ``out``."""
+    d0, d1, d2, d3 = qmul_xyz(q[0], q[1], q[2], q[3], r[0], -r[1], -r[2], -r[3])
+    if d0 < 0.0:
+        d0, d1, d2, d3 = -d0, -d1, -d2, -d3
+    den = a + d0
+    out[0] = f * d1 / den
+    out[1] = f * d2 / den
+    out[2] = f * d3 / den
+
+
+@nb.njit(cache=True, inline="always")
+def _grp_times(p0, p1, p2, a, f, r, out):
+    """``out = grp2q(p) ⊗ r`` (Bernard eq. 7.105 / 7.108), renormalised."""
+    d0, d1, d2, d3 = grp2q_xyz(p0, p1, p2, a, f)
+    e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, r[0], r[1], r[2], r[3])
+    n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+    out[0] = e0 / n
+    out[1] = e1 / n
+    out[2] = e2 / n
+    out[3] = e3 / n
+
+
+@nb.njit(cache=True, inline="always")
+def predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta, use_zeta,
+                predict, s, o, hI, cI, Fr, normals, areas, ids, params, offset, m_out):
+    """The prediction of :func:`bpf_predict_nb` for particle i (shared with the CUDA kernel of
+    :mod:`lightcurve.filters.bpf_gpu`): propagate row i of Q, W over dt (``h = dt/nsub``,
+    ``Jt``, ``Kt`` the inertia and its inverse as 9-tuples), add the process noise, and for
+    ``predict`` write its magnitude into ``m_out[i]``."""
+    r = noise.shape[1]
+    q0, q1, q2, q3 = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
+    w0, w1, w2 = W[i, 0], W[i, 1], W[i, 2]
+    if dt != 0.0:
+        if mode == 0:
+            q0, q1, q2, q3 = const_rate_xyz(q0, q1, q2, q3, w0, w1, w2, dt)
+        else:
+            for _ in range(nsub):
+                q0, q1, q2, q3, w0, w1, w2 = rk4_step_xyz(q0, q1, q2, q3, w0, w1, w2, h,
+                                                          Jt, Kt, None, None, None)
+    if use_noise:
+        v0 = 0.0
+        v1 = 0.0
+        v2 = 0.0
+        v3 = 0.0
+        v4 = 0.0
+        v5 = 0.0
+        for cc in range(r):
+            z = noise[i, cc]
+            v0 += Lnoise[0, cc] * z
+            v1 += Lnoise[1, cc] * z
+            v2 += Lnoise[2, cc] * z
+            v3 += Lnoise[3, cc] * z
+            v4 += Lnoise[4, cc] * z
+            v5 += Lnoise[5, cc] * z
+        d0, d1, d2, d3 = rotvec2q_xyz(v0, v1, v2)
+        q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
+        w0 += v3
+        w1 += v4
+        w2 += v5
+    n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0 /= n
+    q1 /= n
+    q2 /= n
+    q3 /= n
+    Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = q0, q1, q2, q3
+    W[i, 0], W[i, 1], W[i, 2] = w0, w1, w2
+    if predict:
+        if use_zeta:
+            d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
+            q0, q1, q2, q3 = qmul_xyz(d0, d1, d2, d3, q0, q1, q2, q3)
+        fl = _flux_pre(q0, q1, q2, q3, s, o, hI, cI, Fr, normals, areas, ids, params)
+        m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+
+
+@nb.njit(cache=True, parallel=True)
+def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
+                   params, offset, m_out):
+    """One fused bootstrap-PF prediction for every particle (in place on Q, W; fills m_out).
+
+    mode 0: constant rate (controlled; the exact step ``exp(ω dt) ⊗ q``,
+    :func:`~lightcurve.core.dynamics.const_rate_xyz`), 1: torque-free rigid body, ``nsub`` steps
+    of the core's RK4 (:func:`~lightcurve.core.dynamics.rk4_step_xyz`; J, Ji (3,3) inertia
+    kg m² and its inverse). ``noise`` (N,r) standard normals and ``Lnoise`` (6,r) a square root
+    of the process-noise covariance: the sample ``Lnoise · noise[i]`` = [δθ (rad), δω (rad/s)]
+    is applied after the deterministic step as ``q ← exp(δθ) ⊗ q``, ``ω ← ω + δω`` (``noise``
+    (0,r): none). ``zeta`` (N,3) or (0,3): ACS attitude noise (rad) applied to the attitude
+    *only for the predicted measurement* (controlled jitter model, Bernard eq. 7.8–7.11).
+    ``m_out`` (N,) receives ``offset − 2.5 log10 Φ(q)`` (DESIGN.md magnitude equation; +inf
+    where no light reaches the observer). With ``s[0]`` NaN no magnitude is computed
+    (propagation only). The quaternions are renormalised; the facet sum uses the epoch's
+    attitude-independent half vector and Fresnel factors (:func:`flux_invariants`).
+    """
+    N = Q.shape[0]
+    h = dt / max(nsub, 1)
+    use_noise = noise.shape[0] == N
+    use_zeta = zeta.shape[0] == N
+    predict = not np.isnan(s[0])
+    Jt = mat9(J)
+    Kt = mat9(Ji)
+    Fr = np.zeros(normals.shape[0])
+    hI = (0.0, 0.0, 0.0)
+    cI = -1.0
+    if predict:
+        hI, cI = flux_invariants(s, o, ids, params, Fr)
+    nch = n_chunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        for i in range(lo, hi):
+            predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
+                        use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
+                        offset, m_out)
+
+
+@nb.njit(cache=True, parallel=True)
+def argmax_weights(w):
+    """Index of the largest weight (the first one on ties, as ``numpy.argmax``)."""
+    N = w.shape[0]
+    nch = n_chunks(N)
+    best = np.full(nch, -np.inf)
+    arg = np.zeros(nch, dtype=np.int64)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        b = -np.inf
+        k = lo
+        for i in range(lo, hi):
+            if w[i] > b:
+                b = w[i]
+                k = i
+        best[c] = b
+        arg[c] = k
+    b = -np.inf
+    k = 0
+    for c in range(nch):
+        if best[c] > b:
+            b = best[c]
+            k = arg[c]
+    return k
+
+
+@nb.njit(cache=True, parallel=True)
+def grp_weighted_mean(Q, qref, w, a, f):
+    """``Σ_i w_i δp_i`` (3,) with δp_i the GRP of ``Q_i ⊗ qref⁻¹`` (Bernard eq. 7.100–7.102)."""
+    N = Q.shape[0]
+    nch = n_chunks(N)
+    part = np.zeros((nch, 3))
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        g = np.empty(3)
+        for i in range(lo, hi):
+            _grp_of(Q[i], qref, a, f, g)
+            wi = w[i]
+            for j in range(3):
+                part[c, j] += wi * g[j]
+    out = np.zeros(3)
+    for c in range(nch):
+        for j in range(3):
+            out[j] += part[c, j]
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def chart_rows(Q, W, qref, a, f, X):
+    """``X[i, :3]`` = GRP of ``Q_i ⊗ qref⁻¹``, ``X[i, 3:6] = W_i`` (the chart of eq. 7.101)."""
+    N = Q.shape[0]
+    for i in nb.prange(N):
+        _grp_of(Q[i], qref, a, f, X[i, :3])
+        for j in range(3):
+            X[i, 3 + j] = W[i, j]
+
+
+@nb.njit(cache=True, parallel=True)
+def chart_stats(Q, W, w, qref, a, f, w0, X):
+    """:func:`chart_rows` fused with the weighted moments of the rows ``x_i = [δp_i, ω_i]``:
+    returns ``(mean (6,), cov (6,6))`` with ``mean = Σ w x``, ``cov = Σ w (x − mean)(x −
+    mean)ᵀ`` (Bernard eq. 7.102–7.104; normalised weights). One pass, accumulated about the
+    shift ``[0, 0, 0, w0]`` (w0 a rate near the mean, e.g. the heaviest particle's) so that
+    the one-pass covariance keeps full precision."""
+    N = Q.shape[0]
+    nch = n_chunks(N)
+    S1 = np.zeros((nch, 6))
+    S2 = np.zeros((nch, 6, 6))
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        x = np.empty(6)
+        for i in range(lo, hi):
+            _grp_of(Q[i], qref, a, f, X[i, :3])
+            for j in range(3):
+                X[i, 3 + j] = W[i, j]
+                x[j] = X[i, j]
+                x[3 + j] = W[i, j] - w0[j]
+            wi = w[i]
+            for d in range(6):
+                xd = wi * x[d]
+                S1[c, d] += xd
+                for e in range(d + 1):
+                    S2[c, d, e] += xd * x[e]
+    m = np.zeros(6)
+    C = np.zeros((6, 6))
+    for c in range(nch):
+        for d in range(6):
+            m[d] += S1[c, d]
+            for e in range(d + 1):
+                C[d, e] += S2[c, d, e]
+    for d in range(6):
+        for e in range(d + 1):
+            C[d, e] -= m[d] * m[e]
+            C[e, d] = C[d, e]
+    for j in range(3):
+        m[3 + j] += w0[j]
+    return m, C
+
+
+@nb.njit(cache=True, parallel=True)
+def roughen_chart(X, z, sig, ncols, qref, a, f, Q, W):
+    """Roughening in the chart about ``qref``: ``x_i[:ncols] += σ ⊙ z_i`` for the rows
+    ``x_i = [δp, ω]`` of X (first 6 columns), then ``Q_i = grp2q(δp_i) ⊗ qref``, ``W_i = ω_i``
+    (ncols = 3: the attitude only, W left as it is). z (N, ncols) standard normals."""
+    N = Q.shape[0]
+    for i in nb.prange(N):
+        roughen_chart_row(i, X, z, sig, ncols, qref, a, f, Q, W)
+
+
+@nb.njit(cache=True, inline="always")
+def roughen_chart_row(i, X, z, sig, ncols, qref, a, f, Q, W):
+    """Row i of :func:`roughen_chart` (shared with the CUDA kernel)."""
+    _grp_times(X[i, 0] + sig[0] * z[i, 0], X[i, 1] + sig[1] * z[i, 1],
+               X[i, 2] + sig[2] * z[i, 2], a, f, qref, Q[i])
+    if ncols == 6:
+        for j in range(3):
+            W[i, j] = X[i, 3 + j] + sig[3 + j] * z[i, 3 + j]
+
+
+@nb.njit(cache=True, parallel=True)
+def roughen_compose(Q, W, z, sig, a, f):
+    """Bernard table 7.9 "Update state": ``c_i = σ ⊙ z_i``, ``q_i ← q(c_θ,i) ⊗ q_i`` (c_θ a GRP,
+    eq. 7.108) and ``ω_i ← ω_i + c_ω,i`` (eq. 7.109); z (N, ≥6) standard normals (z (N,3):
+    the attitude only)."""
+    N = Q.shape[0]
+    for i in nb.prange(N):
+        roughen_compose_row(i, Q, W, z, sig, a, f)
+
+
+@nb.njit(cache=True, inline="always")
+def roughen_compose_row(i, Q, W, z, sig, a, f):
+    """Row i of :func:`roughen_compose` (shared with the CUDA kernel)."""
+    d0, d1, d2, d3 = grp2q_xyz(sig[0] * z[i, 0], sig[1] * z[i, 1], sig[2] * z[i, 2], a, f)
+    e0, e1, e2, e3 = qmul_xyz(d0, d1, d2, d3, Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
+    n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+    Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3] = e0 / n, e1 / n, e2 / n, e3 / n
+    if z.shape[1] >= 6:
+        for j in range(3):
+            W[i, j] += sig[3 + j] * z[i, 3 + j]
+
+
+@nb.njit(cache=True, parallel=True)
+def liu_west_attitude(X, eps, M, sa, c, qref, a, f, Q, W, E):
+    """Liu & West (2001) kernel on the chart rows ``x_i = [δp, ω, e]`` of X (N, 6 + ne):
+    ``x_i ← sa · x_i + c + M eps_i`` (``c = (1 − sa) x̄``, ``M = h L``), then
+    ``Q_i = grp2q(δp_i) ⊗ qref``, ``W_i = ω_i``, ``E_i = e_i`` (E (N, ne))."""
+    N = Q.shape[0]
+    for i in nb.prange(N):
+        liu_west_row(i, X, eps, M, sa, c, qref, a, f, Q, W, E)
+
+
+@nb.njit(cache=True, inline="always")
+def _lw(i, X, eps, M, sa, c, d):
+    """Component d of the Liu–West move of row i: ``sa X[i,d] + c[d] + Σ_j M[d,j] eps[i,j]``."""
+    acc = sa * X[i, d] + c[d]
+    for j in range(eps.shape[1]):
+        acc += M[d, j] * eps[i, j]
+    return acc
+
+
+@nb.njit(cache=True, inline="always")
+def liu_west_row(i, X, eps, M, sa, c, qref, a, f, Q, W, E):
+    """Row i of :func:`liu_west_attitude` (shared with the CUDA kernel)."""
+    _grp_times(_lw(i, X, eps, M, sa, c, 0), _lw(i, X, eps, M, sa, c, 1),
+               _lw(i, X, eps, M, sa, c, 2), a, f, qref, Q[i])
+    for j in range(3):
+        W[i, j] = _lw(i, X, eps, M, sa, c, 3 + j)
+    for d in range(6, M.shape[0]):
+        E[i, d - 6] = _lw(i, X, eps, M, sa, c, d)
+
+
+@nb.njit(cache=True, parallel=True)
+def min_abs_residual(mpred, y):
+    """``min_i |y − m_i|`` over the finite predictions (+inf when none is finite)."""
+    N = mpred.shape[0]
+    nch = n_chunks(N)
+    part = np.full(nch, np.inf)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        b = np.inf
+        for i in range(lo, hi):
+            m = mpred[i]
+            if np.isfinite(m):
+                v = abs(y - m)
+                if v < b:
+                    b = v
+        part[c] = b
+    b = np.inf
+    for c in range(nch):
+        if part[c] < b:
+            b = part[c]
+    return b
+
+
+@nb.njit(cache=True, parallel=True)
+def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, areas0, ids,
+                           params0, offset, m_out):
+    """Apparent magnitudes with per-particle facet parameters (Model 3, Bernard ch. 8).
+
+    ``m_out[i] = offset − 2.5 log10 Σ_f A_if (n̂_f·ŝ)⁺(n̂_f·ô)⁺ f_r,f`` (DESIGN.md magnitude
+    equation) where particle i's facet arrays are the shape's ``areas0`` (F,) m² and packed
+    BRDF rows ``params0`` (F,P) with the estimated entries replaced by ``p(Z[i])``: state d
+    sets parameter ``kind_col[d]`` (0 ξ, 1 a = F0, 2 m (Beckmann slope) → ``params[f,kc]``;
+    3 → area A_f, m²) of facet ``facet[d]`` to ``1/(1+e^{−z})`` (``logit[d]``) or ``e^{z}``.
+
+    Q (N,4) inertial→body quaternions, or (1,4) shared by every particle (attitude known);
+    ``zeta`` (N,3) ACS jitter rotation vectors (rad) applied as ``exp(ζ_i) ⊗ q_i`` for the
+    prediction only, or (0,3); Z (N,D) unbounded states, or (1,D) shared; s, o (3,) unit
+    object→Sun / object→observer directions in ECI; normals (F,3) body axes; ids (F,) BRDF
+    model ids. The facet sum is the core's (:func:`~lightcurve.core.photometry.facet_flux_nb`), so with
+    ``p(Z[i])`` equal to the shape's values the two agree to round-off. +inf where no light
+    reaches the observer. Parallel over chunks of particles; work buffers per chunk.
+    """
+    N = m_out.shape[0]
+    F = normals.shape[0]
+    P = params0.shape[1]
+    qall = Q.shape[0] == N
+    zall = Z.shape[0] == N
+    use_zeta = zeta.shape[0] == N
+    nch = n_chunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        ar = np.empty(F)
+        pr = np.empty((F, P))
+        qm = np.empty(4)
+        for i in range(lo, hi):
+            iq = i if qall else 0
+            iz = i if zall else 0
+            fill_facet_arrays_nb(Z[iz], facet, kind_col, logit, areas0, params0, ar, pr)
+            if use_zeta:
+                d0, d1, d2, d3 = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
+                qm[0], qm[1], qm[2], qm[3] = qmul_xyz(d0, d1, d2, d3, Q[iq, 0], Q[iq, 1],
+                                                      Q[iq, 2], Q[iq, 3])
+            else:
+                for j in range(4):
+                    qm[j] = Q[iq, j]
+            fl = facet_flux_nb(qm, s, o, normals, ar, ids, pr)
+            m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+
+
+@nb.njit(cache=True)
+def weighted_param_stats_nb(Z, w, logit):
+    """Weighted mean and variance of unbounded states Z (N,D) and of their physical values.
+
+    ``p = 1/(1+e^{−z})`` where ``logit[d]`` else ``e^{z}``; weights w (N,) sum to 1.
+    Returns ``(z_mean, z_var, p_mean, p_var)``, each (D,).
+    """
+    N, D = Z.shape
+    zm = np.zeros(D)
+    pm = np.zeros(D)
+    z2 = np.zeros(D)
+    p2 = np.zeros(D)
+    for i in range(N):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(D):
+            zz = Z[i, d]
+            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            zm[d] += wi * zz
+            pm[d] += wi * pp
+    for i in range(N):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(D):
+            zz = Z[i, d]
+            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            z2[d] += wi * (zz - zm[d]) ** 2
+            p2[d] += wi * (pp - pm[d]) ** 2
+    return zm, z2, pm, p2
+
+
+@nb.njit(cache=True, parallel=True)
+def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, kind_col, logit,
+                            normals, areas0, ids, params0, out):
+    """Log-likelihood of each particle's facet states over the measurement history.
+
+    ``out[i] = Σ_{j<kmax} ℓ_j(Z[i]) + φ_last ℓ_kmax(Z[i])`` with
+    ``ℓ_j = −½ ((y_j − m_j)/σ_j)²`` (m_j the magnitude of :func:`facet_mag_particles_nb` at the
+    known attitude ``Qs[j]``; ``ℓ_j = −inf`` when m_j = +inf; epochs with a non-finite
+    ``y_j`` are skipped). Qs (n,4) known inertial→body attitudes, S, O (n,3) unit ECI
+    object→Sun / object→observer, offs (n,) magnitude offsets, y, sig (n,) mag. Used by the
+    resample-move step of the BPF's attitude-known mode. Parallel over chunks of particles.
+    """
+    N = Z.shape[0]
+    F = normals.shape[0]
+    P = params0.shape[1]
+    nch = n_chunks(N)
+    for c in nb.prange(nch):
+        lo = c * N // nch
+        hi = (c + 1) * N // nch
+        ar = np.empty(F)
+        pr = np.empty((F, P))
+        for i in range(lo, hi):
+            fill_facet_arrays_nb(Z[i], facet, kind_col, logit, areas0, params0, ar, pr)
+            acc = 0.0
+            for j in range(kmax + 1):
+                wj = 1.0 if j < kmax else phi_last
+                if wj == 0.0 or not np.isfinite(y[j]):
+                    continue
+                fl = facet_flux_nb(Qs[j], S[j], O[j], normals, ar, ids, pr)
+                if not fl > 0.0:
+                    acc = -np.inf
+                    break
+                r = (y[j] - (offs[j] - 2.5 * math.log10(fl))) / sig[j]
+                acc += -0.5 * wj * r * r
+            out[i] = acc

@@ -1,0 +1,176 @@
+"""BPFConfig and the thesis variant (Bernard 2021 §7.3, tables 6.3 and 7.9); counter-based draws;
+thread budget of the multi-process paths."""
+
+from __future__ import annotations
+
+import operator
+
+import numba
+import numpy as np
+import pytest
+from filters_synth import make_curve
+from scipy import stats
+
+from lightcurve import threads
+from lightcurve.core import particles as CP
+from lightcurve.filters import FLAG_INFLATED, build_problem, run_bpf
+from lightcurve.filters import _bpf_kernels as BK
+from lightcurve.filters.bpf import BPFConfig
+
+
+@pytest.fixture(scope="module")
+def easy():
+    return build_problem(make_curve(n=40, seed=3), seed=2, sigma_theta_deg=3.0)
+
+
+def test_config_variants_and_validation():
+    t = BPFConfig.thesis()
+    # Bernard ch. 7: multinomial resampling (table 6.3), table 7.9 roughening, no progressive
+    # correction, no gate, the estimate about one particle (eq. 7.100, "some i-th particle")
+    assert (t.resampling, t.rejuvenation, t.progressive, t.gating, t.reference) == (
+        "multinomial", "table7.9", False, False, "heaviest")
+    r = BPFConfig()
+    assert (r.variant, r.resampling, r.rejuvenation, r.progressive, r.gating, r.reference) == (
+        "robust", "systematic", "auto", True, True, "refined")
+    # an explicit field is a named departure from the variant
+    assert BPFConfig(variant="thesis", resampling="systematic").resampling == "systematic"
+    assert r.replace(particles=50).particles == 50
+    for bad in (dict(particles=1), dict(particles=2.5), dict(variant="x"),
+                dict(resampling="residual"), dict(ess_threshold=1.5), dict(roughening=-1),
+                dict(rejuvenation="musso"), dict(kernel_bandwidth=1.0), dict(max_stages=0),
+                dict(joint_max_spread_deg=0), dict(param_discount=0), dict(rng="mt")):
+        with pytest.raises(ValueError):
+            BPFConfig(**bad)
+
+
+def test_table_7_9_roughening_kernel_matches_the_text():
+    """Table 7.9: σ_l = 𝒢 E_l N^(−1/n) from the ranges of the error GRPs and rates, then
+    q ← q(c_θ) ⊗ q (eq. 7.108, c_θ a GRP, eq. 7.2–7.4) and ω ← c_ω + ω (eq. 7.109); checked
+    against a plain-NumPy evaluation of the same equations written here."""
+    rng = np.random.default_rng(5)
+    N = 500
+    Q = rng.standard_normal((N, 4))
+    Q /= np.linalg.norm(Q, axis=1, keepdims=True)
+    W = rng.standard_normal((N, 3)) * 0.03
+    X = np.hstack([rng.standard_normal((N, 3)) * 0.1, W])
+    E = np.empty(6)
+    CP.column_ranges(X, E)
+    np.testing.assert_array_equal(E, X.max(axis=0) - X.min(axis=0))
+    G = 0.2
+    sig = CP.roughening_sigma_nb(E, G, N, 6)
+    np.testing.assert_allclose(sig, G * E * N ** (-1 / 6), rtol=1e-15)
+    z = rng.standard_normal((N, 6))
+    Qn, Wn = Q.copy(), W.copy()
+    BK.roughen_compose(Qn, Wn, z, sig, 1.0, 4.0)
+    c = z * sig
+    # eq. 7.2–7.4 (a = 1, f = 4): δq4 = (−a|p|² + f√(f² + (1−a²)|p|²))/(f² + |p|²), δq_v = (a+δq4)/f p
+    n2 = np.sum(c[:, :3] ** 2, axis=1)
+    q4 = (-n2 + 4 * np.sqrt(16.0)) / (16 + n2)
+    dq = np.hstack([q4[:, None], ((1 + q4) / 4)[:, None] * c[:, :3]])
+    a0, av = dq[:, 0], dq[:, 1:]
+    b0, bv = Q[:, 0], Q[:, 1:]
+    ref = np.hstack([(a0 * b0 - np.sum(av * bv, axis=1))[:, None],
+                     a0[:, None] * bv + b0[:, None] * av - np.cross(av, bv)])   # eq. 3.20
+    np.testing.assert_allclose(Qn, ref / np.linalg.norm(ref, axis=1, keepdims=True), atol=1e-14)
+    np.testing.assert_allclose(Wn, W + c[:, 3:], atol=1e-16)
+
+
+def test_thesis_variant_is_the_plain_filter(easy):
+    c = make_curve(n=40, seed=3)
+    c.mag = c.mag.copy()
+    c.mag[20] += 3.0                       # a gross outlier: the thesis filter has no gate
+    p = build_problem(c, seed=2, sigma_theta_deg=3.0)
+    est = run_bpf(p, BPFConfig.thesis(particles=2000), seed=1)
+    assert sum(est.meta["tempering_stages"]) == 0
+    assert not np.any(est.flags & FLAG_INFLATED)
+    assert est.meta["gate"]["mode"] == "off" and est.meta["bpf"]["variant"] == "thesis"
+    robust = run_bpf(p, particles=2000, seed=1)
+    assert robust.flags[20] & FLAG_INFLATED
+    # on the easy case (σθ = 3° per axis, r = 1 %) the thesis filter converges too: its final
+    # error lies inside its own 3σ and below the prior's RSS σ (3°·√3 = 5.2°)
+    e2 = run_bpf(easy, BPFConfig.thesis(particles=2000), seed=1)
+    s2 = e2.summary()
+    assert s2["inside_3sigma"] and not e2.diverged
+    assert s2["final_att_error_rss_deg"] < 3.0 * np.sqrt(3.0)
+
+
+def test_runs_are_reproducible_and_thread_count_independent(easy):
+    a = run_bpf(easy, particles=3000, seed=4)
+    b = run_bpf(easy, particles=3000, seed=4)
+    np.testing.assert_array_equal(a.q, b.q)
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one numba thread (NUMBA_NUM_THREADS=1): no second thread count to compare")
+    with threads.limited_threads(1):
+        c = run_bpf(easy, particles=3000, seed=4)
+    np.testing.assert_array_equal(a.q, c.q)
+    np.testing.assert_array_equal(a.cov, c.cov)
+
+
+def test_initial_cloud_is_used(easy):
+    N = 500
+    Q = np.tile(easy.truth_q[0], (N, 1))
+    W = np.tile(easy.truth_omega[0], (N, 1))
+    est = run_bpf(easy, particles=N, seed=0, initial_cloud=(Q, W))
+    # every particle at the truth: the first estimate is the truth (to round-off)
+    assert est.att_error_deg is not None and np.max(np.abs(est.att_error_deg[0])) < 1e-6
+    with pytest.raises(ValueError):
+        run_bpf(easy, particles=N, seed=0, initial_cloud=(Q[:10], W))
+
+
+def test_philox_normals_are_standard_normal_and_counter_based():
+    # Philox4x32-10 known-answer vectors (Salmon et al. 2011, Random123 kat_vectors)
+    u = np.uint64
+    assert CP.philox4x32(u(0), u(0), u(0), u(0), u(0), u(0)) == (
+        0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8)
+    m = u(0xFFFFFFFF)
+    assert CP.philox4x32(m, m, m, m, m, m) == (0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD)
+    z = np.empty((100_000, 3))
+    CP.philox_normals(11, 22, 3, z)
+    # Kolmogorov–Smirnov against N(0, 1) per column; false-alarm rate 3 × 1e-3
+    for j in range(3):
+        assert stats.kstest(z[:, j], "norm").pvalue > 1e-3
+    # |corr| between columns below 4.4/√N (two-sided 1e-5 each)
+    c = np.corrcoef(z.T)
+    assert np.max(np.abs(c[np.triu_indices(3, 1)])) < 4.4 / np.sqrt(z.shape[0])
+    # row i of a call does not depend on how many rows are drawn (counter-based)
+    z2 = np.empty((10, 3))
+    CP.philox_normals(11, 22, 3, z2)
+    np.testing.assert_array_equal(z2, z[:10])
+    z3 = np.empty((10, 3))
+    CP.philox_normals(11, 22, 4, z3)
+    assert not np.any(z3 == z2)
+
+
+def test_thread_budget(monkeypatch):
+    monkeypatch.setattr(threads, "available_cores", lambda: 16)
+    monkeypatch.setattr(threads, "_USER_LIMIT", None)
+    assert threads.threads_per_worker(2) == 8
+    assert threads.threads_per_worker(16) == 1 and threads.threads_per_worker(40) == 1
+    monkeypatch.setattr(threads, "_USER_LIMIT", "3")      # the user's NUMBA_NUM_THREADS caps it
+    assert threads.threads_per_worker(2) == 3
+    assert threads.threads_per_worker(2, cores=2) == 1
+
+
+def test_pool_workers_get_their_share_of_the_cores():
+    from lightcurve.studies.runner import iter_results
+
+    cores = threads.available_cores()
+    got = list(iter_results([numba.get_num_threads] * 4, operator.call, workers=2))
+    assert all(1 <= n <= max(1, cores // 2) for n in got), got
+
+
+def test_unmoved_copies_keep_their_predictions(monkeypatch):
+    """Between tempering stages without a move (rejuvenation "none"), the resampled copies keep
+    their predicted magnitudes instead of being predicted again: same posterior as re-predicting
+    (to round-off: a re-prediction renormalises the quaternions)."""
+    import lightcurve.filters.bpf as B
+
+    p = build_problem(make_curve(n=12, seed=4), seed=1, sigma_theta_deg=30.0)
+    a = run_bpf(p, particles=1500, seed=2, rejuvenation="none")
+    assert sum(a.meta["tempering_stages"]) > 0
+    orig = B._Run._stage_move
+    monkeypatch.setattr(B._Run, "_stage_move",
+                        lambda self, k, rest, zeta: (orig(self, k, rest, zeta)[0], True))
+    b = run_bpf(p, particles=1500, seed=2, rejuvenation="none")
+    assert a.meta["tempering_stages"] == b.meta["tempering_stages"]
+    np.testing.assert_allclose(a.q, b.q, atol=1e-10)
