@@ -69,9 +69,10 @@ def _cmd_css_simulate(args) -> int:
         css = sc.css
     else:
         sc = CSSScenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
-                      duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
-                      albedo=_css_albedo(args.albedo), filter_params=fp,
-                      filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
+                         duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
+                         albedo=_css_albedo(args.albedo), filter_params=fp,
+                         filter_albedo=(_css_albedo(args.filter_albedo)
+                                        if args.filter_albedo != "none" else None))
     r = simulate_css(sc, args.seed)
     m = settled_mask(r.t, r.lit, args.settle_s)
     e = r.error_deg[m]

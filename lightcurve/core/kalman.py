@@ -33,7 +33,8 @@ from numba import njit
 __all__ = [
     "cholesky_nb", "forward_nb", "backward_nb", "spd_solve_nb", "spd_inverse_nb", "inverse_nb",
     "symmetrize_nb", "kalman_gain_nb", "joseph_apply_nb", "joseph_update_nb", "joseph_scalar_nb",
-    "consider_update_nb", "UPDATE_OK", "UPDATE_BAD_INNOVATION", "UPDATE_BAD_S", "UPDATE_BAD_POSTERIOR",
+    "consider_update_nb", "UPDATE_OK", "UPDATE_BAD_INNOVATION", "UPDATE_BAD_S",
+    "UPDATE_BAD_POSTERIOR",
 ]
 
 UPDATE_OK = 0

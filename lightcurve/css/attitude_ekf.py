@@ -17,7 +17,8 @@ Linearisation (eq. 4.6-4.8, derived here)::
 
 The state is advanced with the exact constant-rate step of the attitude (ω̃ − β̂ held over the
 step; :func:`lightcurve.core.dynamics.const_rate_nb` on the quaternion of σ, the MRP algebra of
-:mod:`lightcurve.core.rotations`), the covariance with ``Φ = I + F Δt + F² Δt²/2`` on the (σ, β) block and the discrete process noise
+:mod:`lightcurve.core.rotations`), the covariance with ``Φ = I + F Δt + F² Δt²/2`` on the
+(σ, β) block and the discrete process noise
 (Farrenkopf, with ``B Bᵀ = (1+σᵀσ)² I``)::
 
     Q_σσ = (1+σᵀσ)²/16 (σ_v² Δt + σ_u² Δt³/3) I,  Q_σβ = −¼ B σ_u² Δt²/2,  Q_ββ = σ_u² Δt I
@@ -52,7 +53,8 @@ from ..core.rotations import (mrp2dcm_nb, mrp2q_nb, mrp_B_nb, mrp_dcm_vec_jac_nb
 from ..rotations import quat_to_mrp
 
 __all__ = [
-    "mv3_nb", "mtv3_nb", "mrp_propagate_nb", "mrp_switch_cov_nb", "star_tracker_update_nb", "vector_update_nb",
+    "mv3_nb", "mtv3_nb", "mrp_propagate_nb", "mrp_switch_cov_nb", "star_tracker_update_nb",
+    "vector_update_nb",
     "MRPEKFParams", "run_mrp_ekf",
 ]
 

@@ -802,7 +802,7 @@ def simulate_calibration_case(rng, *, css: CSSArray | None = None, duration_s=No
                        css_misalignment_sigma_deg=misalignment_sigma_deg,
                        css_noise_sigma=noise_sigma)
     sc = CSSScenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=dur, dt_s=dt_s,
-                  epoch_utc=epoch_utc, albedo=alb, dispersions=disp)
+                     epoch_utc=epoch_utc, albedo=alb, dispersions=disp)
     r = simulate_css(sc, g)
     spec = gyro_grade(gyro) if isinstance(gyro, str) else gyro
     w_meas, bias = simulate_gyro(r.omega, dt_s, spec, g, detailed=False)

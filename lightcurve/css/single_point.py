@@ -24,7 +24,8 @@ import numpy as np
 
 from ..core.kalman import inverse_nb
 
-__all__ = ["wavg_nb", "lsmn_nb", "run_single_point_nb", "estimate", "SINGLE_POINT_METHODS", "error_map", "ErrorMap",
+__all__ = ["wavg_nb", "lsmn_nb", "run_single_point_nb", "estimate", "SINGLE_POINT_METHODS",
+           "error_map", "ErrorMap",
            "plot_error_map", "angle_deg"]
 
 SINGLE_POINT_METHODS = ("wavg", "lsmn", "wlsmn")
@@ -118,7 +119,8 @@ def estimate(method: str, y, normals, threshold: float = 0.0) -> np.ndarray:
     (dimensionless) outputs.  Rows with no active sensor give zeros.
     """
     if method not in _METHOD_ID:
-        raise ValueError(f"unknown single-point method {method!r}; allowed: {', '.join(SINGLE_POINT_METHODS)}")
+        raise ValueError(f"unknown single-point method {method!r}; "
+                         f"allowed: {', '.join(SINGLE_POINT_METHODS)}")
     Y = np.ascontiguousarray(np.atleast_2d(np.asarray(y, dtype=float)))
     n = np.ascontiguousarray(normals, dtype=float)
     out = run_single_point_nb(_METHOD_ID[method], Y, n, float(threshold))

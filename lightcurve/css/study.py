@@ -53,11 +53,11 @@ from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
 from ..io.tomlio import Section, load_toml
 from . import okeefe2015 as ok
 from ..core.constants import MU_EARTH, R_EARTH_M
-from ..filters.config import VARIANTS
 from .truth import ESTIMATORS
 
 __all__ = ["StudySpec", "load_css_study", "study_tasks", "run_task", "run_css_study",
-           "summarize_css_study", "write_css_report", "settled_mask", "direction_nees", "TAU_STEP_S", "ERR_BINS"]
+           "summarize_css_study", "write_css_report", "settled_mask", "direction_nees",
+           "TAU_STEP_S", "ERR_BINS"]
 
 TAU_STEP_S = 10.0
 """Resolution of the stored envelopes on the sunlit-time axis, s."""
@@ -578,6 +578,8 @@ def _f(x):
 
 def load_css_study(path) -> StudySpec:
     """Read a study TOML (module docstring); :class:`InputError` on bad input."""
+    from ..filters.config import VARIANTS   # here: importing lightcurve.filters costs ~0.5 s
+
     path = Path(path)
     raw, text = load_toml(path, with_text=True)
     doc = Section(raw, file=path)

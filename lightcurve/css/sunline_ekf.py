@@ -177,7 +177,8 @@ def rotation_step_nb(omega, dt):
     """Φ = exp(−[ω×]Δt) (3×3), the exact transition of the sun-line dynamics ``ḋ = −ω × d``
     (O'Keefe eq. 3.29 without noise) for a rate ω (rad/s, body) held over Δt (s): the attitude
     matrix of the rotation vector ω Δt (Bernard eq. 3.13) through
-    :func:`lightcurve.core.rotations.rotvec2q_nb` and :func:`~lightcurve.core.rotations.q2dcm_nb`."""
+    :func:`lightcurve.core.rotations.rotvec2q_nb` and
+    :func:`~lightcurve.core.rotations.q2dcm_nb`."""
     return q2dcm_nb(rotvec2q_nb(omega * dt))
 
 

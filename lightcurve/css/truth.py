@@ -50,7 +50,6 @@ from ..core.dynamics import mat9, rk4_step_xyz
 from ..core.kalman import inverse_nb
 from ..core.rotations import euler321_to_dcm_nb, qrot_inv_nb, qrot_nb
 from ..estimation.rng import as_generator
-from ..filters.config import VARIANTS
 from .albedo import (AlbedoCells, AlbedoMap, albedo_sun_frame_nb, albedo_vectors_nb,
                      builtin_albedo_map, cell_areas_m2, earth_rotation_angle, sun_nadir_axis_nb)
 from .attitude_ekf import mv3_nb
@@ -152,6 +151,8 @@ class CSSScenario:
                                                     "lowpass_hz": 10.0, "sigma_s": 1.0})
 
     def __post_init__(self):
+        from ..filters.config import VARIANTS   # here: importing lightcurve.filters costs ~0.5 s
+
         if self.estimator not in ESTIMATORS:
             raise ValueError(f"unknown estimator {self.estimator!r}; allowed: {', '.join(ESTIMATORS)}")
         if self.variant not in VARIANTS:

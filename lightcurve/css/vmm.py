@@ -231,8 +231,8 @@ def simulate_vmm_case(rng, *, duration_s=3000.0, dt_s=1.0, fov_half_angle_deg=90
                        css_scale_sigma=0.0, css_misalignment_sigma_deg=0.0,
                        css_noise_sigma=noise_sigma)
     sc = CSSScenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=duration_s,
-                  dt_s=dt_s, epoch_utc=epoch_utc, albedo=None if albedo else False,
-                  dispersions=disp)
+                     dt_s=dt_s, epoch_utc=epoch_utc, albedo=None if albedo else False,
+                     dispersions=disp)
     r = simulate_css(sc, g)
     spec = gyro_grade(gyro) if isinstance(gyro, str) else gyro
     w_meas, _ = simulate_gyro(r.omega, dt_s, spec, g, detailed=False)

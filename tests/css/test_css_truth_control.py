@@ -51,7 +51,7 @@ def test_torque_free_truth_conserves_angular_momentum():
     # no gravity gradient, no control: the inertial angular momentum
     # H_I = A(q)^T ([I] w + J_s G Omega) is conserved (Euler's equations, Schaub eq. 4.33)
     sc = CSSScenario(dual_pyramid(), estimator="lsmn", gyro=None, duration_s=600.0, dt_s=0.25,
-                  gravity_gradient=False, albedo=False)
+                     gravity_gradient=False, albedo=False)
     r = simulate_css(sc, 3)
     scf = Spacecraft()
     I = np.asarray(scf.inertia)
@@ -75,7 +75,7 @@ def test_controlled_sun_pointing_converges():
     # closed loop with the EKF and a tactical gyro: the +z axis reaches the Sun and stays
     # near it (deadband 1 deg plus estimation error of a few degrees)
     sc = CSSScenario(dual_pyramid(), estimator="ekf", gyro="tactical", controlled=True,
-                  duration_s=1500.0)
+                     duration_s=1500.0)
     checked = 0
     for seed in range(4):
         r = simulate_css(sc, seed)
@@ -87,7 +87,8 @@ def test_controlled_sun_pointing_converges():
         assert np.percentile(pe[late], 95) < 8.0
     assert checked >= 2
     # the same case uncontrolled keeps tumbling (the pointing error is not small)
-    r = simulate_css(CSSScenario(dual_pyramid(), estimator="ekf", gyro="tactical", duration_s=1500.0), 0)
+    r = simulate_css(CSSScenario(dual_pyramid(), estimator="ekf", gyro="tactical",
+                                 duration_s=1500.0), 0)
     pe = np.degrees(np.arccos(np.clip(r.s_true @ [0, 0, 1.0], -1, 1)))
     assert np.percentile(pe[r.t > 900], 95) > 30.0
 
@@ -102,7 +103,8 @@ def test_settled_mask():
 def _p99_case(estimator, n_runs, duration_s):
     errs, nees = [], []
     for i in range(n_runs):
-        sc = CSSScenario(dual_pyramid(), estimator=estimator, gyro="tactical", duration_s=duration_s)
+        sc = CSSScenario(dual_pyramid(), estimator=estimator, gyro="tactical",
+                         duration_s=duration_s)
         r = simulate_css(sc, np.random.SeedSequence([1, i]))
         m = settled_mask(r.t, r.lit, 300.0)
         errs.append(r.error_deg[m])

@@ -34,8 +34,8 @@ def _simulate(seed, albedo, duration_s=1200.0, dt_s=3.0):
     disp = Dispersions(css_scale_common_sigma=0.0, css_scale_sigma=0.0,
                        css_misalignment_sigma_deg=0.0, css_noise_sigma=0.017)
     sc = CSSScenario(dual_pyramid(fov_half_angle_deg=70.0), estimator="wavg", gyro=None,
-                  duration_s=duration_s, dt_s=dt_s,
-                  albedo=albedo, dispersions=disp, filter_params=FilterParams())
+                     duration_s=duration_s, dt_s=dt_s,
+                     albedo=albedo, dispersions=disp, filter_params=FilterParams())
     return sc, simulate_css(sc, seed)
 
 
