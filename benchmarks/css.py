@@ -55,7 +55,7 @@ def main(argv=None):
     from lightcurve.css.single_point import lsmn_nb, wavg_nb
     from lightcurve.css.sunline_thesis import (thesis_init_nb, thesis_propagate_nb,
                                                thesis_state, thesis_update_nb)
-    from lightcurve.css.truth import simulate
+    from lightcurve.css.truth import simulate_css
 
     css = thesis_css("dual_pyramid")
     az, el = (np.ascontiguousarray(x) for x in normal_to_azel(css.normals))
@@ -118,9 +118,9 @@ def main(argv=None):
     for key, alb in (("sim_step_albedo_toms_1p25x1_us", "toms"), ("sim_step_albedo_off_us", "none")):
         sc = thesis_scenario("dual_pyramid", "ekf", controlled=True, duration_s=a.sim_s,
                              albedo=alb, perturbations=False)
-        simulate(sc, 0)
+        simulate_css(sc, 0)
         t0 = time.perf_counter()
-        r = simulate(sc, 1)
+        r = simulate_css(sc, 1)
         out[key] = round((time.perf_counter() - t0) / r.t.size * 1e6, 1)
     print_with_machine(out, t_start)
 

@@ -25,9 +25,10 @@ from lightcurve._paths import shared_data_dir
 from lightcurve.css.albedo import builtin_albedo_map, load_albedo_map
 from lightcurve.css.calibration import (AlbedoCells, CalibrationParams, albedo_vectors_nb,
                                         calibration_measurement_nb, calibration_update_nb,
-                                        initial_state, r3_nb)
+                                        initial_state)
 from lightcurve.css.configurations import dual_pyramid
 from lightcurve.css.sensors import normal_to_azel
+from lightcurve.core.rotations import euler321_to_dcm_nb
 from lightcurve.rotations import quat_rotate_inv
 
 THESIS_TABLE_4_4_US = {1: 6141.0, 5: 506.0, 10: 180.0}
@@ -95,7 +96,8 @@ def main(n=2000):
             calibration_measurement_nb(x0, az0, el0, cf, hor, s_N, 1.0, theta, r_E, s_E, *args,
                                        np.zeros(N))
 
-        nE = np.array([r3_nb(theta, quat_rotate_inv(q, nn)) for nn in css.normals])
+        E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))   # ECI → Earth-fixed
+        nE = np.array([E @ quat_rotate_inv(q, nn) for nn in css.normals])
         _, _, count = albedo_vectors_nb(*args, r_E, s_E, nE, cf, hor, np.zeros(N))
         out["results"][f"{res}deg"] = {
             "map": src, "cells_total": int(cells.nlat * cells.nlon), "cells_visited": int(count),

@@ -32,11 +32,11 @@ def _css_albedo(spec):
 
 def _cmd_css_simulate(args) -> int:
 
-    from ..css.recording import write_recording
+    from ..css.recording import write_css_recording
     from ..css.study import settled_mask
     from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams
-    from ..css.truth import Scenario, simulate
+    from ..css.truth import CSSScenario, simulate_css
 
     output_not_input(args.output, args.config, args.albedo, args.filter_albedo, option="--output")
     css = _css_sensors(args.config, args.fov_deg)
@@ -68,11 +68,12 @@ def _cmd_css_simulate(args) -> int:
                              albedo="toms" if args.albedo == "builtin" else _css_albedo(args.albedo))
         css = sc.css
     else:
-        sc = Scenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
-                      duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
-                      albedo=_css_albedo(args.albedo), filter_params=fp,
-                      filter_albedo=_css_albedo(args.filter_albedo) if args.filter_albedo != "none" else None)
-    r = simulate(sc, args.seed)
+        sc = CSSScenario(css, estimator=args.estimator, gyro=gyro, controlled=args.controlled,
+                         duration_s=args.duration_s, dt_s=args.dt_s, epoch_utc=args.epoch,
+                         albedo=_css_albedo(args.albedo), filter_params=fp,
+                         filter_albedo=(_css_albedo(args.filter_albedo)
+                                        if args.filter_albedo != "none" else None))
+    r = simulate_css(sc, args.seed)
     m = settled_mask(r.t, r.lit, args.settle_s)
     e = r.error_deg[m]
     print(f"{css.name}: {r.t.size} samples, sunlit {np.mean(r.lit > 0.999) * 100:.0f} %, "
@@ -85,20 +86,20 @@ def _cmd_css_simulate(args) -> int:
         pe = np.degrees(np.arccos(np.clip(r.s_true @ r.info["pointing_axis"], -1, 1)))
         print(f"final pointing error {pe[-1]:.2f} deg")
     if args.output:
-        write_recording(args.output, r, css, args.epoch, gyro is not None)
+        write_css_recording(args.output, r, css, args.epoch, gyro is not None)
         print(f"wrote {args.output}")
     return 0
 
 
 def _cmd_css_estimate(args) -> int:
 
-    from ..css.recording import read_recording
+    from ..css.recording import read_css_recording
     from ..css.single_point import angle_deg, estimate
     from ..css.sunline_ekf import gyroless_params
     from ..css.sunline_ekf import FilterParams, run_filter
 
     output_not_input(args.output, args.recording, option="--output")
-    rec = read_recording(args.recording)
+    rec = read_css_recording(args.recording)
     gyro = None if args.no_gyro else rec["gyro"]
     if args.estimator in ("ekf", "eckf"):
         fp = FilterParams() if gyro is not None else gyroless_params()
@@ -127,15 +128,15 @@ def _cmd_css_estimate(args) -> int:
 
 
 def _cmd_css_study(args) -> int:
-    from ..css.study import load_study, run_study
+    from ..css.study import load_css_study, run_css_study
 
-    spec = load_study(args.pipeline)
+    spec = load_css_study(args.pipeline)
     out_dir = args.output
     if out_dir is None:  # derived from the study's name (data): keep it inside the current folder
         from ..io.paths import safe_output_path
 
         out_dir = safe_output_path(".", f"{spec.name}-report", field="study.name")
-    summary = run_study(spec, out_dir, runs=args.runs, workers=args.workers,
+    summary = run_css_study(spec, out_dir, runs=args.runs, workers=args.workers,
                         scheduler=args.scheduler, dask_local=args.dask_local, force=args.force,
                         progress=not args.quiet)
     print(f"{spec.name}: {summary['verdict']['text']}")

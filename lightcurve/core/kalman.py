@@ -7,6 +7,8 @@
 * :func:`joseph_update_nb` — vector measurement update, Joseph-form covariance, optional
   Schmidt consider states;
 * :func:`joseph_scalar_nb` — the same for one scalar measurement in O(n²) (fast path);
+* :func:`consider_update_nb` — the Schmidt consider update in block form, with consider
+  parameters that also enter the measurement (O'Keefe 2015 eq. 3.47–3.52);
 * :func:`symmetrize_nb`.
 
 Conventions: ``x`` (n,) state, ``P`` (n, n) covariance; ``ν = y − h(x)`` (m,) innovation,
@@ -31,7 +33,8 @@ from numba import njit
 __all__ = [
     "cholesky_nb", "forward_nb", "backward_nb", "spd_solve_nb", "spd_inverse_nb", "inverse_nb",
     "symmetrize_nb", "kalman_gain_nb", "joseph_apply_nb", "joseph_update_nb", "joseph_scalar_nb",
-    "UPDATE_OK", "UPDATE_BAD_INNOVATION", "UPDATE_BAD_S", "UPDATE_BAD_POSTERIOR",
+    "consider_update_nb", "UPDATE_OK", "UPDATE_BAD_INNOVATION", "UPDATE_BAD_S",
+    "UPDATE_BAD_POSTERIOR",
 ]
 
 UPDATE_OK = 0
@@ -308,3 +311,90 @@ def joseph_scalar_nb(P, H, R, nu, dx, Pn):
             if not math.isfinite(v):
                 bad = True
     return S, UPDATE_BAD_POSTERIOR if bad else UPDATE_OK
+
+
+@njit(cache=True)
+def _matmul(A, B):
+    """``A @ B`` by loops (any layout; the small matrices of the filters)."""
+    out = np.zeros((A.shape[0], B.shape[1]))
+    for i in range(A.shape[0]):
+        for k in range(A.shape[1]):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(B.shape[1]):
+                    out[i, j] += a * B[k, j]
+    return out
+
+
+@njit(cache=True)
+def consider_update_nb(x, P, C, B, nu, H, J, R, joseph):
+    """Schmidt consider update in block form (O'Keefe 2015 §3.2.2.2, eq. 3.47–3.52; Woodbury
+    & Junkins 2010).
+
+    Estimated state ``x`` (n,) with covariance ``P`` (n, n); consider parameters β (p,), not
+    estimated (their estimate stays), with covariance ``B`` (p, p) and cross-covariance
+    ``C = E[δx δβᵀ]`` (n, p). Measurement ``y = h(x, β) + v``: innovation ``nu`` (m,),
+    ``H = ∂h/∂x`` (m, n), ``J = ∂h/∂β`` (m, p), noise ``R`` (m, m)::
+
+        W  = H P Hᵀ + H C Jᵀ + J Cᵀ Hᵀ + J B Jᵀ + R                     (eq. 3.47)
+        K  = (P Hᵀ + C Jᵀ) W⁻¹                                           (eq. 3.51)
+        x⁺ = x + K ν,   C⁺ = (I − K H) C − K J B                         (eq. 3.52)
+        P⁺ = P − K W Kᵀ                                                  (eq. 3.52)
+
+    or, with ``joseph`` true, the Joseph form of the same update, valid for any gain:
+    ``P⁺ = (I − KH) P (I − KH)ᵀ − (I − KH) C Jᵀ Kᵀ − K J Cᵀ (I − KH)ᵀ + K (J B Jᵀ + R) Kᵀ``.
+    ``B`` is unchanged. With ``J = 0`` this is :func:`joseph_update_nb` on the augmented
+    state ``[x, β]`` with β as consider states (gain rows zero), written without the
+    augmented matrices; with ``p = 0`` it is the plain Kalman update.
+
+    Returns ``(x⁺, P⁺, C⁺, nis, ok)`` with ``nis = νᵀ W⁻¹ ν``; on failure (non-finite
+    innovation, ``W`` not positive definite, non-finite posterior) copies of the prior and
+    ``nis`` NaN, ``ok`` False. ``W`` is solved through its Cholesky factor; ``P⁺`` is
+    symmetrised.
+    """
+    n = x.shape[0]
+    p = B.shape[0]
+    m = nu.shape[0]
+    for i in range(m):
+        if not np.isfinite(nu[i]):
+            return x.copy(), P.copy(), C.copy(), np.nan, False
+    CJt = _matmul(C, J.T)                       # C Jᵀ (n, m)
+    A = _matmul(P, H.T) + CJt                   # P Hᵀ + C Jᵀ (n, m)
+    HC = _matmul(H, C)                          # (m, p)
+    JB = _matmul(J, B)                          # (m, p)
+    V = _matmul(JB, J.T) + R                    # J B Jᵀ + R (m, m)
+    W = _matmul(H, A) + _matmul(J, HC.T) + V    # eq. 3.47
+    symmetrize_nb(W)
+    L, ok = cholesky_nb(W)
+    if not ok:
+        return x.copy(), P.copy(), C.copy(), np.nan, False
+    K = np.empty((n, m))
+    for r in range(n):
+        K[r, :] = backward_nb(L, forward_nb(L, A[r, :].copy()))
+    w = forward_nb(L, nu)
+    nis = 0.0
+    for a in range(m):
+        nis += w[a] * w[a]
+    xn = x.copy()
+    for i in range(n):
+        for a in range(m):
+            xn[i] += K[i, a] * nu[a]
+    IKH = np.eye(n) - _matmul(K, H)
+    Cn = _matmul(IKH, C) - _matmul(K, JB)      # eq. 3.52b-c
+    if joseph:
+        T = _matmul(IKH, CJt)
+        Pn = (_matmul(_matmul(IKH, P), IKH.T) - _matmul(T, K.T) - _matmul(K, T.T)
+              + _matmul(_matmul(K, V), K.T))
+    else:
+        Pn = P - _matmul(_matmul(K, W), K.T)    # eq. 3.52a
+    for i in range(n):
+        if not np.isfinite(xn[i]):
+            return x.copy(), P.copy(), C.copy(), np.nan, False
+        for j in range(n):
+            if not np.isfinite(Pn[i, j]):
+                return x.copy(), P.copy(), C.copy(), np.nan, False
+        for k in range(p):
+            if not np.isfinite(Cn[i, k]):
+                return x.copy(), P.copy(), C.copy(), np.nan, False
+    symmetrize_nb(Pn)
+    return xn, Pn, Cn, nis, True

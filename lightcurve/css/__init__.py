@@ -23,7 +23,7 @@ from .gyro import GYRO_GRADES, GyroSpec, simulate_gyro
 from .sensors import CSSArray
 from .single_point import error_map, estimate
 from .sunline_ekf import FilterParams, run_filter
-from .truth import Dispersions, Scenario, Spacecraft, simulate, simulate_cases
+from .truth import CSSScenario, Dispersions, Spacecraft, simulate_css, simulate_css_cases
 from .experiments import thesis_scenario
 from .calibration import CalibrationParams, run_calibration, simulate_calibration_case
 from .fault import AveragedNISDetector, inject_fault, run_fault_case
@@ -31,7 +31,7 @@ from .fault import AveragedNISDetector, inject_fault, run_fault_case
 __all__ = ["AlbedoMap", "builtin_albedo_map", "load_albedo_map", "zonal_albedo", "cube",
            "dual_pyramid", "load_configuration", "ControlParams", "GYRO_GRADES", "GyroSpec",
            "simulate_gyro", "CSSArray", "error_map", "estimate", "FilterParams", "run_filter",
-           "Dispersions", "Scenario", "Spacecraft", "simulate", "simulate_cases",
+           "Dispersions", "CSSScenario", "Spacecraft", "simulate_css", "simulate_css_cases",
            "thesis_scenario", "CalibrationParams",
            "run_calibration", "simulate_calibration_case", "AveragedNISDetector", "inject_fault",
            "run_fault_case"]

@@ -27,7 +27,7 @@ __all__ = [
     "builtin_albedo_map", "load_albedo_map", "fit_zonal_coefficients", "albedo_cells_in_view",
     "albedo_on_sensors_nb", "albedo_cells_nb", "cell_irradiance_nb", "earth_rotation_angle",
     "albedo_sun_frame_nb", "expected_albedo_nb", "albedo_phi_nb", "sun_nadir_axis_nb",
-    "TOMS_GRIDS", "load_toms", "draw_albedo_map", "AlbedoCells", "albedo_vectors_nb", "r3_nb",
+    "TOMS_GRIDS", "load_toms", "draw_albedo_map", "AlbedoCells", "albedo_vectors_nb",
     "albedo_coefficient_cov_nb",
 ]
 
@@ -233,14 +233,6 @@ class AlbedoCells:
     def args(self):
         return (self.centers_m, self.normals, self.rho_area_m2, self.lat_c, self.nlat, self.nlon,
                 self.lon_w0, self.dlon, self.dlat_max)
-
-
-@numba.njit(cache=True)
-def r3_nb(theta, v):
-    """R3(θ) v: ECI → Earth-fixed for the Earth rotation angle θ (rad)."""
-    c = np.cos(theta)
-    s = np.sin(theta)
-    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
 
 
 @numba.njit(cache=True, inline="always")

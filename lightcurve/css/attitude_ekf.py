@@ -15,8 +15,10 @@ Linearisation (eq. 4.6-4.8, derived here)::
 
     ∂σ̇/∂σ = ½ (σ ωᵀ − ω σᵀ − [ω×] + (ωᵀσ) I),   ∂σ̇/∂β = −¼ B(σ)
 
-The state is integrated with one RK4 step of the MRP kinematics per sample, the covariance
-with ``Φ = I + F Δt + F² Δt²/2`` on the (σ, β) block and the discrete process noise
+The state is advanced with the exact constant-rate step of the attitude (ω̃ − β̂ held over the
+step; :func:`lightcurve.core.dynamics.const_rate_nb` on the quaternion of σ, the MRP algebra of
+:mod:`lightcurve.core.rotations`), the covariance with ``Φ = I + F Δt + F² Δt²/2`` on the
+(σ, β) block and the discrete process noise
 (Farrenkopf, with ``B Bᵀ = (1+σᵀσ)² I``)::
 
     Q_σσ = (1+σᵀσ)²/16 (σ_v² Δt + σ_u² Δt³/3) I,  Q_σβ = −¼ B σ_u² Δt²/2,  Q_ββ = σ_u² Δt I
@@ -28,13 +30,13 @@ and the covariance rows/columns of σ are mapped with ``J = ∂σˢ/∂σ = (2σ
 Updates:
 
 * unit-vector measurement ``ẑ_B = C(σ) r_N`` (sun sensor, magnetometer; eq. 4.9-4.11) with
-  ``H_σ = ∂(C(σ) r_N)/∂σ`` (:func:`mrp_dcm_vec_jac_nb`);
+  ``H_σ = ∂(C(σ) r_N)/∂σ`` (:func:`lightcurve.core.rotations.mrp_dcm_vec_jac_nb`);
 * star-tracker attitude measurement (a separate update): the small rotation vector
   ``δθ = 4 σ(C(σ_meas) C(σ̂)ᵀ)`` from the estimate to the measurement, ``h = 0`` and
   ``H_σ = 4 Bᵀ(σ̂)/(1+σ̂ᵀσ̂)²`` (from ``Δσ = ¼ B(σ̂) δθ``), ``R = σ_st² I`` (rad²).
 
-Every update is Joseph form with an optional consider mask (Schmidt); a failed
-factorisation leaves the state untouched (see :mod:`lightcurve.estimation.kalman`).
+Every update is :func:`lightcurve.core.kalman.joseph_update_nb` (Joseph form, optional
+Schmidt consider mask); a failed factorisation leaves the state untouched.
 """
 
 from __future__ import annotations
@@ -44,47 +46,17 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..estimation.kalman import joseph_update_nb
+from ..core.dynamics import const_rate_nb
+from ..core.kalman import joseph_update_nb
+from ..core.rotations import (mrp2dcm_nb, mrp2q_nb, mrp_B_nb, mrp_dcm_vec_jac_nb, mrp_shadow_nb,
+                              q2mrp_nb, qmul_nb, skew_nb)
 from ..rotations import quat_to_mrp
 
 __all__ = [
-    "mrp_B_nb", "mrp_dcm_nb", "mv3_nb", "mtv3_nb", "mrp_dcm_vec_jac_nb", "mrp_to_quat_nb", "quat_to_mrp_nb",
-    "mrp_propagate_nb", "mrp_switch_cov_nb", "star_tracker_update_nb", "vector_update_nb",
+    "mv3_nb", "mtv3_nb", "mrp_propagate_nb", "mrp_switch_cov_nb", "star_tracker_update_nb",
+    "vector_update_nb",
     "MRPEKFParams", "run_mrp_ekf",
 ]
-
-
-@numba.njit(cache=True)
-def mrp_B_nb(s):
-    """B(σ) = (1 − σᵀσ) I + 2[σ×] + 2σσᵀ (3×3), so that σ̇ = ¼ B(σ) ω."""
-    n2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
-    B = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            B[i, j] = 2.0 * s[i] * s[j]
-        B[i, i] += 1.0 - n2
-    B[0, 1] -= 2.0 * s[2]
-    B[0, 2] += 2.0 * s[1]
-    B[1, 0] += 2.0 * s[2]
-    B[1, 2] -= 2.0 * s[0]
-    B[2, 0] -= 2.0 * s[1]
-    B[2, 1] += 2.0 * s[0]
-    return B
-
-
-@numba.njit(cache=True)
-def _skew_nb(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-@numba.njit(cache=True)
-def _mm3(A, B):
-    """3×3 product by explicit loops (cheaper to compile than ``@``)."""
-    C = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
-    return C
 
 
 @numba.njit(cache=True)
@@ -101,64 +73,6 @@ def mtv3_nb(A, v):
     return np.array([A[0, 0] * v[0] + A[1, 0] * v[1] + A[2, 0] * v[2],
                      A[0, 1] * v[0] + A[1, 1] * v[1] + A[2, 1] * v[2],
                      A[0, 2] * v[0] + A[1, 2] * v[1] + A[2, 2] * v[2]])
-
-
-@numba.njit(cache=True)
-def mrp_dcm_nb(s):
-    """C(σ) = I + (8[σ×]² − 4(1−σᵀσ)[σ×])/(1+σᵀσ)² (O'Keefe eq. 4.21)."""
-    n2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
-    S = _skew_nb(s)
-    S2 = _mm3(S, S)
-    d = (1.0 + n2) ** 2
-    C = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            C[i, j] = (8.0 * S2[i, j] - 4.0 * (1.0 - n2) * S[i, j]) / d
-        C[i, i] += 1.0
-    return C
-
-
-@numba.njit(cache=True)
-def mrp_dcm_vec_jac_nb(s, a):
-    """∂(C(σ) a)/∂σ (3×3); same algebra as :func:`lightcurve.rotations.mrp_dcm_vec_jacobian`."""
-    n2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
-    sa = s[0] * a[0] + s[1] * a[1] + s[2] * a[2]
-    sxa = np.array([s[1] * a[2] - s[2] * a[1], s[2] * a[0] - s[0] * a[2],
-                    s[0] * a[1] - s[1] * a[0]])
-    N = 8.0 * (s * sa - a * n2) - 4.0 * (1.0 - n2) * sxa
-    A = _skew_nb(a)
-    d1 = (1.0 + n2) ** 2
-    d2 = (1.0 + n2) ** 3
-    J = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            dN = 8.0 * (s[i] * a[j] - 2.0 * a[i] * s[j]) + 8.0 * sxa[i] * s[j] \
-                + 4.0 * (1.0 - n2) * A[i, j]
-            if i == j:
-                dN += 8.0 * sa
-            J[i, j] = dN / d1 - 4.0 * N[i] * s[j] / d2
-    return J
-
-
-@numba.njit(cache=True)
-def mrp_to_quat_nb(s):
-    """Scalar-first unit quaternion of σ."""
-    n2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
-    return np.array([(1.0 - n2) / (1.0 + n2), 2.0 * s[0] / (1.0 + n2), 2.0 * s[1] / (1.0 + n2),
-                     2.0 * s[2] / (1.0 + n2)])
-
-
-@numba.njit(cache=True)
-def quat_to_mrp_nb(q):
-    """σ = q_v/(1+q_1) with the sign chosen so that |σ| ≤ 1."""
-    if q[0] < 0.0:
-        return np.array([-q[1], -q[2], -q[3]]) / (1.0 - q[0])
-    return np.array([q[1], q[2], q[3]]) / (1.0 + q[0])
-
-
-@numba.njit(cache=True)
-def _sdot(s, w):
-    return 0.25 * mv3_nb(mrp_B_nb(s), w)
 
 
 @numba.njit(cache=True)
@@ -206,7 +120,9 @@ def _left_right_nb(P, T, m):
 
 @numba.njit(cache=True)
 def mrp_propagate_nb(x, P, omega_meas, dt, arw, rrw, q_param):
-    """EKF time update in place over Δt (s) with the gyro sample ``omega_meas`` (rad/s).
+    """EKF time update (O'Keefe eq. 4.5-4.8) in place over Δt (s) with the gyro sample
+    ``omega_meas`` (rad/s): the attitude by the core's constant-rate step, the covariance by
+    the module docstring's Φ and Farrenkopf noise, then the shadow-set switch (eq. 4.2).
 
     x (n,) = [σ, β, p...]; P (n,n); arw σ_v (rad/√s), rrw σ_u (rad/s^1.5); q_param: random-
     walk density added to the diagonal of the parameter block (units²/s, 0 for constants).
@@ -214,30 +130,24 @@ def mrp_propagate_nb(x, P, omega_meas, dt, arw, rrw, q_param):
     n = x.shape[0]
     s = x[0:3].copy()
     w = omega_meas - x[3:6]
-    # state: one RK4 step of the MRP kinematics (ω constant over the step)
-    k1 = _sdot(s, w)
-    k2 = _sdot(s + 0.5 * dt * k1, w)
-    k3 = _sdot(s + 0.5 * dt * k2, w)
-    k4 = _sdot(s + dt * k3, w)
-    sn = s + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    # state: the exact constant-rate step of the attitude (ω held over the step) through the
+    # core, q⁺ = exp(ω Δt) ⊗ q(σ); σ⁺ continued from σ (|σ⁺| > 1 is switched below with the
+    # covariance)
+    qn = const_rate_nb(mrp2q_nb(s), w, dt)
+    sn = q2mrp_nb(qn)
+    if qn[0] < 0.0:
+        sn = mrp_shadow_nb(sn, 0.0)
     # linearisation at the start of the step
     F = np.zeros((6, 6))
     sw = s[0] * w[0] + s[1] * w[1] + s[2] * w[2]
-    W = _skew_nb(w)
+    W = skew_nb(w)
     B = mrp_B_nb(s)
     for i in range(3):
         for j in range(3):
             F[i, j] = 0.5 * (s[i] * w[j] - w[i] * s[j] - W[i, j])
             F[i, 3 + j] = -0.25 * B[i, j]
         F[i, i] += 0.5 * sw
-    Phi = np.zeros((6, 6))
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for l in range(6):
-                acc += F[i, l] * F[l, j]
-            Phi[i, j] = F[i, j] * dt + 0.5 * dt * dt * acc
-        Phi[i, i] += 1.0
+    Phi = np.eye(6) + F * dt + (0.5 * dt * dt) * (F @ F)
     # P <- Phi P Phi^T on the (σ, β) rows/columns only
     _left_right_nb(P, Phi, 6)
     n2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
@@ -271,15 +181,11 @@ def star_tracker_update_nb(x, P, q_meas, sigma_rad, consider):
     """
     n = x.shape[0]
     s = x[0:3].copy()
-    qe = mrp_to_quat_nb(s)
+    qe = mrp2q_nb(s)
     # δq = q_meas ⊗ q_est⁻¹ (scalar first)
-    a0, a1, a2, a3 = q_meas[0], q_meas[1], q_meas[2], q_meas[3]
-    b0, b1, b2, b3 = qe[0], -qe[1], -qe[2], -qe[3]
-    dq = np.array([a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
-                   a0 * b1 + b0 * a1 - (a2 * b3 - a3 * b2),
-                   a0 * b2 + b0 * a2 - (a3 * b1 - a1 * b3),
-                   a0 * b3 + b0 * a3 - (a1 * b2 - a2 * b1)])
-    nu = 4.0 * quat_to_mrp_nb(dq)
+    for i in range(1, 4):
+        qe[i] = -qe[i]
+    nu = 4.0 * q2mrp_nb(qmul_nb(q_meas, qe))
     n2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
     B = mrp_B_nb(s)
     H = np.zeros((3, n))
@@ -303,7 +209,7 @@ def vector_update_nb(x, P, z_b, r_n, sigma, consider):
     Returns (NIS, ok)."""
     n = x.shape[0]
     s = x[0:3].copy()
-    h = mv3_nb(mrp_dcm_nb(s), r_n)
+    h = mv3_nb(mrp2dcm_nb(s), r_n)
     J = mrp_dcm_vec_jac_nb(s, r_n)
     H = np.zeros((3, n))
     for i in range(3):

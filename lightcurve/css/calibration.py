@@ -64,19 +64,20 @@ from dataclasses import asdict, dataclass, field
 import numba
 import numpy as np
 
-from ..estimation.kalman import joseph_update_nb
+from ..core.kalman import joseph_update_nb
+from ..core.rotations import euler321_to_dcm_nb, mrp2dcm_nb, mrp_dcm_vec_jac_nb
 from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
 from .albedo import (AlbedoCells, AlbedoMap, albedo_coefficient_cov_nb, albedo_vectors_nb,
-                     builtin_albedo_map, earth_rotation_angle, r3_nb)
-from .attitude_ekf import (mrp_dcm_nb, mrp_dcm_vec_jac_nb, mrp_propagate_nb,
-                           mrp_switch_cov_nb, mtv3_nb, mv3_nb, star_tracker_update_nb)
+                     builtin_albedo_map, earth_rotation_angle)
+from .attitude_ekf import (mrp_propagate_nb, mrp_switch_cov_nb, mtv3_nb, mv3_nb,
+                           star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
 
 __all__ = ["AlbedoCells", "CalibrationParams", "CalibrationResult", "run_calibration",
            "calibration_measurement_nb", "calibration_update_nb", "albedo_vectors_nb",
            "CalibrationCase", "simulate_calibration_case", "state_layout", "acceptance_summary",
-           "r3_nb", "albedo_grid_error"]
+           "albedo_grid_error"]
 
 
 # ---------------------------------------------------------------------------------------
@@ -99,7 +100,7 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
     N = az0.shape[0]
     n = x.shape[0]
     s = x[0:3].copy()
-    C = mrp_dcm_nb(s)
+    C = mrp2dcm_nb(s)
     s_B = mv3_nb(C, s_N)
     nb = np.empty((N, 3))
     da = np.empty((N, 3))
@@ -123,13 +124,14 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
     if nlat > 0:
         nE = np.empty((N, 3))
         hE = np.empty((N, 3))
+        E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))   # ECI → Earth-fixed, R3(θ)
         for k in range(N):
-            nE[k] = r3_nb(theta, mtv3_nb(C, nb[k]))
-            hE[k] = r3_nb(theta, mtv3_nb(C, horizon_B[k]))
+            nE[k] = mv3_nb(E, mtv3_nb(C, nb[k]))
+            hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
         V_E, Aedge, _ = albedo_vectors_nb(cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0,
                                           dlon, dlat_max, r_E, s_E, nE, cos_fov, hE, edge_m)
         for k in range(N):
-            V_N[k] = r3_nb(-theta, V_E[k])
+            V_N[k] = mtv3_nb(E, V_E[k])
     Js = mrp_dcm_vec_jac_nb(s, s_N)
     h = np.zeros(N)
     H = np.zeros((N, n))
@@ -194,15 +196,16 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
         lat_c, nlat, nlon, lon_w0, dlon, dlat_max, np.zeros(N))
     Ra = np.zeros((N, N))
     if cells_sig.shape[0] == cells_ra.shape[0] and nlat > 0 and lit > 0.0:
-        C = mrp_dcm_nb(x[0:3].copy())
+        C = mrp2dcm_nb(x[0:3].copy())
         nE = np.empty((N, 3))
         hE = np.empty((N, 3))
+        E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))   # ECI → Earth-fixed, R3(θ)
         for k in range(N):
             a = az0[k] + x[6 + N + 2 * k]
             e = el0[k] + x[6 + N + 2 * k + 1]
             nb = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-            nE[k] = r3_nb(theta, mtv3_nb(C, nb))
-            hE[k] = r3_nb(theta, mtv3_nb(C, horizon_B[k]))
+            nE[k] = mv3_nb(E, mtv3_nb(C, nb))
+            hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
         Ra = albedo_coefficient_cov_nb(cells_c, cells_n, cells_ra, cells_sig, lat_c, nlat, nlon,
                                        lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE)
     idx = np.empty(N, dtype=np.int64)
@@ -787,7 +790,7 @@ def simulate_calibration_case(rng, *, css: CSSArray | None = None, duration_s=No
     """
     from .configurations import dual_pyramid
     from .gyro import gyro_grade, simulate_gyro
-    from .truth import Dispersions, Scenario, simulate
+    from .truth import CSSScenario, Dispersions, simulate_css
 
     g = as_generator(rng)
     # our robust calibration set-up (70° FOV, no structure horizon), not the thesis ch. 4 one
@@ -798,9 +801,9 @@ def simulate_calibration_case(rng, *, css: CSSArray | None = None, duration_s=No
                        css_scale_sigma=scale_sigma,
                        css_misalignment_sigma_deg=misalignment_sigma_deg,
                        css_noise_sigma=noise_sigma)
-    sc = Scenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=dur, dt_s=dt_s,
-                  epoch_utc=epoch_utc, albedo=alb, dispersions=disp)
-    r = simulate(sc, g)
+    sc = CSSScenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=dur, dt_s=dt_s,
+                     epoch_utc=epoch_utc, albedo=alb, dispersions=disp)
+    r = simulate_css(sc, g)
     spec = gyro_grade(gyro) if isinstance(gyro, str) else gyro
     w_meas, bias = simulate_gyro(r.omega, dt_s, spec, g, detailed=False)
     K = r.t.size
@@ -882,9 +885,9 @@ def simulate_thesis_calibration_case(rng, configuration="dual_pyramid", *, durat
                          sim={"scale_individual_sigma": CALIBRATION["scale_sigma"],
                               "scale_common_max": 0.0,
                               "misalignment_sigma_deg": CALIBRATION["misalignment_sigma_deg"]})
-    from .truth import simulate
+    from .truth import simulate_css
 
-    r = simulate(sc, g_truth)
+    r = simulate_css(sc, g_truth)
     K = r.t.size
     sv = np.zeros(K, dtype=bool)
     if star_period_s > 0:

@@ -1,6 +1,6 @@
 """O'Keefe (2015) ch. 3 simulation set-up as the text gives it (values and citations in
 :mod:`lightcurve.css.okeefe2015`): sensor sets, dispersions, estimator tuning and the
-:class:`~lightcurve.css.truth.Scenario` of one experiment case.
+:class:`~lightcurve.css.truth.CSSScenario` of one experiment case.
 
 ``variant="thesis"`` runs the estimators and controller of the text (:mod:`.sunline_thesis`,
 eq. 3.64 with its integral term, single-point methods without an activity threshold);
@@ -18,7 +18,7 @@ from .configurations import CUBE_AZEL_DEG, DUAL_PYRAMID_AZEL_DEG, from_azel_deg
 from .control import ControlParams
 from .gyro import GyroSpec, gyro_grade
 from .sunline_thesis import thesis_params
-from .truth import Dispersions, Scenario
+from .truth import CSSScenario, Dispersions
 
 __all__ = ["thesis_css", "thesis_dispersions", "thesis_filter_params", "thesis_scenario",
            "thesis_albedo"]
@@ -104,12 +104,12 @@ def thesis_albedo(grid: str = "1p25x1"):
 
 def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="thesis",
                     gyro="intermediate", controlled=False, duration_s=None, albedo="toms",
-                    perturbations=True, sim=None, **kw) -> Scenario:
+                    perturbations=True, sim=None, **kw) -> CSSScenario:
     """The §2.4 / ch. 3 simulation of one case.  ``gyro``: a Table 2.3 grade name or None;
     ``albedo``: "toms" (TOMS 1°×1.25° with its spread, §2.1.2.1), "builtin", "none", an
     AlbedoMap or a (mean, std) pair; ``sim``: overrides of the §2.4 values (keys
     altitude_km, inclination_deg, raan_deg, epoch_utc, perturbations, css_rate_hz,
-    gyro_rate_hz and the CSS_SIM keys); extra keywords go to :class:`Scenario`."""
+    gyro_rate_hz and the CSS_SIM keys); extra keywords go to :class:`CSSScenario`."""
     sim = dict(sim or {})
     orb = {**ok.ORBIT}
     for k in ("inclination_deg", "raan_deg", "epoch_utc"):
@@ -136,7 +136,7 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
     tp = thesis_filter_params(estimator, gyro) if estimator in ("ekf", "eckf") else None
     if tp is None:
         tp = thesis_filter_params("ekf", gyro)   # shadow level etc. for the single-point path
-    return Scenario(
+    return CSSScenario(
         css, estimator=estimator, gyro=gyro, controlled=controlled,
         duration_s=ok.ORBIT["duration_s"] if duration_s is None else float(duration_s),
         dt_s=1.0 / rates["css_rate_hz"],

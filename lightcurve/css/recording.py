@@ -30,10 +30,10 @@ from ..geometry.time import epoch_iso
 from ..io.atomic import atomic_path
 from .sensors import CSSArray
 
-__all__ = ["write_recording", "read_recording"]
+__all__ = ["write_css_recording", "read_css_recording"]
 
 
-def write_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool, *,
+def write_css_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool, *,
                     noise_sigma: float | None = None) -> Path:
     """Write a :class:`~lightcurve.css.truth.SimResult` of sensor set ``css`` to ``path``.
 
@@ -75,7 +75,7 @@ def write_recording(path, result, css: CSSArray, epoch_utc: str, with_gyro: bool
     return path
 
 
-def read_recording(path) -> dict:
+def read_css_recording(path) -> dict:
     """Read a CSS recording; :class:`InputError` naming the file and dataset when malformed.
 
     Returns a dict with ``t``, ``y``, ``normals``, ``fov_half_angle_rad``, ``gyro`` (or None)
@@ -98,7 +98,7 @@ _MAX_ELEMENTS = 200_000_000
 
 
 def _read_checked(f, path) -> dict:
-    """Validate and read the datasets of an open CSS recording (see :func:`read_recording`)."""
+    """Validate and read the datasets of an open CSS recording (see :func:`read_css_recording`)."""
     if f.attrs.get("format") != "lightcurve-css":
         raise InputError("not a CSS recording", file=path, field="format",
                          value=f.attrs.get("format"), allowed="lightcurve-css")

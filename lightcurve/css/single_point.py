@@ -22,12 +22,13 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ._linalg import inv_nb
+from ..core.kalman import inverse_nb
 
-__all__ = ["wavg_nb", "lsmn_nb", "run_single_point_nb", "estimate", "METHODS", "error_map", "ErrorMap",
+__all__ = ["wavg_nb", "lsmn_nb", "run_single_point_nb", "estimate", "SINGLE_POINT_METHODS",
+           "error_map", "ErrorMap",
            "plot_error_map", "angle_deg"]
 
-METHODS = ("wavg", "lsmn", "wlsmn")
+SINGLE_POINT_METHODS = ("wavg", "lsmn", "wlsmn")
 _METHOD_ID = {"wavg": 0, "lsmn": 1, "wlsmn": 2}
 
 
@@ -80,7 +81,7 @@ def lsmn_nb(y, normals, threshold, weighted):
                + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
         tr = (A[0, 0] + A[1, 1] + A[2, 2]) / 3.0
         if det > 1e-6 * tr * tr * tr:
-            Ai, ok = inv_nb(A)
+            Ai, ok = inverse_nb(A)
             if ok:
                 d = Ai @ b
                 done = True
@@ -89,7 +90,7 @@ def lsmn_nb(y, normals, threshold, weighted):
         G = H @ H.T
         for i in range(m):
             G[i, i] += 1e-10
-        Gi, ok = inv_nb(G)
+        Gi, ok = inverse_nb(G)
         lam = Gi @ yy
         d = H.T @ lam
     nrm = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
@@ -118,7 +119,8 @@ def estimate(method: str, y, normals, threshold: float = 0.0) -> np.ndarray:
     (dimensionless) outputs.  Rows with no active sensor give zeros.
     """
     if method not in _METHOD_ID:
-        raise ValueError(f"unknown single-point method {method!r}; allowed: {', '.join(METHODS)}")
+        raise ValueError(f"unknown single-point method {method!r}; "
+                         f"allowed: {', '.join(SINGLE_POINT_METHODS)}")
     Y = np.ascontiguousarray(np.atleast_2d(np.asarray(y, dtype=float)))
     n = np.ascontiguousarray(normals, dtype=float)
     out = run_single_point_nb(_METHOD_ID[method], Y, n, float(threshold))

@@ -19,7 +19,7 @@ A study TOML (``pipelines/css/okeefe2015/*.toml``)::
     [simulation]                      # optional overrides of the §2.4 values (okeefe2015.py)
 
 Every case (estimator × variant × gyro) flies the same dispersed spacecraft for run ``i``
-(seed ``[seed, i]``, common random numbers; :func:`lightcurve.css.truth.simulate_cases`).
+(seed ``[seed, i]``, common random numbers; :func:`lightcurve.css.truth.simulate_css_cases`).
 One task per run and gyro (uncontrolled: the truth is shared by all estimators) or per run,
 gyro, estimator and variant (controlled).  Tasks run on the executors of
 :func:`lightcurve.studies.runner.iter_results` (process pool, Dask); each finished task is
@@ -52,10 +52,12 @@ from ..errors import InputError
 from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
 from ..io.tomlio import Section, load_toml
 from . import okeefe2015 as ok
-from .truth import ESTIMATORS, MU_EARTH, R_EARTH_M, VARIANTS
+from ..core.constants import MU_EARTH, R_EARTH_M
+from .truth import ESTIMATORS
 
-__all__ = ["StudySpec", "load_study", "study_tasks", "run_task", "run_study", "summarize",
-           "write_report", "settled_mask", "direction_nees", "TAU_STEP_S", "ERR_BINS"]
+__all__ = ["StudySpec", "load_css_study", "study_tasks", "run_task", "run_css_study",
+           "summarize_css_study", "write_css_report", "settled_mask", "direction_nees",
+           "TAU_STEP_S", "ERR_BINS"]
 
 TAU_STEP_S = 10.0
 """Resolution of the stored envelopes on the sunlit-time axis, s."""
@@ -148,7 +150,7 @@ def _albedo_arg(name):
 
 
 def scenario_for(spec: StudySpec, estimator, variant, gyro):
-    """The :class:`~lightcurve.css.truth.Scenario` of one case."""
+    """The :class:`~lightcurve.css.truth.CSSScenario` of one case."""
     from .experiments import thesis_albedo, thesis_scenario
 
     alb = spec.albedo
@@ -236,7 +238,7 @@ def run_task(task: Task) -> dict:
     import time
     import traceback
 
-    from .truth import simulate_cases
+    from .truth import simulate_css_cases
 
     t0 = time.perf_counter()
     d = json.loads(task.spec_json)
@@ -248,7 +250,7 @@ def run_task(task: Task) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             scs = [scenario_for(spec, *c) for c in task.cases]
-            rs = simulate_cases(scs, [spec.seed, task.run])
+            rs = simulate_css_cases(scs, [spec.seed, task.run])
         period = _orbit_period(scs[0].altitude_m)
         for c, r in zip(task.cases, rs):
             res["cases"][_case_key(c)] = _run_metrics(spec, r, period)
@@ -322,7 +324,7 @@ def _prepare(out: Path, spec: StudySpec, force: bool):
                                        indent=1) + "\n")
 
 
-def run_study(spec: StudySpec, out_dir, *, runs=None, workers=None, scheduler=None,
+def run_css_study(spec: StudySpec, out_dir, *, runs=None, workers=None, scheduler=None,
               dask_local=None, force=False, progress=True) -> dict:
     """Run (or resume) a study into ``out_dir`` and write ``summary.json`` and
     ``report.html``; returns the summary.  Executors as :func:`lightcurve.studies.runner.
@@ -339,7 +341,7 @@ def run_study(spec: StudySpec, out_dir, *, runs=None, workers=None, scheduler=No
 
 
 def _run_locked(spec, out, n, workers, scheduler, dask_local, force, progress) -> dict:
-    """:func:`run_study` while holding the folder's lock."""
+    """:func:`run_css_study` while holding the folder's lock."""
     from ..studies.runner import iter_results, limit_blas_threads, progress_bar
 
     _prepare(out, spec, force)
@@ -364,8 +366,8 @@ def _run_locked(spec, out, n, workers, scheduler, dask_local, force, progress) -
                 bar.update(1)
         finally:
             bar.close()
-    summary = summarize(spec, out, runs=n)
-    write_report(spec, summary, out)
+    summary = summarize_css_study(spec, out, runs=n)
+    write_css_report(spec, summary, out)
     return summary
 
 
@@ -377,7 +379,7 @@ def _pct_from_hist(h, q):
     return float(ERR_BINS[min(k + 1, ERR_BINS.size - 1)])
 
 
-def summarize(spec: StudySpec, out_dir, *, runs=None) -> dict:
+def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
     """Aggregate the stored runs into ``summary.json`` (and return it)."""
     out = Path(out_dir)
     n = spec.runs if runs is None else int(runs)
@@ -489,7 +491,7 @@ def _verdict(spec, cases) -> dict:
             "text": "thesis variant vs the thesis's 99th percentile: " + "; ".join(parts)}
 
 
-def write_report(spec: StudySpec, summary: dict, out_dir) -> Path:
+def write_css_report(spec: StudySpec, summary: dict, out_dir) -> Path:
     """Self-contained ``report.html``: verdict, table (thesis variant, robust variant and the
     thesis's number side by side), percentile envelopes against sunlit time, time above
     15°/30° per orbit."""
@@ -574,8 +576,10 @@ def _f(x):
     return f"{x:.3g}" if isinstance(x, float) else str(x)
 
 
-def load_study(path) -> StudySpec:
+def load_css_study(path) -> StudySpec:
     """Read a study TOML (module docstring); :class:`InputError` on bad input."""
+    from ..filters.config import VARIANTS   # here: importing lightcurve.filters costs ~0.5 s
+
     path = Path(path)
     raw, text = load_toml(path, with_text=True)
     doc = Section(raw, file=path)

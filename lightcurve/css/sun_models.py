@@ -27,9 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["vallado_sun_eci", "sun_direction", "compare_models", "SUN_MODELS", "AU_M"]
+from ..core.constants import AU_M
 
-AU_M = 149597870700.0
+__all__ = ["vallado_sun_eci", "sun_direction", "compare_models", "SUN_MODELS"]
+
 SUN_MODELS = ("de421", "vallado")
 
 

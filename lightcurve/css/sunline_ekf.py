@@ -4,7 +4,7 @@ State: the *scaled* Sun vector ``d`` in body axes (eq. 3.27).  Its direction is 
 direction; its norm absorbs the unknown common scale factor C of the sensors (and part of
 the albedo), so no calibration is needed.
 
-Dynamics (eq. 3.28): the Sun is inertially fixed over a pass, so in body axes
+Dynamics (eq. 3.29): the Sun is inertially fixed over a pass, so in body axes
 ``ḋ = −ω × d`` with ω the body rate (rad/s) from the gyro — or, without a gyro, from
 successive estimates (eq. 3.67, :func:`successive_rate_nb`).  Over a step Δt with constant ω
 the exact solution is ``d⁺ = Φ d``, ``Φ = exp(−[ω×]Δt)`` (a rotation), used for both the
@@ -72,7 +72,8 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 
-from ._linalg import inv_nb
+from ..core.kalman import consider_update_nb, symmetrize_nb
+from ..core.rotations import q2dcm_nb, qrot_inv_nb, rotvec2q_nb, skew_nb
 from .albedo import albedo_phi_nb, expected_albedo_nb
 from .single_point import lsmn_nb
 
@@ -173,40 +174,12 @@ class FilterParams:
 # ---------------------------------------------------------------------------------------
 @numba.njit(cache=True)
 def rotation_step_nb(omega, dt):
-    """Φ = exp(−[ω×]Δt) (3×3), Rodrigues' formula."""
-    wx, wy, wz = omega[0], omega[1], omega[2]
-    w = np.sqrt(wx * wx + wy * wy + wz * wz)
-    Phi = np.eye(3)
-    th = w * dt
-    if th < 1e-12:
-        # first order: I - [w x] dt
-        Phi[0, 1] += wz * dt
-        Phi[0, 2] -= wy * dt
-        Phi[1, 0] -= wz * dt
-        Phi[1, 2] += wx * dt
-        Phi[2, 0] += wy * dt
-        Phi[2, 1] -= wx * dt
-        return Phi
-    ex, ey, ez = wx / w, wy / w, wz / w
-    s = np.sin(th)
-    c1 = 1.0 - np.cos(th)
-    # exp(-th [e x]) = I - s [e x] + c1 [e x]^2
-    K = np.array([[0.0, -ez, ey], [ez, 0.0, -ex], [-ey, ex, 0.0]])
-    K2 = K @ K
-    for i in range(3):
-        for j in range(3):
-            Phi[i, j] += -s * K[i, j] + c1 * K2[i, j]
-    return Phi
-
-
-@numba.njit(cache=True)
-def _symmetrize(P):
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(i + 1, n):
-            v = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = v
-            P[j, i] = v
+    """Φ = exp(−[ω×]Δt) (3×3), the exact transition of the sun-line dynamics ``ḋ = −ω × d``
+    (O'Keefe eq. 3.29 without noise) for a rate ω (rad/s, body) held over Δt (s): the attitude
+    matrix of the rotation vector ω Δt (Bernard eq. 3.13) through
+    :func:`lightcurve.core.rotations.rotvec2q_nb` and
+    :func:`~lightcurve.core.rotations.q2dcm_nb`."""
+    return q2dcm_nb(rotvec2q_nb(omega * dt))
 
 
 @numba.njit(cache=True)
@@ -321,46 +294,35 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
         H[m_css, 2] = d[2] / nd
         nu[m_css] = 1.0 - nd
         rv[m_css] = norm_sigma * norm_sigma
-    S = H @ P @ H.T
+    R = np.zeros((m, m))
     for i in range(m):
-        S[i, i] += rv[i]
-    Si, ok = inv_nb(S)
+        R[i, i] = rv[i]
+    # Kalman update through the core, Joseph form; the ECKF's rate error c is a Schmidt
+    # consider parameter that does not enter the measurement (J = 0, so its covariance P_cc
+    # does not enter the update either: P_xc ← (I − KH) P_xc)
+    nc = Pxc.shape[1] if consider else 0
+    Bc = np.zeros((nc, nc))
+    Jc = np.zeros((m, nc))
+    Pc = Pxc if consider else np.zeros((3, 0))
+    dn, Pn, Xn, nis, ok = consider_update_nb(d, P, Pc, Bc, nu, H, Jc, R, True)
     if not ok:
         return 0, 0.0, 1.0
-    nis = nu @ Si @ nu
     infl = 1.0
     if nis > gate * m:
+        # strong-measurement inflation of the prior, then the update again
         infl = min(nis / (gate * m), inflate_max)
-        for i in range(3):
-            for j in range(3):
-                P[i, j] *= infl
-        if consider:
-            for i in range(Pxc.shape[0]):
-                for j in range(Pxc.shape[1]):
-                    Pxc[i, j] *= np.sqrt(infl)
-        S = H @ P @ H.T
-        for i in range(m):
-            S[i, i] += rv[i]
-        Si, ok = inv_nb(S)
-    K = P @ H.T @ Si
-    dx = K @ nu
+        dn, Pn, Xn, _, ok = consider_update_nb(d, P * infl, Pc * np.sqrt(infl), Bc, nu, H, Jc,
+                                               R, True)
+        if not ok:
+            return 0, 0.0, 1.0
     for i in range(3):
-        d[i] += dx[i]
-    IKH = np.eye(3) - K @ H
-    KR = K.copy()
-    for i in range(m):
-        for j in range(3):
-            KR[j, i] *= rv[i]
-    Pn = IKH @ P @ IKH.T + KR @ K.T
-    for i in range(3):
+        d[i] = dn[i]
         for j in range(3):
             P[i, j] = Pn[i, j]
     if consider:
-        Xn = IKH @ Pxc
-        for i in range(Pxc.shape[0]):
-            for j in range(Pxc.shape[1]):
+        for i in range(3):
+            for j in range(nc):
                 Pxc[i, j] = Xn[i, j]
-    _symmetrize(P)
     _floor(P, p_floor)
     return m_css, nis, infl
 
@@ -391,24 +353,12 @@ def _eckf_rhs(Pxx, Pxc, F, Fc, pcc, q):
 def eckf_propagate_nb(d, Pxx, Pxc, omega, dt, q_proc, pcc, n_sub):
     """Continuous-discrete consider time update in place (RK4 on the covariance ODEs with
     ``n_sub`` sub-steps; d rotated exactly).  ``pcc`` is the scalar σ_c² of P_cc = σ_c² I."""
-    F = np.zeros((3, 3))
-    F[0, 1] = omega[2]
-    F[0, 2] = -omega[1]
-    F[1, 0] = -omega[2]
-    F[1, 2] = omega[0]
-    F[2, 0] = omega[1]
-    F[2, 1] = -omega[0]
+    F = -skew_nb(omega)
     h = dt / n_sub
     Phi_h = rotation_step_nb(omega, h)
     for _ in range(n_sub):
         # F_c = -[d x], evaluated at the start of the sub-step (d changes slowly)
-        Fc = np.zeros((3, 3))
-        Fc[0, 1] = d[2]
-        Fc[0, 2] = -d[1]
-        Fc[1, 0] = -d[2]
-        Fc[1, 2] = d[0]
-        Fc[2, 0] = d[1]
-        Fc[2, 1] = -d[0]
+        Fc = -skew_nb(d)
         k1p, k1x = _eckf_rhs(Pxx, Pxc, F, Fc, pcc, q_proc)
         k2p, k2x = _eckf_rhs(Pxx + 0.5 * h * k1p, Pxc + 0.5 * h * k1x, F, Fc, pcc, q_proc)
         k3p, k3x = _eckf_rhs(Pxx + 0.5 * h * k2p, Pxc + 0.5 * h * k2x, F, Fc, pcc, q_proc)
@@ -421,7 +371,7 @@ def eckf_propagate_nb(d, Pxx, Pxc, omega, dt, q_proc, pcc, n_sub):
             for j in range(3):
                 Pxx[i, j] = Pn[i, j]
                 Pxc[i, j] = Xn[i, j]
-    _symmetrize(Pxx)
+    symmetrize_nb(Pxx)
 
 
 @numba.njit(cache=True)
@@ -491,17 +441,6 @@ def filter_step_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset=False):
                                  np.zeros(3))
 
 
-@numba.njit(cache=True)
-def _rotate_about_nb(v, axis, ang):
-    """Active rotation of v by angle ``ang`` (rad) about unit ``axis`` (Rodrigues)."""
-    c = np.cos(ang)
-    s = np.sin(ang)
-    kx = np.array([axis[1] * v[2] - axis[2] * v[1], axis[2] * v[0] - axis[0] * v[2],
-                   axis[0] * v[1] - axis[1] * v[0]])
-    kd = axis[0] * v[0] + axis[1] * v[1] + axis[2] * v[2]
-    return v * c + kx * s + axis * kd * (1.0 - c)
-
-
 def phi_state_size(params: "FilterParams") -> int:
     """Length of the φ grid-filter state array of :func:`filter_step_albedo_nb`."""
     return 7 + int(params.albedo_n_phi)
@@ -544,7 +483,8 @@ def _phi_filter_nb(d, omega, dt, y, normals, prm, alb_coords, alb_ratio, alb_m, 
         cz = e2p[0] * e2_I[1] - e2p[1] * e2_I[0]
         dpsi = np.arctan2(s_I[0] * cx + s_I[1] * cy + s_I[2] * cz,
                           e2p[0] * e2_I[0] + e2p[1] * e2_I[1] + e2p[2] * e2_I[2])
-        rb = _rotate_about_nb(rb, sb, dpsi)
+        # active rotation of r_b by δψ about the Sun line: A(q(δψ ŝ))ᵀ r_b (eq. 3.13)
+        rb = qrot_inv_nb(rotvec2q_nb(dpsi * sb), rb)
         c = rb[0] * sb[0] + rb[1] * sb[1] + rb[2] * sb[2]
         rb = rb - c * sb
         nr = np.sqrt(rb[0] ** 2 + rb[1] ** 2 + rb[2] ** 2)

@@ -21,13 +21,14 @@ too, with increased uncertainty (§3.2.1.2; the increase is left open — σ_V d
 ``B ∉ S``), declared when every output is below ``shadow_level``.
 
 EKF (§3.2.1): Joseph-form update (eq. 3.24) through
-:func:`lightcurve.estimation.kalman.joseph_update_nb`; σ_V = 1.84 and σ_s from §3.3.
+:func:`lightcurve.core.kalman.joseph_update_nb`; σ_V = 1.84 and σ_s from §3.3.
 
 ECKF (§3.2.2): consider parameters ``β_η = [ḋ_β (3), ω_β (3)]`` and
 ``β_ν = [C_κ (N), θ_β (N), φ_β (N), V_αβ (N)]`` (eq. 3.56) with covariance blocks
 ``P_x, L, Λ, B_η, B_ν`` (eq. 3.35), propagated by eq. 3.42 (``Ḃ_η`` = σ_ωd² on the gyro-bias
 block, the bias random walk of eq. 2.23b) and updated by the traditional Schmidt consider update
-eq. 3.51-3.52 (§3.2.2.2: "the traditional, non-optimal, version of the ECKF is implemented")::
+eq. 3.51-3.52 (§3.2.2.2: "the traditional, non-optimal, version of the ECKF is implemented"),
+:func:`lightcurve.core.kalman.consider_update_nb`::
 
     W = H P_x Hᵀ + J Λᵀ Hᵀ + H Λ Jᵀ + J B_ν Jᵀ + M R Mᵀ          (eq. 3.47)
     K = (P_x Hᵀ + Λ Jᵀ) W⁻¹                                        (eq. 3.51)
@@ -50,8 +51,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..estimation.kalman import joseph_update_nb
-from ._linalg import inv_nb
+from ..core.kalman import consider_update_nb, joseph_update_nb
+from ..core.rotations import skew_nb
 
 __all__ = ["thesis_state", "thesis_init_nb", "thesis_propagate_nb", "thesis_update_nb",
            "THESIS_PRM", "thesis_params"]
@@ -78,11 +79,6 @@ def thesis_state(n_sensors: int):
     N = int(n_sensors)
     return (np.zeros(3), np.eye(3), np.zeros((3, 6)), np.zeros((3, 4 * N)), np.zeros((6, 6)),
             np.zeros(4 * N))
-
-
-@numba.njit(cache=True)
-def _cross_mat(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @numba.njit(cache=True)
@@ -126,9 +122,9 @@ def thesis_init_nb(y, normals, prm, d, P, L, Lam, Beta, Bnu):
 @numba.njit(cache=True)
 def _deriv(d, P, L, Lam, Beta, w, sig_s, sig_w, sig_wd, eckf):
     """Right-hand sides of eq. 3.29/3.55 (d) and 3.42 (P_x, L, Λ, B_η)."""
-    F = -_cross_mat(w)
+    F = -skew_nb(w)
     dd = F @ d
-    Dx = _cross_mat(d)
+    Dx = skew_nb(d)
     GQG = -(sig_w * sig_w) * (Dx @ Dx)
     for i in range(3):
         GQG[i, i] += sig_s * sig_s
@@ -155,7 +151,9 @@ def _deriv(d, P, L, Lam, Beta, w, sig_s, sig_w, sig_wd, eckf):
 
 @numba.njit(cache=True)
 def thesis_propagate_nb(d, P, L, Lam, Beta, omega, dt, prm, sig_s, sig_w):
-    """One RK4 step of length dt (s) of d and the covariance blocks, in place.  ``omega``
+    """One RK4 step of length dt (s) of d (eq. 3.29, 3.55) and the covariance blocks P_x, L, Λ,
+    B_η (eq. 3.42; §3.3.5: "propagation updates are computed using an RK4 integrator"), in
+    place.  ``omega``
     (rad/s, body) is held over the step; ``sig_s``/``sig_w`` are the process-noise σ's in use
     (the gyro-less case of §3.3.3 sets σ_ω = 0 and σ_s = 1 rad/√s)."""
     eckf = prm[0] > 0.5
@@ -203,7 +201,9 @@ def _boundary_angle(n, b, u):
 
 @numba.njit(cache=True)
 def thesis_update_nb(d, P, L, Lam, Beta, Bnu, y, normals, az, el, cos_fov, horizon, prm):
-    """Measurement update in place (module docstring).  ``normals``/``az``/``el``/``cos_fov``/
+    """Measurement update in place (module docstring): EKF eq. 3.31c-d with the Joseph form of
+    eq. 3.24; ECKF eq. 3.57d-f (H, M, J), the §3.2.3 consistency bound (eq. 3.61-3.63) and the
+    consider update of eq. 3.47-3.52.  ``normals``/``az``/``el``/``cos_fov``/
     ``horizon``: the nominal sensor model the flight software knows.  Returns (number of
     sensors used, NIS), (0, NaN) when nothing was processed (shadow, or no sensor)."""
     N = y.shape[0]
@@ -293,34 +293,25 @@ def thesis_update_nb(d, P, L, Lam, Beta, Bnu, y, normals, az, el, cos_fov, horiz
         if abs(psi_b - ang) < gamma:
             emax = nd * (np.cos(psi_b - min(psi_b, gamma)) + prm[11] + sig_v)
             R[a, a] += emax * emax
-    # W (eq. 3.47)
-    PHt = P @ H.T
-    LamJt = Lam @ J.T
-    JB = J.copy()
-    for a in range(m):
-        for b in range(nb):
-            JB[a, b] *= Bnu[b]
-    W = H @ PHt + (H @ LamJt).T + H @ LamJt + JB @ J.T + R
-    for a in range(m):
-        for b in range(a):
-            v = 0.5 * (W[a, b] + W[b, a])
-            W[a, b] = v
-            W[b, a] = v
-    Wi, ok = inv_nb(W)
+    # eq. 3.47-3.52 through the core: x = d, consider parameters [β_η, β_ν] with
+    # cross-covariance [L, Λ] and covariance blockdiag(B_η, diag B_ν); only β_ν enters the
+    # measurement (J); P_x⁺ = P_x − K W Kᵀ as printed (eq. 3.52a)
+    nq = 6 + nb
+    C = np.zeros((3, nq))
+    C[:, :6] = L
+    C[:, 6:] = Lam
+    Bq = np.zeros((nq, nq))
+    Bq[:6, :6] = Beta
+    Jq = np.zeros((m, nq))
+    for b in range(nb):
+        Bq[6 + b, 6 + b] = Bnu[b]
+        for a in range(m):
+            Jq[a, 6 + b] = J[a, b]
+    x_post, P_post, C_post, nis, ok = consider_update_nb(d, P, C, Bq, nu, H, Jq, R, False)
     if not ok:
         return 0, np.nan
-    K = (PHt + LamJt) @ Wi
-    nis = nu @ Wi @ nu
-    dx = K @ nu
-    for j in range(3):
-        d[j] += dx[j]
-    Pn = P - K @ W @ K.T
-    IKH = np.eye(3) - K @ H
-    Ln = IKH @ L
-    Lamn = IKH @ Lam - K @ JB
-    for i in range(3):
-        for j in range(3):
-            P[i, j] = 0.5 * (Pn[i, j] + Pn[j, i])
-    L[:, :] = Ln
-    Lam[:, :] = Lamn
+    d[:] = x_post
+    P[:, :] = P_post
+    L[:, :] = C_post[:, :6]
+    Lam[:, :] = C_post[:, 6:]
     return m, nis

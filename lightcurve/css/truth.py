@@ -5,13 +5,16 @@ wheels included), four reaction wheels with the spin axes G_s printed in §2.4
 (:data:`~lightcurve.css.okeefe2015.WHEEL_AXES`), spin-axis inertia J_s = 0.001 kg m², motor
 torque limit 30 mN m.
 
-Dynamics (Schaub & Junkins §4.5, reaction wheels; SI units, body axes)::
+Dynamics (O'Keefe eq. B.1; Schaub & Junkins §4.5, reaction wheels; SI units, body axes)::
 
     [I_RW] ω̇ = −ω × ([I] ω + J_s [G_s] Ω) − [G_s] u_s + L_gg,    [I_RW] = [I] − J_s G_s G_sᵀ
     Ω̇ = u_s / J_s − G_sᵀ ω̇,       q̇ = ½ [0, ω] ⊗ q   (q inertial→body, scalar first)
     L_gg = 3 μ/|r|⁵  r_B × ([I] r_B)                  (gravity gradient)
 
-integrated with fixed-step RK4 (motor torques held over a step).  Time grid: CSS samples every
+integrated with the core's RK4 step (:func:`lightcurve.core.dynamics.rk4_step_xyz` with the
+wheel momenta ``h = G_s h_s``, ``h_s = J_s (Ω + G_sᵀ ω)``, which grow linearly under the
+motor torques held over a step; the gravity-gradient torque is evaluated at the step start and
+held).  Time grid: CSS samples every
 ``dt_s`` (§2.4: 2 Hz), each split into ``substeps`` propagation steps at which the gyro is
 sampled, the sequential estimators are propagated and the controller runs (§2.4: gyro at
 10 Hz, so ``substeps = 5`` in the thesis set-up).
@@ -42,12 +45,14 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from ..core.constants import MU_EARTH, OMEGA_EARTH, P_SUN_1AU, R_EARTH_M
+from ..core.dynamics import mat9, rk4_step_xyz
+from ..core.kalman import inverse_nb
+from ..core.rotations import euler321_to_dcm_nb, qrot_inv_nb, qrot_nb
 from ..estimation.rng import as_generator
-from ..rotations import qmul_nb, qnormalize_nb, qrot_inv_nb, qrot_nb
-from ._linalg import inv_nb
 from .albedo import (AlbedoCells, AlbedoMap, albedo_sun_frame_nb, albedo_vectors_nb,
-                     builtin_albedo_map, cell_areas_m2, earth_rotation_angle, r3_nb,
-                     sun_nadir_axis_nb)
+                     builtin_albedo_map, cell_areas_m2, earth_rotation_angle, sun_nadir_axis_nb)
+from .attitude_ekf import mv3_nb
 from .control import ControlParams, mrp_control_nb, sun_pointing_mrp_nb
 from .gyro import GyroSpec, gyro_grade, gyro_step_nb
 from .okeefe2015 import SPACECRAFT, WHEEL_AXES
@@ -56,36 +61,10 @@ from .single_point import lsmn_nb, wavg_nb
 from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
 from .sunline_thesis import thesis_init_nb, thesis_propagate_nb, thesis_update_nb
 
-def _refresh_numba_cache_stamp():
-    """numba's on-disk cache of :func:`truth_loop_nb` is keyed on this file's timestamp only,
-    not on the files of the compiled functions it calls (numba documents this): when one of
-    them is newer than this file, touch this file so that the stale cache is not loaded."""
-    import os
-    from pathlib import Path
+__all__ = ["Spacecraft", "Dispersions", "CSSScenario", "SimResult", "simulate_css",
+           "simulate_css_cases", "ESTIMATORS", "truth_loop_nb"]
 
-    here = Path(__file__)
-    deps = ("sunline_thesis.py", "sunline_ekf.py", "albedo.py", "control.py", "gyro.py",
-            "single_point.py", "_linalg.py", "../rotations.py", "../estimation/kalman.py",
-            "../earth/albedo.py", "../core/rotations.py", "../core/kalman.py")
-    try:
-        newest = max((here.parent / d).stat().st_mtime for d in deps if (here.parent / d).exists())
-        if newest > here.stat().st_mtime:
-            os.utime(here, None)
-    except OSError:  # read-only install: nothing can be stale there
-        pass
-
-
-_refresh_numba_cache_stamp()
-
-__all__ = ["Spacecraft", "Dispersions", "Scenario", "SimResult", "simulate", "simulate_cases",
-           "ESTIMATORS",
-           "VARIANTS", "MU_EARTH", "R_EARTH_M", "truth_loop_nb"]
-
-MU_EARTH = 3.986004418e14
-R_EARTH_M = 6378137.0
 ESTIMATORS = ("ekf", "eckf", "wavg", "lsmn", "wlsmn")
-VARIANTS = ("thesis", "robust")
-P_SUN_N_M2 = 4.56e-6   # solar radiation pressure at 1 au (Vallado 2013, eq. 8-43), N/m²
 
 
 @dataclass(frozen=True)
@@ -129,7 +108,7 @@ class Dispersions:
 
 
 @dataclass
-class Scenario:
+class CSSScenario:
     """One CSS simulation case.
 
     css: nominal sensor set; estimator: one of ESTIMATORS; variant: "thesis" (O'Keefe's
@@ -172,6 +151,8 @@ class Scenario:
                                                     "lowpass_hz": 10.0, "sigma_s": 1.0})
 
     def __post_init__(self):
+        from ..filters.config import VARIANTS   # here: importing lightcurve.filters costs ~0.5 s
+
         if self.estimator not in ESTIMATORS:
             raise ValueError(f"unknown estimator {self.estimator!r}; allowed: {', '.join(ESTIMATORS)}")
         if self.variant not in VARIANTS:
@@ -217,31 +198,6 @@ class SimResult:
 # ---------------------------------------------------------------------------------------
 # numba core
 # ---------------------------------------------------------------------------------------
-@numba.njit(cache=True)
-def _deriv(q, w, Om, u, I, IRW_inv, G, Js, Lext):
-    H = I @ w + Js * (G @ Om)
-    rhs = -np.cross(w, H) - G @ u + Lext
-    wd = IRW_inv @ rhs
-    Omd = u / Js - G.T @ wd
-    wq = np.array([0.0, w[0], w[1], w[2]])
-    qd = 0.5 * qmul_nb(wq, q)
-    return qd, wd, Omd
-
-
-@numba.njit(cache=True)
-def _rk4(q, w, Om, u, I, IRW_inv, G, Js, Lext, h):
-    k1q, k1w, k1o = _deriv(q, w, Om, u, I, IRW_inv, G, Js, Lext)
-    k2q, k2w, k2o = _deriv(q + 0.5 * h * k1q, w + 0.5 * h * k1w, Om + 0.5 * h * k1o, u, I,
-                           IRW_inv, G, Js, Lext)
-    k3q, k3w, k3o = _deriv(q + 0.5 * h * k2q, w + 0.5 * h * k2w, Om + 0.5 * h * k2o, u, I,
-                           IRW_inv, G, Js, Lext)
-    k4q, k4w, k4o = _deriv(q + h * k3q, w + h * k3w, Om + h * k3o, u, I, IRW_inv, G, Js, Lext)
-    qn = q + h / 6.0 * (k1q + 2 * k2q + 2 * k3q + k4q)
-    wn = w + h / 6.0 * (k1w + 2 * k2w + 2 * k3w + k4w)
-    On = Om + h / 6.0 * (k1o + 2 * k2o + 2 * k3o + k4o)
-    return qnormalize_nb(qn), wn, On
-
-
 @numba.njit(cache=True)
 def _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint, dw0, gains, umax,
                        axis, dt):
@@ -297,24 +253,27 @@ def _rate_from_estimates_nb(a, b, dt, rate_max, per_axis):
 
 
 @numba.njit(cache=True)
-def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, noise_in_scale,
-                  gyro, body, init, est, ctrl, alb_pre):
-    """The whole closed loop (module docstring).
+def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
+    """The whole closed loop (module docstring), its inputs packed by subject.
 
-    t (K,) CSS sample times; ``sub`` propagation steps per sample; r_I (K*sub+1... see
-    :func:`simulate`) positions at every propagation step (rows k*sub + j); sun_I, lit, theta
-    at the CSS samples; ``cells`` = AlbedoCells.args() of the truth (with the run's ρA);
-    css_true = (normals, cos_fov, gains, horizon); css_noise (K,N) standard normals × σ;
+    geom = (t, sub, r_I, sun_I, lit, theta): t (K,) CSS sample times; ``sub`` propagation
+    steps per sample; r_I ((K−1)·sub+1, 3) positions at every propagation step (rows
+    k·sub + j; see :func:`simulate_css`); sun_I, lit, theta at the CSS samples;
+    sens = (cells, css_true, css_noise, noise_in_scale, alb_pre): ``cells`` =
+    AlbedoCells.args() of the truth (with the run's ρA); css_true = (normals, cos_fov, gains,
+    horizon); css_noise (K,N) standard normals × σ; noise_in_scale (bool, eq. 2.21);
+    ``alb_pre`` (K,N): the albedo part of every output when already known (an uncontrolled
+    run repeated with another estimator flies the same attitude), else an empty array;
     gyro = (use, arw, rrw, bias0 (3), n_u (K*sub,3), n_v (K*sub,3), lowpass_alpha,
     rate_max, sigma_s_gyroless); body = (I, G, Js, umax, om_max, mu_gg); init = (q0, w0);
     est = (kind, variant, thesis prm, robust prm, normals, az, el, cos_fov, horizon,
     falb cells tuple (centers, normals, rho_area)); ctrl = (controlled, thesis gains (4,),
-    robust gains (3,), axis).  kind −1: no estimator.  ``alb_pre`` (K,N): the albedo part of
-    every output when already known (an uncontrolled run repeated with another estimator flies
-    the same attitude), else an empty array.
+    robust gains (3,), axis).  kind −1: no estimator.
     Returns Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB at the K samples and GYR, the
     gyro samples of every propagation step ((K−1)·sub, 3).
     """
+    t, sub, r_I, sun_I, lit, theta = geom
+    cells, css_true, css_noise, noise_in_scale, alb_pre = sens
     K = t.shape[0]
     n_true, cos_fov_t, gains_t, horizon_t = css_true
     N = n_true.shape[0]
@@ -327,9 +286,13 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
     cc, cn, cra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max = cells
     thesis = variant == 0
     nw = G.shape[1]
+    # O'Keefe eq. B.1 through the core's RK4 step: J = [I_RW] = [I] − J_s G_s G_sᵀ, wheel
+    # momenta h_s = J_s (Ω + G_sᵀ ω), motor torques u_s (constant over a step)
     IRW = I - Js * (G @ G.T)
-    IRW_inv, _ = inv_nb(IRW)
-    GGi, _ = inv_nb(G @ G.T)
+    IRW_inv, _ = inverse_nb(IRW)
+    J_rw = mat9(IRW)
+    K_rw = mat9(IRW_inv)
+    GGi, _ = inverse_nb(G @ G.T)
     G_pinv = G.T @ GGi
     Q = np.zeros((K, 4))
     Wt = np.zeros((K, 3))
@@ -400,12 +363,12 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
         if have_pre:
             alb[:] = alb_pre[k]
         elif nlat > 0 and lit[k] > 0.0:
-            th = theta[k]
-            rE = r3_nb(th, r_I[k * sub])
-            sE = r3_nb(th, sun_I[k])
+            E = euler321_to_dcm_nb(np.array([theta[k], 0.0, 0.0]))  # ECI → Earth-fixed, R3(θ)
+            rE = mv3_nb(E, r_I[k * sub])
+            sE = mv3_nb(E, sun_I[k])
             for j in range(N):
-                nE[j] = r3_nb(th, qrot_inv_nb(q, n_true[j]))
-                hE[j] = r3_nb(th, qrot_inv_nb(q, horizon_t[j]))
+                nE[j] = mv3_nb(E, qrot_inv_nb(q, n_true[j]))
+                hE[j] = mv3_nb(E, qrot_inv_nb(q, horizon_t[j]))
             V, _, _ = albedo_vectors_nb(cc, cn, cra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
                                         rE, sE, nE, cos_fov_t, hE, zeros_edge)
             for j in range(N):
@@ -474,9 +437,9 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
                             lit_now = True
                     reset = lit_now and fprm[14] > 0 and dark >= fprm[14]
                     if f_alb:
-                        th = theta[k]
+                        E = euler321_to_dcm_nb(np.array([theta[k], 0.0, 0.0]))
                         fa_coords, fa_ratio, fa_m = albedo_sun_frame_nb(
-                            falb_c, falb_n, falb_ra, r3_nb(th, r_I[k * sub]), r3_nb(th, sun_I[k]))
+                            falb_c, falb_n, falb_ra, mv3_nb(E, r_I[k * sub]), mv3_nb(E, sun_I[k]))
                         e2_I = sun_nadir_axis_nb(r_I[k * sub], sun_I[k])
                     m, nis, infl = filter_step_albedo_nb(kind, d, P, Pxc, om, dt_c, Y[k], n_nom,
                                                          fprm, reset, fa_coords, fa_ratio, fa_m,
@@ -580,12 +543,22 @@ def truth_loop_nb(t, sub, r_I, sun_I, lit, theta, cells, css_true, css_noise, no
                     if (Om[i] >= om_max and u[i] > 0.0) or (Om[i] <= -om_max and u[i] < 0.0):
                         u[i] = 0.0
             # ---- truth --------------------------------------------------------------
+            # gravity-gradient torque on the whole spacecraft, held over the step
             Lext = np.zeros(3)
             if mu_gg > 0.0:
                 rb = qrot_nb(q, r_I[ks])
                 rn = np.sqrt(rb[0] ** 2 + rb[1] ** 2 + rb[2] ** 2)
                 Lext = 3.0 * mu_gg / rn ** 5 * np.cross(rb, I @ rb)
-            q, w, Om = _rk4(q, w, Om, u, I, IRW_inv, G, Js, Lext, h)
+            hs = Js * (G.T @ w + Om)
+            hb = G @ hs
+            tau = G @ u
+            a0, a1, a2, a3, b0, b1, b2 = rk4_step_xyz(
+                q[0], q[1], q[2], q[3], w[0], w[1], w[2], h, J_rw, K_rw,
+                (Lext[0], Lext[1], Lext[2]), None, (hb[0], hb[1], hb[2], tau[0], tau[1], tau[2]))
+            sgn = -1.0 if a0 < 0.0 else 1.0     # the truth keeps q1 ≥ 0
+            q = np.array([sgn * a0, sgn * a1, sgn * a2, sgn * a3])
+            w = np.array([b0, b1, b2])
+            Om = (hs + h * u) / Js - G.T @ w
     return Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB, GYR
 
 
@@ -608,7 +581,7 @@ def _kepler_orbit(alt, inc, raan, u0, t):
                                 np.sin(u) * si])
 
 
-def _perturbed_orbit(sc: Scenario, raan, u0, t, sun_dir0):
+def _perturbed_orbit(sc: CSSScenario, raan, u0, t, sun_dir0):
     """J2–J6 + drag + SRP (§2.4) from the circular state at argument of latitude u0."""
     from ..dynamics.atmosphere import density_kg_m3
     from ..geometry.frames import earth_pole_gcrs
@@ -618,8 +591,8 @@ def _perturbed_orbit(sc: Scenario, raan, u0, t, sun_dir0):
     r0, v0 = coe_to_rv(a, 0.0, np.radians(sc.inclination_deg), raan, 0.0, u0)
     scf = sc.spacecraft
     bd = scf.drag_coefficient * scf.drag_area_m2 / scf.mass_kg
-    bs = P_SUN_N_M2 * scf.srp_cr * scf.srp_area_m2 / scf.mass_kg
-    we = np.array([0.0, 0.0, 7.292115e-5])
+    bs = P_SUN_1AU * scf.srp_cr * scf.srp_area_m2 / scf.mass_kg
+    we = np.array([0.0, 0.0, OMEGA_EARTH])
     s = np.asarray(sun_dir0, float)
 
     def accel(_t, r, v):
@@ -676,7 +649,7 @@ def _grid_for_robust(spec):
     return _CELLS_CACHE[key]
 
 
-def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
+def simulate_css(sc: CSSScenario, rng, *, _albedo_cache=None) -> SimResult:
     """Draw the dispersions and run one closed-loop (or open-loop tumbling) case.
 
     ``rng`` is a numpy Generator or seed; a given seed reproduces the run bit for bit, and
@@ -771,8 +744,9 @@ def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
     axis = np.asarray(sc.control.axis, dtype=float)
     axis = axis / np.linalg.norm(axis)
     out = truth_loop_nb(
-        t, sub, r_f, sun_hat, lit, theta, cells,
-        (n_true, cos_fov, gains, horizon), css_noise, bool(sc.noise_in_scale),
+        (t, sub, r_f, sun_hat, lit, theta),
+        (cells, (n_true, cos_fov, gains, horizon), css_noise, bool(sc.noise_in_scale),
+         _albedo_cache if _albedo_cache is not None else np.zeros((0, N))),
         (spec is not None, float(arw), float(rrw), gb0, g_nu, g_nv, lp_alpha,
          float(np.radians(gl["rate_limit_deg_s"])), float(gl["sigma_s"])),
         (I, G, float(scf.wheel_inertia), float(scf.wheel_max_torque),
@@ -782,8 +756,7 @@ def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
          np.ascontiguousarray(az0), np.ascontiguousarray(el0),
          np.cos(css.fov_half_angle_rad), np.ascontiguousarray(css.horizon_normals), falb),
         (bool(sc.controlled), np.asarray(sc.thesis_control, float),
-         np.array([sc.control.k_gain, sc.control.p_gain, sc.control.deadband_rad]), axis),
-        _albedo_cache if _albedo_cache is not None else np.zeros((0, N)))
+         np.array([sc.control.k_gain, sc.control.p_gain, sc.control.deadband_rad]), axis))
     Q, Wt, St, Sh, Y, NA, Wu, OM, PC, DH, DIR, NIS, ALB, GYR = out
     if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(Wt))):
         from ..errors import ConvergenceError
@@ -806,7 +779,7 @@ def simulate(sc: Scenario, rng, *, _albedo_cache=None) -> SimResult:
                      PC if is_filter else None, DH if is_filter else None, DIR, NIS)
 
 
-def simulate_cases(scenarios, seed) -> list[SimResult]:
+def simulate_css_cases(scenarios, seed) -> list[SimResult]:
     """Run several scenarios that differ only in estimator, variant or gyro on the same
     dispersed spacecraft (seed).  Uncontrolled scenarios fly the same attitude whatever the
     estimator, so the truth albedo (the costly part) is computed once and reused.  ``seed``:
@@ -816,7 +789,7 @@ def simulate_cases(scenarios, seed) -> list[SimResult]:
     for sc in scenarios:
         reuse = cache if (not sc.controlled and cache is not None) else None
         # a fresh SeedSequence per scenario: spawning children advances a SeedSequence
-        r = simulate(sc, np.random.SeedSequence(seed), _albedo_cache=reuse)
+        r = simulate_css(sc, np.random.SeedSequence(seed), _albedo_cache=reuse)
         if not sc.controlled and cache is None:
             cache = r.info["albedo_outputs"]
         out.append(r)

@@ -7,8 +7,11 @@ Junkins, *Optimal Estimation of Dynamic Systems*, §7.2) on the same data:
 
 * global attitude ``q̂`` (scalar first, inertial→body, ``v_B = A(q) v_N``), error state
   ``[δθ, Δβ]`` with ``q = δq(δθ) ⊗ q̂``, ``A(q) ≈ (I − [δθ×]) A(q̂)``, gyro bias β (rad/s);
-* propagation ``q̂⁺ = δq(ω̂ Δt) ⊗ q̂``, ``ω̂ = ω̃ − β̂``, ``F = [[−[ω̂×], −I], [0, 0]]``,
-  ``Φ = I + F Δt + F² Δt²/2``, Farrenkopf discrete process noise;
+* propagation ``q̂⁺ = δq(ω̂ Δt) ⊗ q̂``, ``ω̂ = ω̃ − β̂`` (the exact constant-rate step,
+  :func:`lightcurve.core.dynamics.const_rate_nb`), ``F = [[−[ω̂×], −I], [0, 0]]`` and its
+  closed-form ``Φ = exp(F Δt)`` (:func:`lightcurve.core.dynamics.controlled_transition_nb`, the
+  bias block with the opposite sign), Farrenkopf discrete process noise; Joseph-form updates
+  (:func:`lightcurve.core.kalman.joseph_update_nb`);
 * magnetometer: unit field direction ``b̂_B = A(q) b̂_N``, ``H_θ = [(A b̂_N)×]``, ``R = σ_m² I``.
 
 They differ only in how the photodiodes enter:
@@ -37,9 +40,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..estimation.kalman import joseph_update_nb
+from ..core.dynamics import const_rate_nb, controlled_transition_nb
+from ..core.kalman import joseph_update_nb
+from ..core.rotations import qmul_nb, qnormalize_nb, qrot_nb, rotvec2q_nb, skew_nb
 from ..estimation.rng import as_generator
-from ..rotations import qmul_nb, qnormalize_nb, qrot_nb, rotvec2q_nb, rotvec_to_quat, quat_mult
+from ..rotations import quat_mult, rotvec_to_quat
 from .single_point import lsmn_nb
 
 __all__ = ["VMMParams", "dipole_field_eci", "mekf_run_nb", "VMMCase", "simulate_vmm_case",
@@ -91,11 +96,6 @@ class VMMParams:
 
 
 @numba.njit(cache=True)
-def _cross_mat(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-@numba.njit(cache=True)
 def _apply(q, b, dx):
     dq = rotvec2q_nb(dx[0:3])
     qn = qnormalize_nb(qmul_nb(dq, q))
@@ -128,16 +128,14 @@ def mekf_run_nb(mode, t, W, Y, normals, mag_B, mag_N, sun_N, q0, P0, prm):
         if k > 0:
             dt = t[k] - t[k - 1]
             w = W[k - 1] - b
-            qn = qnormalize_nb(qmul_nb(rotvec2q_nb(w * dt), q))
+            qn = qnormalize_nb(const_rate_nb(q, w, dt))
             for i in range(4):
                 q[i] = qn[i]
-            F = np.zeros((6, 6))
-            Wx = _cross_mat(w)
+            # error state [δθ, Δβ] with δθ̇ = −[ω̂×]δθ − Δβ: the constant-rate Φ with δω = −Δβ
+            Phi = controlled_transition_nb(w, dt)
             for i in range(3):
                 for j in range(3):
-                    F[i, j] = -Wx[i, j]
-                F[i, 3 + i] = -1.0
-            Phi = np.eye(6) + F * dt + (F @ F) * (0.5 * dt * dt)
+                    Phi[i, 3 + j] = -Phi[i, 3 + j]
             Qd = np.zeros((6, 6))
             for i in range(3):
                 Qd[i, i] = arw * arw * dt + rrw * rrw * dt ** 3 / 3.0
@@ -148,7 +146,7 @@ def mekf_run_nb(mode, t, W, Y, normals, mag_B, mag_N, sun_N, q0, P0, prm):
         # magnetometer
         hm = qrot_nb(q, mag_N[k])
         H = np.zeros((3, 6))
-        Hx = _cross_mat(hm)
+        Hx = skew_nb(hm)
         for i in range(3):
             for j in range(3):
                 H[i, j] = Hx[i, j]
@@ -165,7 +163,7 @@ def mekf_run_nb(mode, t, W, Y, normals, mag_B, mag_N, sun_N, q0, P0, prm):
         NL[k] = nl
         if nl > 0:
             hs = qrot_nb(q, sun_N[k])
-            Sx = _cross_mat(hs)
+            Sx = skew_nb(hs)
             if mode == 0:
                 s_meas = lsmn_nb(Y[k], normals, thr, False)
                 if s_meas[0] ** 2 + s_meas[1] ** 2 + s_meas[2] ** 2 > 0.0:
@@ -225,17 +223,17 @@ def simulate_vmm_case(rng, *, duration_s=3000.0, dt_s=1.0, fov_half_angle_deg=90
     from .albedo import earth_rotation_angle
     from .configurations import cube
     from .gyro import gyro_grade, simulate_gyro
-    from .truth import Dispersions, Scenario, simulate
+    from .truth import CSSScenario, Dispersions, simulate_css
 
     g = as_generator(rng)
     css = cube(fov_half_angle_deg=fov_half_angle_deg)
     disp = Dispersions(rate_sigma_deg_s=rate_sigma_deg_s, css_scale_common_sigma=0.0,
                        css_scale_sigma=0.0, css_misalignment_sigma_deg=0.0,
                        css_noise_sigma=noise_sigma)
-    sc = Scenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=duration_s,
-                  dt_s=dt_s, epoch_utc=epoch_utc, albedo=None if albedo else False,
-                  dispersions=disp)
-    r = simulate(sc, g)
+    sc = CSSScenario(css, estimator="wavg", gyro=None, controlled=False, duration_s=duration_s,
+                     dt_s=dt_s, epoch_utc=epoch_utc, albedo=None if albedo else False,
+                     dispersions=disp)
+    r = simulate_css(sc, g)
     spec = gyro_grade(gyro) if isinstance(gyro, str) else gyro
     w_meas, _ = simulate_gyro(r.omega, dt_s, spec, g, detailed=False)
     theta = earth_rotation_angle(epoch_utc, r.t)

@@ -88,13 +88,13 @@ def css_recording_problem(path, *, configuration=None, max_epochs: int = 400, la
     :func:`lightcurve.css.configurations.load_configuration`); default: the file's normals,
     FOVs and horizons. ``max_epochs``: thinning limit (module docstring).
     """
-    from ..css.recording import read_recording
+    from ..css.recording import read_css_recording
     from ..css.sensors import CSSArray
     from ..physics import CSSContext
     from .problem import css_problem
 
     path = Path(path)
-    rec = read_recording(path)
+    rec = read_css_recording(path)
     notes = []
     if rec.get("geometry") is None:
         raise InputError("this CSS recording has no orbit geometry (written by an older version); "

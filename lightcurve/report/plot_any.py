@@ -164,11 +164,11 @@ def _save(fig, out):
 def plot_css_recording(path, out) -> Path:
     """CSS recording: outputs of every sensor, Sun-direction error of the stored estimate
     (deg, against the truth; eclipse shaded) and the gyro rates, versus UTC."""
-    from ..css.recording import read_recording
+    from ..css.recording import read_css_recording
     from ..io.safe_open import open_hdf5, read_dataset
     from .style import figsize, utc_axis, utc_times
 
-    rec = read_recording(path)
+    rec = read_css_recording(path)
     with open_hdf5(path) as h:
         s_hat = (np.asarray(read_dataset(h, "estimate/s_hat", max_elements=2 * 10**8, file=path))
                  if "estimate/s_hat" in h else None)

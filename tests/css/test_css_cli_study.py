@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from lightcurve.cli import main
-from lightcurve.css.recording import read_recording
-from lightcurve.css.study import load_study, run_study
+from lightcurve.css.recording import read_css_recording
+from lightcurve.css.study import load_css_study, run_css_study
 from lightcurve.errors import InputError
 
 
@@ -26,7 +26,7 @@ def test_cli_simulate_estimate_roundtrip(tmp_path, capsys):
     # runs without its albedo model; the in-loop filter must do the same to be comparable
     assert main(["css", "simulate", "--duration-s", "400", "--gyro", "tactical",
                  "--out", str(rec), "--seed", "3", "--filter-albedo", "none"]) == 0
-    r = read_recording(rec)
+    r = read_css_recording(rec)
     assert r["y"].shape == (801, 8) and r["gyro"].shape == (801, 3)
     # estimating offline with the same EKF reproduces the in-loop estimate
     out_csv = tmp_path / "est.csv"
@@ -72,7 +72,7 @@ albedo = "builtin"
 
 
 def test_study_load_run_resume_report(tmp_path, capsys):
-    spec = load_study(_study_toml(tmp_path))
+    spec = load_css_study(_study_toml(tmp_path))
     assert spec.estimators == ("ekf", "lsmn") and spec.variants == ("thesis", "robust")
     out = tmp_path / "rep"
     # the CLI: -o/--output and the deprecated --out alias, one worker (inline)
@@ -91,7 +91,7 @@ def test_study_load_run_resume_report(tmp_path, capsys):
     assert len(runs) == 2 * 2 * 2  # controlled: one task per run, variant and estimator
     mtimes = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.npz")}
     # resume: nothing recomputed, more runs only adds the missing ones
-    summary = run_study(spec, out, runs=3, workers=1, progress=False)
+    summary = run_css_study(spec, out, runs=3, workers=1, progress=False)
     assert all(c["runs"] == 3 for c in summary["cases"])
     for name, mt in mtimes.items():
         assert (out / "runs" / name).stat().st_mtime_ns == mt
@@ -106,7 +106,7 @@ def test_study_bad_toml(tmp_path):
     p = _study_toml(tmp_path)
     p.write_text(p.read_text().replace('estimators = ["ekf", "lsmn"]', 'estimators = ["kalman"]'))
     with pytest.raises(InputError, match="scenario.estimators"):
-        load_study(p)
+        load_css_study(p)
 
 
 @pytest.mark.parametrize("extra,field", [
@@ -116,7 +116,7 @@ def test_study_bad_toml(tmp_path):
 ])
 def test_study_bad_fields(tmp_path, extra, field):
     with pytest.raises(InputError) as e:
-        load_study(_rewrite(tmp_path, extra))
+        load_css_study(_rewrite(tmp_path, extra))
     assert field in str(e.value)
 
 
@@ -137,7 +137,7 @@ def test_bundled_study_files_load():
     files = sorted((data_dir("pipelines") / "css" / "okeefe2015").glob("*.toml"))
     assert len(files) >= 6
     for f in files:
-        spec = load_study(f)
+        spec = load_css_study(f)
         assert spec.runs == 1000 and spec.experiment in THESIS_RESULTS
         assert spec.simulation["fov_half_angle_deg"] == 60.0
         assert spec.simulation["noise_sigma"] == 0.05
@@ -150,5 +150,5 @@ def test_read_recording_rejects_other_hdf5(tmp_path):
     with h5py.File(p, "w") as f:
         f["t"] = np.arange(3.0)
     with pytest.raises(InputError) as e:
-        read_recording(p)
+        read_css_recording(p)
     assert "format" in str(e.value)

@@ -231,11 +231,11 @@ def _short(est, gyro, controlled=False):
 def test_truth_is_the_same_with_and_without_gyro():
     # the no-gyro defect: every row of a study flies the same spacecraft (common random
     # numbers) — the truth and the CSS outputs do not depend on the gyro option
-    from lightcurve.css.truth import simulate
+    from lightcurve.css.truth import simulate_css
 
-    a = simulate(_short("wavg", "intermediate"), np.random.SeedSequence([7, 1]))
-    b = simulate(_short("wavg", None), np.random.SeedSequence([7, 1]))
-    c = simulate(_short("ekf", "low"), np.random.SeedSequence([7, 1]))
+    a = simulate_css(_short("wavg", "intermediate"), np.random.SeedSequence([7, 1]))
+    b = simulate_css(_short("wavg", None), np.random.SeedSequence([7, 1]))
+    c = simulate_css(_short("ekf", "low"), np.random.SeedSequence([7, 1]))
     assert np.array_equal(a.q, b.q) and np.array_equal(a.y, b.y) and np.array_equal(a.q, c.q)
     # §2.4 dispersions: rates uniform within ±2°/s per axis; common scale 1..1.5
     assert np.all(np.abs(np.degrees(a.info["omega0_rad_s"])) <= 2.0)
@@ -246,12 +246,12 @@ def test_truth_is_the_same_with_and_without_gyro():
 def test_thesis_ekf_converges_tumbling_without_albedo():
     # one 20-minute tumbling run without albedo or misalignment, started in sunlight: after
     # 850 s (the Sun sets at ≈1050 s in this run) the EKF error is below 3° (thesis: 1.75° p99 with every error source on)
-    from lightcurve.css.truth import simulate
+    from lightcurve.css.truth import simulate_css
 
     sc = thesis_scenario("dual_pyramid", "ekf", duration_s=1200.0, albedo="none",
                          perturbations=False, sim={"misalignment_sigma_deg": 0.0})
     sc.start_sunlit = True
-    r = simulate(sc, np.random.SeedSequence([1, 0]))
+    r = simulate_css(sc, np.random.SeedSequence([1, 0]))
     m = (r.direct > 0) & (r.t > 850)
     assert m.sum() > 200
     assert np.percentile(r.error_deg[m], 99) < 3.0
@@ -259,10 +259,10 @@ def test_thesis_ekf_converges_tumbling_without_albedo():
 
 def test_perturbed_orbit_stays_circular_400km():
     # J2-J6 + drag + SRP (§2.4): a 100-minute arc stays within a few km of 400 km altitude
-    from lightcurve.css.truth import simulate
+    from lightcurve.css.truth import simulate_css
 
     sc = thesis_scenario("dual_pyramid", "wavg", duration_s=600.0, albedo="none")
-    r = simulate(sc, np.random.SeedSequence([2, 0]))
+    r = simulate_css(sc, np.random.SeedSequence([2, 0]))
     h = np.linalg.norm(r.info["r_I_m"], axis=1) - 6378137.0
     assert np.all(np.abs(h - 400e3) < 25e3)   # J2 alone moves a polar orbit by ~±11 km
     assert np.degrees(r.info["raan_rad"]) == pytest.approx(60.0)

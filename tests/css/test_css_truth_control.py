@@ -8,7 +8,7 @@ from lightcurve.css.configurations import dual_pyramid
 from lightcurve.css.control import mrp_control_nb, sun_pointing_mrp
 from lightcurve.css.okeefe2015 import WHEEL_AXES
 from lightcurve.css.study import direction_nees, settled_mask
-from lightcurve.css.truth import Scenario, Spacecraft, simulate
+from lightcurve.css.truth import CSSScenario, Spacecraft, simulate_css
 from lightcurve.rotations import mrp_to_dcm, quat_rotate_inv
 
 
@@ -50,9 +50,9 @@ def test_control_law_inline_deadband_and_saturation():
 def test_torque_free_truth_conserves_angular_momentum():
     # no gravity gradient, no control: the inertial angular momentum
     # H_I = A(q)^T ([I] w + J_s G Omega) is conserved (Euler's equations, Schaub eq. 4.33)
-    sc = Scenario(dual_pyramid(), estimator="lsmn", gyro=None, duration_s=600.0, dt_s=0.25,
-                  gravity_gradient=False, albedo=False)
-    r = simulate(sc, 3)
+    sc = CSSScenario(dual_pyramid(), estimator="lsmn", gyro=None, duration_s=600.0, dt_s=0.25,
+                     gravity_gradient=False, albedo=False)
+    r = simulate_css(sc, 3)
     scf = Spacecraft()
     I = np.asarray(scf.inertia)
     Hb = r.omega @ I.T + scf.wheel_inertia * r.wheel_speed @ scf.wheel_axes.T
@@ -66,19 +66,19 @@ def test_torque_free_truth_conserves_angular_momentum():
 
 
 def test_seed_reproducible():
-    sc = Scenario(dual_pyramid(), estimator="ekf", gyro="tactical", duration_s=120.0)
-    a, b = simulate(sc, 5), simulate(sc, 5)
+    sc = CSSScenario(dual_pyramid(), estimator="ekf", gyro="tactical", duration_s=120.0)
+    a, b = simulate_css(sc, 5), simulate_css(sc, 5)
     assert np.array_equal(a.s_hat, b.s_hat) and np.array_equal(a.y, b.y)
 
 
 def test_controlled_sun_pointing_converges():
     # closed loop with the EKF and a tactical gyro: the +z axis reaches the Sun and stays
     # near it (deadband 1 deg plus estimation error of a few degrees)
-    sc = Scenario(dual_pyramid(), estimator="ekf", gyro="tactical", controlled=True,
-                  duration_s=1500.0)
+    sc = CSSScenario(dual_pyramid(), estimator="ekf", gyro="tactical", controlled=True,
+                     duration_s=1500.0)
     checked = 0
     for seed in range(4):
-        r = simulate(sc, seed)
+        r = simulate_css(sc, seed)
         pe = np.degrees(np.arccos(np.clip(r.s_true @ [0, 0, 1.0], -1, 1)))
         late = (r.t > 600) & (r.lit > 0.999)   # the start is sunlit, the Sun may set later
         if late.sum() < 100:
@@ -87,7 +87,8 @@ def test_controlled_sun_pointing_converges():
         assert np.percentile(pe[late], 95) < 8.0
     assert checked >= 2
     # the same case uncontrolled keeps tumbling (the pointing error is not small)
-    r = simulate(Scenario(dual_pyramid(), estimator="ekf", gyro="tactical", duration_s=1500.0), 0)
+    r = simulate_css(CSSScenario(dual_pyramid(), estimator="ekf", gyro="tactical",
+                                 duration_s=1500.0), 0)
     pe = np.degrees(np.arccos(np.clip(r.s_true @ [0, 0, 1.0], -1, 1)))
     assert np.percentile(pe[r.t > 900], 95) > 30.0
 
@@ -102,8 +103,9 @@ def test_settled_mask():
 def _p99_case(estimator, n_runs, duration_s):
     errs, nees = [], []
     for i in range(n_runs):
-        sc = Scenario(dual_pyramid(), estimator=estimator, gyro="tactical", duration_s=duration_s)
-        r = simulate(sc, np.random.SeedSequence([1, i]))
+        sc = CSSScenario(dual_pyramid(), estimator=estimator, gyro="tactical",
+                         duration_s=duration_s)
+        r = simulate_css(sc, np.random.SeedSequence([1, i]))
         m = settled_mask(r.t, r.lit, 300.0)
         errs.append(r.error_deg[m])
         if r.p_cov is not None:

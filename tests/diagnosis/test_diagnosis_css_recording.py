@@ -29,26 +29,26 @@ needs_ceres = pytest.mark.skipif(CERES is None or not CERES.exists(),
 def _simulate(seed, albedo, duration_s=1200.0, dt_s=3.0):
     from lightcurve.css.configurations import dual_pyramid
     from lightcurve.css.sunline_ekf import FilterParams
-    from lightcurve.css.truth import Dispersions, Scenario, simulate
+    from lightcurve.css.truth import CSSScenario, Dispersions, simulate_css
 
     disp = Dispersions(css_scale_common_sigma=0.0, css_scale_sigma=0.0,
                        css_misalignment_sigma_deg=0.0, css_noise_sigma=0.017)
-    sc = Scenario(dual_pyramid(fov_half_angle_deg=70.0), estimator="wavg", gyro=None,
-                  duration_s=duration_s, dt_s=dt_s,
-                  albedo=albedo, dispersions=disp, filter_params=FilterParams())
-    return sc, simulate(sc, seed)
+    sc = CSSScenario(dual_pyramid(fov_half_angle_deg=70.0), estimator="wavg", gyro=None,
+                     duration_s=duration_s, dt_s=dt_s,
+                     albedo=albedo, dispersions=disp, filter_params=FilterParams())
+    return sc, simulate_css(sc, seed)
 
 
 @needs_ceres
 def test_cli_diagnose_css_recording_names_albedo(tmp_path):
     from lightcurve.cli import main
     from lightcurve.css.albedo import load_albedo_map
-    from lightcurve.css.recording import read_recording, write_recording
+    from lightcurve.css.recording import read_css_recording, write_css_recording
 
     sc, r = _simulate(2, load_albedo_map(CERES))
     h5 = tmp_path / "css_ceres.h5"
-    write_recording(h5, r, sc.css, sc.epoch_utc, False, noise_sigma=0.017)
-    rec = read_recording(h5)
+    write_css_recording(h5, r, sc.css, sc.epoch_utc, False, noise_sigma=0.017)
+    rec = read_css_recording(h5)
     # the new datasets round-trip (the model needs them)
     np.testing.assert_array_equal(rec["geometry"]["r_eci_m"], r.info["r_I_m"])
     np.testing.assert_array_equal(rec["geometry"]["sun_eci_unit"], r.info["sun_I_hat"])
@@ -67,11 +67,11 @@ def test_cli_diagnose_css_recording_names_albedo(tmp_path):
 def test_css_recording_without_geometry_is_refused(tmp_path):
     """Files written before the geometry was recorded: exit 2 naming the missing dataset."""
     from lightcurve.cli import main
-    from lightcurve.css.recording import write_recording
+    from lightcurve.css.recording import write_css_recording
 
     sc, r = _simulate(1, False, duration_s=60.0, dt_s=5.0)
     h5 = tmp_path / "old.h5"
-    write_recording(h5, r, sc.css, sc.epoch_utc, False, noise_sigma=0.017)
+    write_css_recording(h5, r, sc.css, sc.epoch_utc, False, noise_sigma=0.017)
     with h5py.File(h5, "a") as f:          # make it look like an old file
         del f["geometry"]
     assert main(["diagnose", str(h5), "-o", str(tmp_path / "dx"), "--quiet"]) == 2

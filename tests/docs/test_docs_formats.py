@@ -128,9 +128,9 @@ def test_example_loads(kind, name, opts, text, written):
         assert css.normals.shape == (3, 3)
         np.testing.assert_allclose(np.degrees(css.fov_half_angle_rad), [80.0, 60.0, 80.0])
     elif kind == "css-study":
-        from lightcurve.css.study import load_study
+        from lightcurve.css.study import load_css_study
 
-        spec = load_study(p)
+        spec = load_css_study(p)
         assert spec.runs == 20 and spec.name == "css-demo"
     elif kind == "plugin":
         from lightcurve.photometry import get_brdf
@@ -179,7 +179,7 @@ def test_hdf5_tables_match_the_writers(tmp_path):
     import warnings
 
     import lightcurve
-    from lightcurve.css.recording import write_recording
+    from lightcurve.css.recording import write_css_recording
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -197,10 +197,10 @@ def test_hdf5_tables_match_the_writers(tmp_path):
     assert {"format", "method", "t", "q", "omega_rad_s", "cov", "innovations", "nees"} <= got
 
     from lightcurve.css.configurations import configuration_by_name
-    from lightcurve.css.truth import Scenario, simulate
+    from lightcurve.css.truth import CSSScenario, simulate_css
 
     css = configuration_by_name("cube")
-    r = simulate(Scenario(css, duration_s=20.0, dt_s=1.0), 1)
+    r = simulate_css(CSSScenario(css, duration_s=20.0, dt_s=1.0), 1)
     css_doc = _table_names("### CSS recording HDF5")
-    got = _file_names(write_recording(tmp_path / "c.h5", r, css, "2015-03-01T00:00:00Z", True))
+    got = _file_names(write_css_recording(tmp_path / "c.h5", r, css, "2015-03-01T00:00:00Z", True))
     assert {g for g in got if not _documented(g, css_doc)} == set()

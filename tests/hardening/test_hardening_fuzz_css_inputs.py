@@ -1,5 +1,5 @@
 """Fuzz: CSS inputs — albedo maps (load_albedo_map), sensor-configuration TOML
-(load_configuration) and CSS study TOML (load_study).
+(load_configuration) and CSS study TOML (load_css_study).
 
 Property (issue 11): damaged or hostile files give an InputError naming the file, or a valid
 object (albedo values in [0, 1], unit sensor normals).
@@ -124,7 +124,7 @@ STUDY = _study_base()
 @given(st.one_of(mutated_docs(STUDY or {"a": 1}).map(lambda d: dumps_toml(d).encode()),
                  damaged_bytes(dumps_toml(STUDY or {"a": 1}).encode())))
 def test_css_study_toml(data):
-    from lightcurve.css.study import load_study
+    from lightcurve.css.study import load_css_study
 
     p = _write(data, "study.toml")
-    only_input_error("CSS study TOML (load_study)", load_study, p, file=p)
+    only_input_error("CSS study TOML (load_css_study)", load_css_study, p, file=p)

@@ -175,18 +175,18 @@ CSS_GOOD = _css_good()
 @fuzz_settings(60)
 @given(st.one_of(st.binary(max_size=1000), damaged_bytes(CSS_GOOD)))
 def test_css_recording_damaged(data):
-    from lightcurve.css.recording import read_recording
+    from lightcurve.css.recording import read_css_recording
 
     p = _tmp("css.h5")
     p.write_bytes(data)
-    only_input_error("CSS HDF5 recording (css read_recording)", read_recording, p, file=p)
+    only_input_error("CSS HDF5 recording (read_css_recording)", read_css_recording, p, file=p)
 
 
 @fuzz_settings(80)
 @given(st.sampled_from(["t", "y", "normals", "fov_half_angle_rad", "gyro_rad_s", "truth"]),
        st.one_of(HOSTILE_ARRAYS, st.none()))
 def test_css_recording_hostile_datasets(name, value):
-    from lightcurve.css.recording import read_recording
+    from lightcurve.css.recording import read_css_recording
 
     p = _tmp("css.h5")
     p.write_bytes(CSS_GOOD)
@@ -194,7 +194,7 @@ def test_css_recording_hostile_datasets(name, value):
         del f[name]
         if value is not None:
             f[name] = value
-    out = only_input_error("CSS HDF5 recording (css read_recording)", read_recording, p, file=p)
+    out = only_input_error("CSS HDF5 recording (read_css_recording)", read_css_recording, p, file=p)
     if not isinstance(out, InputError):
         assert np.all(np.isfinite(out["t"])) and np.all(np.isfinite(out["y"]))
         assert np.all(np.isfinite(out["normals"]))

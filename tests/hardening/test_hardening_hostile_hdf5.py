@@ -41,12 +41,12 @@ def _replace(path, name, make):
 
 
 def _hdf5_readers():
-    from lightcurve.css.recording import read_recording as read_css
+    from lightcurve.css.recording import read_css_recording
     from lightcurve.filters.result import read_estimate
     from lightcurve.io.lightcurve_h5 import read_lightcurve
     from lightcurve.studies.runner import read_run
 
-    return {"read_lightcurve": read_lightcurve, "css read_recording": read_css,
+    return {"read_lightcurve": read_lightcurve, "read_css_recording": read_css_recording,
             "read_estimate": read_estimate, "read_run": read_run}
 
 

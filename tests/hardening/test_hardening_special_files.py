@@ -66,7 +66,7 @@ def special(tmp_path):
 
 def _readers():
     from lightcurve.css.albedo import load_albedo_map
-    from lightcurve.css.recording import read_recording as read_css
+    from lightcurve.css.recording import read_css_recording
     from lightcurve.filters.result import read_estimate
     from lightcurve.io.lightcurve_h5 import read_lightcurve
     from lightcurve.io.recording import read_recording
@@ -77,7 +77,7 @@ def _readers():
 
     return {"load_toml": load_toml, "load_scenario": load_scenario,
             "read_recording (CSV)": read_recording, "read_lightcurve": read_lightcurve,
-            "css read_recording": read_css, "read_estimate": read_estimate,
+            "read_css_recording": read_css_recording, "read_estimate": read_estimate,
             "read_run": read_run, "load_albedo_map": load_albedo_map,
             "load_brdf_table": load_brdf_table}
 
