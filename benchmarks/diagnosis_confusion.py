@@ -5,7 +5,7 @@ For every effect of the physics registry (magnitude and coarse-sun-sensor) and f
 ``tests/diagnosis/concealed.py`` (no import of the package's photometry or physics; Table 9.2
 cube) with the effect at random realistic parameters, diagnosed against the package's model
 without it (``tests/diagnosis/concealed_cases.py``: which scenario shows which effect, and
-why). Issue 21 acceptance per effect: named first AND held-out χ²/n < 1.5 in ≥ 9/10 seeds;
+why). Acceptance per effect: named first AND held-out χ²/n < 1.5 in ≥ 9/10 seeds;
 "none" consistent in ≥ 9/10; no effect named with an unidentified parameter.
 
 Prints ONE JSON line: per case the confusion row (how often each effect was named first,

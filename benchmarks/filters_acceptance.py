@@ -1,4 +1,4 @@
-"""Issue 5 acceptance runs on the thesis LEO fast-spin case (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml).
+"""Filter acceptance runs on the thesis LEO fast-spin case (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml).
 
 Controlled 1U cube seen from Socorro, σω = 0.02°/s, r = 1 %, eclipse ignored as in the thesis
 (Bernard 2021 §9.3.3). Each run i simulates the lightcurve with seed i (truth ACS noise and

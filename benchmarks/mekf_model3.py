@@ -1,4 +1,4 @@
-"""Kalman-filter cost per epoch with and without reflection states (issue 6).
+"""Kalman-filter cost per epoch with and without reflection states (Bernard 2021 ch. 8).
 
 Prints ONE JSON line: microseconds of filter time per epoch (``Estimate.runtime_s / N``,
 median over ``--reps`` runs after one warm-up run that compiles / loads the numba cache) for

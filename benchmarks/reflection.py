@@ -1,11 +1,11 @@
-"""BPF step cost with Model 3 reflection states versus attitude only (issue 6, Bernard ch. 8).
+"""BPF step cost with Model 3 reflection states versus attitude only (Bernard 2021 ch. 8).
 
 Measures the bootstrap particle filter on the bundled thesis LEO fast-spin case
 (pipelines/thesis/leo-ic1-fast-spin-controlled-1site.toml: controlled, Socorro, 73 epochs,
 eclipse ignored as in the thesis; truth shape perturbed per §10.1 by the scenario's
 ``[reflection]`` section) twice per particle count:
 
-* ``attitude`` — attitude-only state (GRP error + rate, the filter of issue 5);
+* ``attitude`` — attitude-only state (GRP error + rate, no reflection states);
 * ``model3`` — the same plus Model 3's 24 extra states (ξ, a, m, A of the six cube_1u facets,
   reparameterised per eq. 8.41–8.44, constant dynamics eq. 8.39).
 

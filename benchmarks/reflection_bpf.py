@@ -1,4 +1,4 @@
-"""Reflection states in the bootstrap particle filter (issue 6, Bernard ch. 8 and §10.7–10.8).
+"""Reflection states in the bootstrap particle filter (Bernard 2021 ch. 8 and §10.7–10.8).
 
 Two modes, each printing ONE JSON line (with ``os.cpu_count()``); the step cost of the BPF with
 Model 3 versus attitude only is ``benchmarks/reflection.py``.
@@ -9,8 +9,8 @@ Model 3 versus attitude only is ``benchmarks/reflection.py``.
   bootstrap filter with Liu–West roughening of z (``plain``) and with one Metropolis
   resample-move step per resampling (``move``). Per parameter: shrink factor = prior σ / final
   posterior σ in physical units (prior σ of p(z) under the filter's Gaussian prior in z, by
-  Monte Carlo) and the rate of runs whose final error is inside 3σ. Acceptance (issue 6,
-  thesis fig. 10.11f): the −Z facet's ξ and a (``xi[5]``, ``a[5]``) shrink ≥ 2× and end inside
+  Monte Carlo) and the rate of runs whose final error is inside 3σ. Acceptance (thesis
+  fig. 10.11f): the −Z facet's ξ and a (``xi[5]``, ``a[5]``) shrink ≥ 2× and end inside
   3σ.
 * ``--combined`` — §10.8: attitude and Model 3 estimated together with the BPF at σθ = 3° and
   10° (``--seeds`` runs each, default 5): final attitude error, inside-3σ of the attitude, the
@@ -26,7 +26,8 @@ Usage: python benchmarks/reflection_bpf.py --acceptance [--seeds 10] [--particle
                                            [--rejuvenation auto|separate|joint]
                                            [--kernel-bandwidth H] [--sigmas 3 10]
                                            [--no-reference]
-       (``--rejuvenation separate`` reproduces the session-2 filter for before/after)
+       (``--rejuvenation separate``: table 7.9 roughening on the attitude and Liu–West on z,
+       to compare with the joint kernel)
 """
 
 from __future__ import annotations
@@ -156,7 +157,7 @@ def combined(seeds, particles, sigmas=(3.0, 10.0), rejuvenation="auto", kernel_b
              reference=True, joint_max_spread_deg=None):
     """§10.8 combined runs (module docstring). ``rejuvenation`` / ``kernel_bandwidth`` go to
     :func:`run_bpf` ("auto" = the joint Liu–West kernel with the Musso bandwidth for Model 3;
-    "separate" = the session-2 filter: table 7.9 on the attitude, Liu–West δ = 0.98 on z).
+    "separate" = separate rejuvenation: table 7.9 on the attitude, Liu–West δ = 0.98 on z).
     Per run also the final NEES of the attitude (3 dof) and of attitude + rate (6 dof), and
     per σθ their sums with the χ² 99.9 % bounds (a consistent filter exceeds them with
     probability 0.1 %). ``reference``: also run the attitude-only BPF on the same data."""

@@ -1,6 +1,6 @@
-"""emcee reflection-parameter posterior: acceptance and calibration benchmark (issue 6).
+"""emcee reflection-parameter posterior: acceptance and calibration benchmark.
 
-Runs the emcee acceptance of issue 6: 10 synthetic LEO lightcurves of the cube_1u shape with a
+Runs the emcee acceptance: 10 synthetic LEO lightcurves of the cube_1u shape with a
 known attitude (fast spin ≈ [2, 1, 3.6] deg/s, 300 epochs over 300 s, 1 % noise, Bernard eq.
 9.3), reflection parameters ξ, a, m and areas A of all six facets perturbed per Bernard §10.1
 (N(0, (0.1 p)²), seeded), 24 parameters fitted with ``fit_reflection`` (prior = the shape

@@ -1,6 +1,6 @@
 """CSS diagnosis: data with Earth albedo (CERES map) diagnosed with a model without albedo.
 
-Issue 10 acceptance: "data simulated with Earth albedo (CERES map) diagnosed with a model
+Acceptance: "data simulated with Earth albedo (CERES map) diagnosed with a model
 without albedo must name css_albedo and improve". The data: O'Keefe's 8-sensor dual pyramid
 (table 2.1) on a 500 km circular orbit, slowly tumbling, one orbit sampled every 90 s, the
 CSS outputs with the CERES 2018 all-sky 1° albedo map (O'Keefe eq. 2.15, 2.21) and

@@ -1,4 +1,4 @@
-"""`lightcurve diagnose` on a coarse-sun-sensor recording (issue 10, CSS acceptance via the CLI).
+"""`lightcurve diagnose` on a coarse-sun-sensor recording (CSS albedo acceptance via the CLI).
 
 Data: the CSS truth simulator (lightcurve.css.truth, O'Keefe 2015 §2.4 dynamics) with the
 CERES 2018 all-sky 1° albedo map in the truth and the sensor scale-factor and misalignment
@@ -6,7 +6,7 @@ dispersions switched off, so that Earth albedo is the only physics the diagnosis
 (nominal sensors, direct Sun only) leaves out; output noise σ = 0.017 (full scale 1),
 outputs clipped at zero as by a photodiode. The diagnosis proposes css_albedo with the
 package's built-in zonal map (not the CERES map of the truth): it must still be named first
-and improve the fit (issue 10: "data simulated with Earth albedo (CERES map) diagnosed with a
+and improve the fit (acceptance: "data simulated with Earth albedo (CERES map) diagnosed with a
 model without albedo must name css_albedo and improve"). The truth uses the 1° map: the
 diagnosis sums the albedo on a grid sized to the orbit (2° at 500 km), and a coarser truth
 grid would differ from it by its own field-of-view edge discretisation.

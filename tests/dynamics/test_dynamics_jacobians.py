@@ -1,5 +1,5 @@
 """Linearised error dynamics F (Bernard 2021 eq. 7.24, 7.37, appendix A) against central
-finite differences of the nonlinear model, to 1e-6 relative (issue 2 acceptance)."""
+finite differences of the nonlinear model, to 1e-6 relative."""
 
 import numpy as np
 import pytest

@@ -63,7 +63,7 @@ def test_axisymmetric_torque_free_matches_analytic_solution():
 
 
 def test_torque_free_one_orbit_conserves_momentum_and_energy():
-    # Acceptance (issue 2): DOP853 with rtol = atol = 1e-12 over one LEO orbit conserves the
+    # Acceptance: DOP853 with rtol = atol = 1e-12 over one LEO orbit conserves the
     # inertial angular momentum A(q)ᵀ J ω and the energy ½ ωᵀ J ω to 1e-9 relative.
     t = np.linspace(0.0, T_ORBIT, 59)
     x = integrate_truth(np.r_[Q0, W0], t, lambda tt, xx: state_derivative(tt, xx, J_ASYM))

@@ -1,4 +1,5 @@
-"""Reflection states in the bootstrap particle filter: site biases and Model 3 (issue 6)."""
+"""Reflection states in the bootstrap particle filter: site biases and Model 3 (Bernard 2021
+ch. 8)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 6 speed path: the one-pass numba partials and the scalar Joseph kernel of the MEKF
+"""Model 3 speed path: the one-pass numba partials and the scalar Joseph kernel of the MEKF
 give the numbers of the NumPy path (the oracle: the NumPy algebra of tests/partials_oracle.py on a
 shape copy, and :func:`lightcurve.estimation.joseph_update`) to ≤ 1e-10 relative, and the
 Jacobians they return equal central finite differences to 1e-6 relative.
@@ -193,7 +193,7 @@ def test_single_attitude_kernel_against_finite_differences(name):
 
 def test_facet_state_kernel_equals_numpy_partials():
     """FacetParameterStates.partials (one-pass kernel from plain arrays, no shape copy)
-    equals partials_numpy (magnitude_partials on shape_at(z), the session-2 formula) to
+    equals partials_numpy (magnitude_partials on shape_at(z), the NumPy reference formula) to
     1e-10 at 60 random (q, z) with z spread over ±2σ of the prior; ∂m/∂z also equals
     central differences of the per-state magnitude (1e-6 relative)."""
     c = make_curve(n=30)
@@ -227,8 +227,8 @@ def test_facet_state_kernel_equals_numpy_partials():
 
 
 def _old_magnitudes(self, model, Q, Z, k):
-    """Session-2 FacetParameterStates.magnitudes (kernel path): NumPy per-state facet arrays
-    (facet_arrays) + mag_states_nb."""
+    """Oracle FacetParameterStates.magnitudes (NumPy facet-array path): NumPy per-state facet
+    arrays (facet_arrays) + mag_states_nb."""
     Q = np.ascontiguousarray(np.asarray(Q, float).reshape(-1, 4))
     Z = np.atleast_2d(np.asarray(Z, float))
     if Z.shape[0] == 1 and Q.shape[0] > 1:
@@ -239,8 +239,8 @@ def _old_magnitudes(self, model, Q, Z, k):
 
 
 def test_per_state_magnitude_kernel_equals_facet_array_path():
-    """magnitudes() (facet arrays filled inside mag_z_states_nb) equals the session-2 path
-    (facet_arrays in NumPy + mag_states_nb) to 1e-12 relative for 61 sigma-point-like states
+    """magnitudes() (facet arrays filled inside mag_z_states_nb) equals the NumPy facet-array
+    path (facet_arrays in NumPy + mag_states_nb) to 1e-12 relative for 61 sigma-point-like states
     (z up to ±3σ) at every epoch, and one shared z broadcast over attitudes."""
     c = make_curve(n=20)
     cube = load_shape("cube_1u")
@@ -260,7 +260,7 @@ def test_per_state_magnitude_kernel_equals_facet_array_path():
 
 def test_ukf_model3_equals_old_magnitude_path(m3curve, monkeypatch):
     """The UKF with Model 3 (which calls magnitudes() for its sigma points) reproduces the
-    run with the session-2 magnitudes (monkeypatched oracle) to ≤ 1e-10 relative."""
+    run with the NumPy facet-array magnitudes (monkeypatched oracle) to ≤ 1e-10 relative."""
     c = m3curve
     new = invert(c, "ukf", seed=4, reflection="model3", sigma_theta_deg=3.0)
     with monkeypatch.context() as mp:
@@ -308,13 +308,13 @@ def test_scalar_joseph_kernel_equals_joseph_update():
 # --------------------------------------------------------------------------------------------
 
 def _old_update(P, h, R, y, yhat):
-    """Session-2 update: estimation.joseph_update from a zero error state."""
+    """Oracle update: estimation.joseph_update from a zero error state."""
     dx, Pn, info = joseph_update(np.zeros(P.shape[0]), P, y, h[None, :], R, h=yhat)
     return dx, Pn, float(info.innovation[0]), float(info.S[0, 0]), info.ok
 
 
 def _old_predict(m, facets, q, z, k, jacobian, ph=None, h=1e-6):
-    """Session-2 prediction: magnitude kernel + NumPy partials, or partials on shape_at(z)."""
+    """Oracle prediction: magnitude kernel + NumPy partials, or partials on shape_at(z)."""
     if facets is None:
         yhat = float(m.predict_q(q[None, :], k)[0])
         if not np.isfinite(yhat):
@@ -382,7 +382,7 @@ def m3curve():
     dict(reflection="model3", error="small_angle"),
 ])
 def test_mekf_new_path_equals_old_formulas(m3curve, monkeypatch, case):
-    """The MEKF (numba partials + scalar Joseph kernel) reproduces the session-2 MEKF (NumPy
+    """The MEKF (numba partials + scalar Joseph kernel) reproduces the oracle MEKF (NumPy
     partials on a shape copy + estimation.joseph_update, monkeypatched in as the oracle) over
     80 epochs: attitude, rate, covariance, bias / Model 3 states and their σ, predicted
     magnitudes all to ≤ 1e-10 relative; identical flags. The new path never copies the shape."""

@@ -1,4 +1,4 @@
-"""The vectorised observation geometry; the thesis LEO case is unlit (issue 3 acceptance)."""
+"""The vectorised observation geometry; the thesis LEO case is unlit (Bernard 2021 §9.3)."""
 
 import warnings
 
@@ -13,7 +13,7 @@ from lightcurve.geometry.time import ephemeris, skyfield_times
 from lightcurve.geometry.visibility import (UnlitPassWarning, airmass_kasten_young,
                                             check_illumination)
 
-# Bernard (2021) LEO test orbit (issue 3): a = 6871.14 km, e = 0.01, i = 83°, Ω = ω = 0,
+# Bernard (2021) LEO test orbit (§9.3): a = 6871.14 km, e = 0.01, i = 83°, Ω = ω = 0,
 # ν = 126.264° at 2020-03-01 08:08:40 UTC, observed for 360 s from Socorro and Bear Lake
 EPOCH = "2020-03-01T08:08:40Z"
 LEO = {"type": "keplerian", "a_km": 6871.14, "e": 0.01, "i_deg": 83.0, "raan_deg": 0.0,
@@ -61,7 +61,7 @@ def test_geometry_against_independent_computation(leo_pass):
     times = skyfield_times(EPOCH, t)
     for k, site in enumerate(sites):
         m = si == k
-        # site positions: skyfield oracle, 1e-6 relative (issue 3 acceptance)
+        # site positions: skyfield oracle, 1e-6 relative
         ref = site_position_gcrs(site, EPOCH, t[m])
         assert np.max(np.linalg.norm(g.r_site_eci_m[m] - ref, axis=1)
                       / np.linalg.norm(ref, axis=1)) < 1e-6

@@ -15,7 +15,7 @@ EPOCH = "2020-03-01T08:08:40Z"
 
 def test_bundled_catalog_values():
     s = gs.load_sites()
-    # Bernard (2021) tables 9.3-9.4 (issue 3 text); Mount Lemmon: Fankhauser et al. (2023)
+    # Bernard (2021) tables 9.3-9.4; Mount Lemmon: Fankhauser et al. (2023)
     expect = {"socorro": (33.8173, -106.66, 1500.0), "bear_lake": (41.93, -111.4, 1815.0),
               "maui": (20.7081, -156.257, 3059.0), "mount_lemmon": (32.4434, -110.7881, 2791.0)}
     for sid, (lat, lon, h) in expect.items():

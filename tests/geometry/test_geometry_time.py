@@ -1,4 +1,4 @@
-"""Time and ephemeris: skyfield is the oracle (issue 3 acceptance: Sun positions to 1e-6)."""
+"""Time and ephemeris: skyfield is the oracle (Sun positions to 1e-6 relative)."""
 
 import warnings
 from datetime import datetime, timezone

@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 from lightcurve.errors import InputError
 
-#: loader name -> number of generated inputs fed to it in this session
+#: loader name -> number of generated inputs fed to it in this pytest session
 CASES: Counter = Counter()
 
 #: every fuzz file lives under one folder, removed when the test session ends

@@ -1,4 +1,4 @@
-"""Every file the package writes goes through lightcurve.io.atomic (issue 11, "Files").
+"""Every file the package writes goes through lightcurve.io.atomic (docs/robustness.md).
 
 1. A source audit: each write call in lightcurve/ (open(..., "w"), savefig, h5py.File(..., "w"),
    np.save/savetxt, json.dump, Path.write_text/write_bytes) sits inside an ``atomic_path``
@@ -139,7 +139,7 @@ def test_no_code_or_pickle_loading_from_data():
 
 
 def test_atomic_write_fsyncs_file_then_folder(tmp_path, monkeypatch):
-    """Durability (issue 11, "every write is atomic"): the data is fsync-ed before the rename,
+    """Durability (every write is atomic): the data is fsync-ed before the rename,
     the folder after it (POSIX); the rename semantics are unchanged — the final name holds the
     new bytes, a previous version is replaced whole, no temporary file is left."""
     import os

@@ -1,7 +1,7 @@
-"""CLI exit codes and error lines (issue 11): 0 success, 1 run-time failure, 2 bad usage or bad
-input; an error prints ONE line on stderr (``lightcurve: error: ...`` / ``lightcurve: failed:
-...``), the traceback only with ``--debug``. Output names derived from data stay inside the
-output folder (lightcurve.io.paths.safe_output_path).
+"""CLI exit codes and error lines: 0 success, 1 run-time failure, 2 bad usage or bad input
+(docs/robustness.md "CLI exit codes"); an error prints ONE line on stderr (``lightcurve: error:
+...`` / ``lightcurve: failed: ...``), the traceback only with ``--debug``. Output names derived
+from data stay inside the output folder (lightcurve.io.paths.safe_output_path).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Fuzz: CSS inputs — albedo maps (load_albedo_map), sensor-configuration TOML
 (load_configuration) and CSS study TOML (load_css_study).
 
-Property (issue 11): damaged or hostile files give an InputError naming the file, or a valid
+Property: damaged or hostile files give an InputError naming the file, or a valid
 object (albedo values in [0, 1], unit sensor normals).
 """
 

@@ -1,6 +1,6 @@
 """Fuzz: our HDF5 files — lightcurves (read_lightcurve) and CSS recordings (css.recording).
 
-Property (issue 11): random bytes, truncated or bit-flipped files, datasets of the wrong type,
+Property: random bytes, truncated or bit-flipped files, datasets of the wrong type,
 shape or value, and hostile attributes give an InputError naming the file, or a valid object.
 HDF5 reading never unpickles (h5py has no pickle path; object dtypes are refused).
 """

@@ -1,6 +1,6 @@
 """Fuzz: CSV recordings (lightcurve.io.recording.read_recording) and their measurement rules.
 
-Property (issue 11): any bytes, damaged rows, hostile values or column mappings give an
+Property: any bytes, damaged rows, hostile values or column mappings give an
 InputError naming the file (and the line/column for row errors) or a valid Lightcurve whose
 magnitudes are finite; NaN magnitudes, out-of-order rows, duplicated rows and rows below the
 horizon are skipped or sorted with counts in ``attrs``; unknown sites and times outside the
@@ -105,7 +105,7 @@ def test_huge_line_count_is_linear():
 
 
 # ----------------------------------------------------------------------------------------
-# measurement rules (issue 11 "Measurements")
+# measurement rules (docs/robustness.md, CSV recording rows)
 # ----------------------------------------------------------------------------------------
 def test_nan_magnitudes_skipped_and_counted():
     rows = list(GOOD_ROWS)

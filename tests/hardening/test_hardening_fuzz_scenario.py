@@ -1,6 +1,6 @@
 """Fuzz: scenario TOML files (load_scenario / parse_scenario) and the simulator's input checks.
 
-Property (issue 11): any damaged or hostile scenario gives an InputError naming the scenario
+Property: any damaged or hostile scenario gives an InputError naming the scenario
 file (or a valid Scenario); simulate() on a loaded scenario raises only InputError.
 """
 

@@ -1,6 +1,6 @@
 """Fuzz: shape files (TOML facet lists, OBJ/STL meshes with a TOML material map).
 
-Property (issue 11): load_shape and validate_shape raise only InputError (naming the file) for
+Property: load_shape and validate_shape raise only InputError (naming the file) for
 any damaged or hostile shape TOML, OBJ or STL; validate_shape returns a list of problems.
 """
 

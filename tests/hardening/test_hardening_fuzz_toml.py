@@ -1,6 +1,6 @@
 """Fuzz: the TOML layer (load_toml, Section getters) and site files (load_sites/get_site).
 
-Property (issue 11): for any bytes or any parsed value, only InputError escapes, and its
+Property: for any bytes or any parsed value, only InputError escapes, and its
 message names the file.
 """
 

@@ -1,4 +1,4 @@
-"""Measurements in the simulator (issue 11): epochs below the horizon, in site daylight, in the
+"""Measurements in the simulator: epochs below the horizon, in site daylight, in the
 Earth's shadow or without reflected light are dropped and counted; nothing non-finite reaches
 the lightcurve; every scheduled epoch is accounted for exactly once.
 """

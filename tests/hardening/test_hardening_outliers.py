@@ -1,5 +1,6 @@
-"""Bad measurements reaching the attitude filters (issue 11 acceptance: "a test that injects NaN
-and outliers into a lightcurve and checks the filters flag rather than propagate them").
+"""Bad measurements reaching the attitude filters (acceptance: "a test that injects NaN
+and outliers into a lightcurve and checks the filters flag rather than propagate them";
+docs/robustness.md "Measurements reaching the attitude filters").
 
 The gate is lightcurve.filters.gating: a measurement whose normalised innovation squared
 ν²/S exceeds γ = χ²₁⁻¹(1 − α) is rejected (flag FLAG_OUTLIER, counted) — S includes the prior

@@ -1,5 +1,6 @@
-"""docs/robustness.md stays in sync with the hardening tests (issue 11 acceptance: "a table of
-every bad-input case handled and how, kept in sync with the tests")."""
+"""docs/robustness.md stays in sync with the hardening tests: its table of every
+bad-input case handled and how lists exactly the hardening tests (each listed test exists,
+each test is listed)."""
 
 from __future__ import annotations
 

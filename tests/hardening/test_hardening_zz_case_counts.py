@@ -1,7 +1,7 @@
-"""The number of generated fuzz cases per loader (issue 11 asks for the count in the note).
+"""The number of generated fuzz cases per loader, printed so that a run can report it.
 
-Runs last in tests/hardening (file name order). When the fuzz tests ran in this session, every
-loader must have received at least ``MIN_CASES`` generated inputs; the table is printed
+Runs last in tests/hardening (file name order). When the fuzz tests ran in this pytest session,
+every loader must have received at least ``MIN_CASES`` generated inputs; the table is printed
 (``pytest -s`` shows it). Run alone, the test skips.
 """
 

@@ -1,4 +1,4 @@
-"""CSV recording import (lightcurve.io.recording; issue 10, docs/formats.md "Recordings (CSV)").
+"""CSV recording import (lightcurve.io.recording; docs/formats.md "Recordings (CSV)").
 
 Oracles: the CSV's own topocentric columns (our GCRS object positions must reproduce the
 recorded altitude/azimuth through the independent ENU path of compute_geometry, the recorded
@@ -106,7 +106,7 @@ def test_mapping_for_another_layout(tmp_path):
         "time_column": "when", "mag_column": 1, "sigma_column": "err", "site": "mount_lemmon",
         "alt_column": "Z", "az_column": "A", "height_column": 0, "height_unit": "km",
         "comment": "%", "delimiter": ";"})
-    # two of these made-up rows fall in the Earth's shadow (skipped by default, issue 11);
+    # two of these made-up rows fall in the Earth's shadow (skipped by default);
     # this test is about the layout, so they are kept
     with pytest.warns(UserWarning, match="shadow"):
         lc = read_recording(f, spec, unlit="keep")
@@ -133,7 +133,7 @@ def test_default_layout_two_sites_and_range(tmp_path):
         want.append((site, d))
     f = tmp_path / "default.csv"
     f.write_text("\n".join(rows))
-    # random made-up rows: two fall in the Earth's shadow (skipped by default, issue 11); this
+    # random made-up rows: two fall in the Earth's shadow (skipped by default); this
     # test is about the layout and the ranges, so they are kept
     with pytest.warns(UserWarning, match="shadow"):
         lc = read_recording(f, unlit="keep")

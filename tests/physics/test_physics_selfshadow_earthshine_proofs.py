@@ -1,4 +1,4 @@
-"""Issue 10 proof scenarios for self-shadowing and Earthshine: the mesh box-wing, the ray-cast
+"""Diagnosis proof scenarios for self-shadowing and Earthshine: the mesh box-wing, the ray-cast
 visibility against an independent computation, and the size of both effects in their
 scenarios (pipelines/diagnosis/diag-leo-lit-2site-mesh.toml, diag-meo-dusk-2site.toml)."""
 

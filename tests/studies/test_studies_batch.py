@@ -1,4 +1,4 @@
-"""Batch inversion (`lightcurve invert` with many files and globs, issue 7).
+"""Batch inversion (`lightcurve invert` with many files and globs).
 
 The same two lightcurves inverted inline, with the process pool and with a 2-worker Dask
 LocalCluster give bit-identical estimates (each file's filter is seeded with --seed alone, so

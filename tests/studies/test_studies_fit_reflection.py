@@ -1,4 +1,4 @@
-"""Tests of the emcee reflection-parameter posterior (issue 6) and the generic MCMC diagnostics."""
+"""Tests of the emcee reflection-parameter posterior and the generic MCMC diagnostics."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Simulation-based calibration of the emcee reflection posterior (issue 6).
+"""Simulation-based calibration of the emcee reflection posterior.
 
 If the generative model of the synthetic cases (truth drawn from the §10.1 10 % truncated
 Gaussian, eq. 9.3 noise) and the posterior (same prior, Gaussian likelihood with the recorded

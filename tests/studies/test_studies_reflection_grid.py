@@ -1,4 +1,4 @@
-"""Reflection models in the study grid (issue 7): a 2-cell grid (UKF, MEKF) × reflection
+"""Reflection models in the study grid: a 2-cell grid (UKF, MEKF) × reflection
 Model 1 on the tiny scenario with the §10.1 truth perturbation ([reflection], 10 %).
 
 Checks: every run finishes with a per-site bias state whose final 1σ is well below its eq. 8.10

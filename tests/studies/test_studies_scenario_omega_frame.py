@@ -1,9 +1,10 @@
-"""``[attitude] omega_frame``: in which axes a scenario gives its rates (issue 6, §10.7 question).
+"""``[attitude] omega_frame``: in which axes (body or inertial) a scenario gives its rates
+(Bernard 2021 §10.7).
 
 * a bad value, or ``"inertial"`` with a nadir frame, is an InputError naming the key;
 * ``"inertial"`` with q0 = identity gives exactly the ``"body"`` result (A(q0) = I);
 * ``"inertial"`` converts ω_B = A(q0) ω_I (Bernard eq. 3.16) — checked against an independent
-  plain-numpy eq. 3.7 (3-2-1 DCM) and against the lead's measured ω_B = [−2.680, 3.282,
+  plain-numpy eq. 3.7 (3-2-1 DCM) and against an independently measured ω_B = [−2.680, 3.282,
   0.088] °/s for the LEO fast-spin angles;
 * property (hypothesis): for a torque-free isotropic body (uncontrolled, Euler's equations) and
   for the controlled model without ACS noise, the inertial angular velocity recovered by finite
@@ -109,7 +110,7 @@ def test_thesis_inertial_rates_conversion():
     assert np.array_equal(at.omega_input_deg_s, [2.0, 1.0, 3.6])
     A0 = A_321(*np.radians([-42.4122, 59.1601, 48.9897]))
     np.testing.assert_allclose(at.omega_deg_s, A0 @ np.array([2.0, 1.0, 3.6]), atol=1e-12)
-    # the lead's measured numbers for this reading (issue 6 notes, 3 decimals)
+    # independently measured numbers for this reading (3 decimals)
     np.testing.assert_allclose(at.omega_deg_s, [-2.680, 3.282, 0.088], atol=6e-4)
     # the rest equals the thesis file
     base = load_scenario(BASE)

@@ -1,4 +1,4 @@
-"""End-to-end simulator checks (issue 4 acceptance).
+"""End-to-end simulator checks.
 
 * Bernard §9.3.3: at the epoch of the LEO fast-spin case the +X facet normal lies within 0.5°
   of the bisector of the object→Sun and object→Socorro directions (the thesis designed the

@@ -48,7 +48,7 @@ def test_cell_key_is_canonical():
 
 
 def test_reflection_models_accepted_unknown_refused(tmp_path, make_study):
-    # the grid accepts exactly the filters' reflection choices (issue 7: no longer "none" only)
+    # the grid accepts exactly the filters' reflection choices (not only "none")
     from lightcurve.filters.reflection import REFLECTION_CHOICES
 
     p = make_study(tmp_path, reflection=["none", "model1"])

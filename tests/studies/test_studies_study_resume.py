@@ -114,7 +114,7 @@ def test_changed_study_refused_unless_force(tmp_path, make_study):
 
 
 def test_code_change_refused_unless_force(tmp_path, make_study, monkeypatch):
-    """The study hash covers the package version and source hash (issue 7): a stored study made
+    """The study hash covers the package version and source hash: a stored study made
     by other code is not resumed (the message says the code changed) unless --force."""
     import lightcurve.studies.study as st
 

@@ -62,7 +62,7 @@ def test_traffic_light_scales_with_the_run_count():
     assert traffic_light([5, 5, 0, 0, 0, 0]) == "yellow"
     assert traffic_light([0, 10, 0, 0, 0, 0]) == "yellow"
     assert traffic_light([0, 11, 0, 0, 0, 0]) == "red"
-    # 5 runs with 4 outside: 80 per 100 -> red (the example showed green)
+    # 5 runs with 4 outside: 80 per 100 -> red (the raw count 4 < 5 would read green)
     assert traffic_light([4, 0, 0, 0, 0, 0], 5) == "red"
     # 10 runs: one outside = 10 per 100 -> yellow; two = 20 -> red; 20 runs: one = 5 -> green,
     # two components with one each -> yellow
