@@ -7,7 +7,7 @@ the full calibration filter, the averaged per-sensor NIS detector and the dark-s
 (:class:`lightcurve.css.fault.DarkSensorDetector`).
 
 Reported (one JSON line, with os.cpu_count() and the load average at the start):
-detection rates over all runs / observable runs / previous-session "exposed" runs /
+detection rates over all runs / observable runs / "exposed" runs (lit after the failure) /
 observable runs whose sensor was not calibrated before the failure; false alarms (clean
 runs and before the failure); which detector flagged first; time-to-detection
 percentiles; for ``stuck`` the split by stuck value (near zero — a dark sensor frozen at

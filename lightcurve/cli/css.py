@@ -198,7 +198,7 @@ def register(sub) -> None:
                    help="builtin (zonal CERES fit), none, or a CERES CSV / TOMS .dat file")
     s.add_argument("--filter-albedo", default="builtin",
                    help="albedo model inside the EKF/ECKF: builtin (default), none (no albedo "
-                   "model, first-session filter), or a CERES CSV / TOMS .dat file")
+                   "model), or a CERES CSV / TOMS .dat file")
     add_seed(s, default=1)
     s.add_argument("--settle-s", type=number(0.0), default=300.0,
                    help="ignore errors this long after entering sunlight, s (default 300)")

@@ -224,7 +224,7 @@ class FaultRun:
     time_to_detect_s (NaN if not), false_alarm (bool: flag of any sensor before t_fail, or at
     all in a fault-free run), wrong_sensor (another sensor flagged after t_fail), exposed
     (the failed sensor's noise-free direct output exceeded ``exposure_level`` at some sample
-    after t_fail — the previous session's definition), calibrated (the failed sensor's
+    after t_fail — a lit-sensor criterion), calibrated (the failed sensor's
     scale-factor 3σ was below 0.1 at t_fail, i.e. it had been calibrated before failing),
     observable (the failed output differed from what the healthy sensor would have read —
     its simulated noisy output, direct Sun + albedo — by more than ``observe_level`` at
@@ -324,7 +324,7 @@ def fault_study(n_runs=300, modes=FAULT_MODES + (None,), *, seed=0, workers=1,
     """Monte Carlo of :func:`run_fault_case`: ``n_runs`` per mode (None = fault-free).
 
     Returns per mode: runs, detection rate over all runs, over the runs whose failure was
-    ``observable`` (see :class:`FaultRun`), over the previous session's ``exposed`` runs and
+    ``observable`` (see :class:`FaultRun`), over the ``exposed`` runs and
     over exposed runs with a calibrated sensor; false-alarm rate; wrong-sensor rate; which
     detector flagged first; the time-to-detection distribution (s: 10/25/50/75/90th
     percentiles and max) overall and for the observable runs; plus the detector settings.

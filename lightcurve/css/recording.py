@@ -9,7 +9,7 @@ Layout (root attributes ``format = "lightcurve-css"``, ``format_version = 1``,
 * ``gyro_rad_s`` (K,3) measured body rates (absent for gyro-less recordings);
 * ``truth/s_body`` (K,3), ``truth/q`` (K,4), ``truth/omega_rad_s`` (K,3), ``truth/lit`` (K,),
   ``estimate/s_hat`` (K,3) for simulated data;
-* optional (written since the diagnosis path, issue 10; older files lack them and cannot be
+* optional (written by the diagnosis-capable writer; older files lack them and cannot be
   diagnosed): ``geometry/r_eci_m`` (K,3) spacecraft GCRS position, m, and
   ``geometry/sun_eci_unit`` (K,3) unit spacecraft→Sun direction, GCRS; ``horizon_normals``
   (N,3) nominal structure-horizon normals (zero rows: none); root attributes ``noise_sigma``

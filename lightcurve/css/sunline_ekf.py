@@ -89,7 +89,7 @@ FILTER_KINDS = ("ekf", "eckf")
 class FilterParams:
     """Tuning of the sun-line filters (dimensionless outputs, SI time).
 
-    Defaults were tuned (first session) on the §2.4 tumbling Monte Carlo with the filter
+    Defaults were tuned on the §2.4 tumbling Monte Carlo with the filter
     *without* an albedo model: Earth albedo (up to ~0.27 of full scale on an Earth-facing
     sensor at 400 km) treated as measurement noise — a high activity threshold (0.5)
     keeps albedo-dominated sensors out and σ = 0.3 lets the tumbling average the remaining

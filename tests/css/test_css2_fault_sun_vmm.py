@@ -96,7 +96,7 @@ def test_dark_sensor_detector_statistics_and_decisions():
 def test_uncalibrated_off_failure_caught_by_dark_test():
     """Seed (0, 0, 9): sensor 6 fails off at 1950 s before ever being lit (scale 3σ 0.9);
     at its first lit sample the filter explains the zero output by a gain ≈ 0.05, so the
-    averaged NIS never fires (the previous session's miss); the dark-sensor test flags it
+    averaged NIS never fires (a missed fault before this test existed); the dark-sensor test flags it
     once it has been predicted lit for ~10 samples.  The fault-free twin stays silent."""
     r = run_fault_case(np.random.SeedSequence([0, 0, 9]), "off")
     assert not r.calibrated and r.observable

@@ -1,4 +1,4 @@
-"""Earth-albedo model inside the sun-line filters (issue 8, second session).
+"""Earth-albedo model inside the sun-line filters (the albedo model of O'Keefe 2015 §2.1.2).
 
 Error budget that motivated it (200-run tumbling study, dual pyramid, tactical gyro, seed 1,
 99th percentile of the angular error 5 min after entering sunlight, filters *without* an

@@ -342,7 +342,7 @@ def test_cli_shapes(capsys, tmp_path):
     assert "self-shadowing" in capsys.readouterr().out
     facets = _box_facets()
     facets[0]["area"] = 0.0
-    p = _write(tmp_path, facets, name="mine.toml")
+    _write(tmp_path, facets, name="mine.toml")
     assert main(["shapes", "--library", str(tmp_path), "validate", "mine"]) == 2
     assert "zero-area" in capsys.readouterr().out
     assert main(["shapes", "show", "nope"]) == 2
