@@ -169,7 +169,8 @@ def watch_parent(parent_pid: int, poll_s: float = 1.0, *, pdeathsig: bool = True
 
 def stop_pool(executor, grace_s: float = 2.0) -> None:
     """Stop a ``concurrent.futures.ProcessPoolExecutor`` now: cancel pending tasks, SIGTERM
-    its workers, SIGKILL those still alive after ``grace_s``, and reap them."""
+    its workers, SIGKILL those still alive after ``grace_s``, reap them, and fail the tasks
+    they were running (``BrokenProcessPool``)."""
     procs = list((getattr(executor, "_processes", None) or {}).values())
     with contextlib.suppress(Exception):
         executor.shutdown(wait=False, cancel_futures=True)
@@ -187,3 +188,12 @@ def stop_pool(executor, grace_s: float = 2.0) -> None:
                 p.join(1.0)
     with contextlib.suppress(Exception):  # reap the executor's threads and queues now
         executor.shutdown(wait=True)
+    # a task whose worker was killed is failed at once (the executor's own thread does this
+    # asynchronously, and not at all when it had already left on the shutdown request)
+    from concurrent.futures.process import BrokenProcessPool
+
+    for item in list((getattr(executor, "_pending_work_items", None) or {}).values()):
+        fut = getattr(item, "future", None)
+        with contextlib.suppress(Exception):
+            if fut is not None and not fut.done():
+                fut.set_exception(BrokenProcessPool("the pool was stopped"))

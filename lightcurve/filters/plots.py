@@ -456,8 +456,15 @@ def _title(est, sp, eul, eul_s, frac_in, epoch):
         line2 += f"; DIVERGED ({est.divergence_reason})"
     cons = s.get("consistency") or {}
     if cons.get("flags"):
-        line2 += (f"; FLAGGED: {', '.join(cons['flags'])} (NIS mean {cons['nis_mean']:.2g}, 99 % "
-                  f"band {cons['nis_band'][0]:.2g}–{cons['nis_band'][1]:.2g})")
+        why = []
+        if cons.get("nis_mean") is not None:
+            why.append(f"NIS mean {cons['nis_mean']:.2g}, 99 % band "
+                       f"{cons['nis_band'][0]:.2g}–{cons['nis_band'][1]:.2g}")
+        if cons.get("residual_median_sq") is not None:
+            why.append(f"median squared residual {cons['residual_median_sq']:.2g}σ², 99 % band "
+                       f"{cons['residual_median_band'][0]:.2g}–"
+                       f"{cons['residual_median_band'][1]:.2g}")
+        line2 += f"; FLAGGED: {', '.join(cons['flags'])}" + (f" ({'; '.join(why)})" if why else "")
     gi = (est.meta or {}).get("global_init")
     if gi:
         line2 += "\nglobal initialisation: " + (
