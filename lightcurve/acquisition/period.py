@@ -284,9 +284,10 @@ class PeriodResult:
             c["weight"] /= tot
         return out
 
-    def plot(self, path, title=None) -> Path:
+    def plot(self, path, title=None, true_period_s=None) -> Path:
         """Periodogram (Lomb–Scargle power and PDM 1−θ against period) and the folded
-        lightcurve with the multi-harmonic fit; PNG written atomically."""
+        lightcurve with the multi-harmonic fit; PNG written atomically. ``title`` is put above
+        the result line; ``true_period_s`` (a simulation's truth) is marked when given."""
         import matplotlib
 
         matplotlib.use("Agg")
@@ -304,11 +305,19 @@ class PeriodResult:
             a1.axvline(a["period_s"], color="0.5", lw=0.8, ls="--")
             a1.text(a["period_s"], 0.98, a["relation"], rotation=90, va="top", ha="right",
                     fontsize=7, color="0.35", transform=a1.get_xaxis_transform())
+        if true_period_s is not None and np.isfinite(true_period_s):
+            a1.axvline(true_period_s, color="k", lw=1.2, ls=":",
+                       label=f"truth {true_period_s:.4g} s")
         a1.set_xscale("log")
+        from matplotlib.ticker import LogLocator, ScalarFormatter
+
+        a1.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        a1.xaxis.set_major_formatter(ScalarFormatter())
+        a1.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         a1.set_xlabel("period (s)")
         a1.set_ylabel("power")
         a1.set_ylim(bottom=0)
-        a1.legend(fontsize=8, loc="upper left")
+        a1.legend(fontsize=8, loc="best", framealpha=0.85)
         fd = self.fold
         if fd:
             a2.errorbar(fd["phase"], fd["resid"], yerr=fd["sigma"], fmt=".", ms=3, lw=0.5,
@@ -320,9 +329,10 @@ class PeriodResult:
             a2.set_ylabel("Δ magnitude")
             a2.legend(fontsize=8)
         sig = "significant" if self.significant else "NOT significant"
-        fig.suptitle(title or f"spin period {self.period_s:.4g} ± {self.period_sigma_s:.2g} s "
-                     f"({sig}, FAP {self.false_alarm_probability:.1e}); sidereal 99 %: "
-                     f"{self.interval_99_s[0]:.4g}–{self.interval_99_s[1]:.4g} s", fontsize=10)
+        line = (f"spin period {self.period_s:.4g} ± {self.period_sigma_s:.2g} s "
+                f"({sig}, FAP {self.false_alarm_probability:.1e}); sidereal 99 %: "
+                f"{self.interval_99_s[0]:.4g}–{self.interval_99_s[1]:.4g} s")
+        fig.suptitle(f"{title}\n{line}" if title else line, fontsize=10)
         path = Path(path)
         with atomic_path(path, suffix=".png") as tmp:
             fig.savefig(tmp, dpi=110, format="png")

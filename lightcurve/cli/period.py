@@ -26,6 +26,10 @@ def _cmd_period(args) -> int:
           f"({res.n_harmonics} harmonics, chi2/dof {res.chi2_dof:.3g}, false-alarm probability "
           f"{res.false_alarm_probability:.2g}: "
           f"{'significant' if res.significant else 'NOT significant'})")
+    if not res.significant:
+        print("NO significant period: the numbers below describe the best trial period, not a "
+              "detection (the lightcurve may not repeat over this window; use --initial global "
+              "with its broad rate prior rather than this period)")
     print(f"sidereal spin period, 99 %: {lo:.5g} to {hi:.5g} s (synodic bound "
           f"±{res.synodic_bound_s:.3g} s from the phase-angle bisector's "
           f"{res.summary()['pab_rate_deg_s']:.3g} deg/s)")
@@ -48,7 +52,16 @@ def _cmd_period(args) -> int:
         stem = Path(args.file).stem
         jpath = safe_output_path(out, f"{stem}.period", ".json", field="file name")
         atomic_write_text(jpath, json.dumps(res.summary(), indent=2))
-        ppath = res.plot(safe_output_path(out, f"{stem}.period", ".png", field="file name"))
+        truth = None
+        if curve.truth_omega_rad_s is not None:   # a simulation: mark 2π/|ω| at the first epoch
+            import math
+
+            import numpy as np
+
+            w = float(np.linalg.norm(np.asarray(curve.truth_omega_rad_s, float)[0]))
+            truth = 2.0 * math.pi / w if w > 0 else None
+        ppath = res.plot(safe_output_path(out, f"{stem}.period", ".png", field="file name"),
+                         title=Path(args.file).name, true_period_s=truth)
         print(f"wrote {jpath} and {ppath}")
     return 0
 

@@ -37,7 +37,8 @@ def _cmd_simulate(args) -> int:
     lc.write(args.output)
     print(f"wrote {args.output}: {len(lc)} measurements from {len(lc.site_names)} site(s) "
           f"({counts.scheduled} scheduled; dropped {counts.below_horizon} below the elevation limit, "
-          f"{counts.site_daylight} in site daylight, {counts.eclipsed} eclipsed)")
+          f"{counts.site_daylight} in site daylight, {counts.eclipsed} eclipsed, "
+          f"{counts.no_reflection} with no lit facet facing the observer)")
     if args.plot:
         from ..report.plots import plot_lightcurve
 

@@ -298,4 +298,10 @@ def _result_line(file, method, est, s) -> str:
         line += f", {est.skipped_nan} NaN magnitude(s) skipped"
     if getattr(est, "refl_names", None) is not None:
         line += f", {len(est.refl_names)} Model 3 facet parameters estimated"
+    flags = (s.get("consistency") or {}).get("flags") or []
+    if flags:
+        line += f", FLAGGED: {', '.join(flags)} (the fit is not consistent with the noise)"
+    gi = (est.meta or {}).get("global_init") if hasattr(est, "meta") else None
+    if gi and gi.get("statement"):
+        line += f"\n  global initialisation: {gi['statement']}"
     return line

@@ -15,7 +15,7 @@ if the object were in full sunlight (how Bernard's published cases were generate
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -38,6 +38,7 @@ class SimulationCounts:
     site_daylight: int
     eclipsed: int
     kept: int
+    no_reflection: int = 0   # lit and visible, but no lit facet faces the observer
 
 
 def _rngs(seed: int):
@@ -140,7 +141,6 @@ def simulate(scenario, seed: int | None = None, return_counts: bool = False):
         # [reflection] (Bernard §10.1): the truth shape's parameters are perturbed; own stream,
         # independent of the attitude and noise streams (their draws are unchanged)
         import json
-        from dataclasses import replace
 
         from ..photometry.perturb import perturb_reflection
 
@@ -213,6 +213,7 @@ def simulate(scenario, seed: int | None = None, return_counts: bool = False):
     dark_obj = ~np.isfinite(m_true)
     n_no_reflection = int(np.sum(keep & dark_obj))  # only epochs not already dropped above
     keep &= ~dark_obj
+    counts = replace(counts, no_reflection=n_no_reflection, kept=int(np.sum(keep)))
     if not np.any(keep):
         raise InputError("no visible measurement: no lit facet faces the observer at any epoch",
                          file=scenario.source, field="attitude")
