@@ -286,6 +286,15 @@ def progress_bar(total=None, desc=None, quiet=False, unit="it"):
                 dynamic_ncols=True, leave=False)
 
 
+def add_group(sub, name, *, title, metavar, help, description):
+    """A command group ``name`` with its own actions: returns ``(parser, actions)`` (the
+    subparsers to add the actions to); the group alone prints its help and exits 2."""
+    p = sub.add_parser(name, help=help, description=description)
+    actions = p.add_subparsers(title=title, metavar=metavar)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+    return p, actions
+
+
 def add_shape(p):
     """``--shape NAME|FILE.toml``: a shape replacing the one a lightcurve file carries."""
     return p.add_argument("--shape", default=None, metavar="NAME|FILE.toml",

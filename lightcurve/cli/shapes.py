@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InputError
-from ._args import add_library
+from ._args import add_group, add_library
 
 __all__ = ["register"]
 
@@ -57,14 +57,12 @@ def _dirs(args):
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "shapes",
+    p, ssub = add_group(
+        sub, "shapes", title="shape commands", metavar="ACTION",
         help="list, show and validate faceted shapes",
         description="Faceted shape library: bundled shapes/ plus folders given with --library. "
-        "Shapes are TOML facet lists or OBJ/STL meshes with a TOML material map.",
-    )
+        "Shapes are TOML facet lists or OBJ/STL meshes with a TOML material map.")
     add_library(p)
-    ssub = p.add_subparsers(title="shape commands", metavar="ACTION")
     pl = ssub.add_parser("list", help="list the shapes in the library")
     _sub_library(pl)
     pl.set_defaults(func=_cmd_shapes_list)
@@ -80,4 +78,3 @@ def register(sub) -> None:
     pv.add_argument("spec", metavar="PATH_OR_NAME", help="library name or path to a shape TOML")
     _sub_library(pv)
     pv.set_defaults(func=_cmd_shapes_validate)
-    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._args import add_sites
+from ._args import add_group, add_sites
 
 __all__ = ["register"]
 
@@ -30,15 +30,13 @@ def _cmd_sites_show(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "sites",
+    _, ssub = add_group(
+        sub, "sites", title="sites commands", metavar="SUBCOMMAND",
         help="list or show observing sites (observatories/*.toml)",
         description="The site catalog: the bundled observatories/ folder plus any folders "
         "given with --sites (later folders override earlier ones). Each site is one TOML "
         "file with id, name, lat_deg, lon_deg (WGS84), height_m and optional band and "
-        "[horizon_mask].",
-    )
-    ssub = p.add_subparsers(title="sites commands", metavar="SUBCOMMAND")
+        "[horizon_mask].")
     pl = ssub.add_parser("list", help="list all known sites")
     add_sites(pl)
     pl.set_defaults(func=_cmd_sites_list)
@@ -46,4 +44,3 @@ def register(sub) -> None:
     ps.add_argument("id", help="site id, e.g. socorro")
     add_sites(ps)
     ps.set_defaults(func=_cmd_sites_show)
-    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])

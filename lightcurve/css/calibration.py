@@ -184,6 +184,27 @@ def _gather_rows(idx, m, H, y, h):
 
 
 @numba.njit(cache=True)
+def _consider_mask(n, N):
+    """Consider-state mask of the n-state calibration filter with N sensors: the albedo
+    errors after attitude, gyro bias and the 3N sensor parameters."""
+    cons = np.zeros(n, dtype=np.bool_)
+    for i in range(6 + 3 * N, n):
+        cons[i] = True
+    return cons
+
+
+@numba.njit(cache=True)
+def _apply_correction(x, P, xn, Pn):
+    """In place ``x += δx``, ``P ← P⁺``, then the MRP shadow-set switch (O'Keefe eq. 4.2)."""
+    n = x.shape[0]
+    for i in range(n):
+        x[i] += xn[i]
+        for j in range(n):
+            P[i, j] = Pn[i, j]
+    mrp_switch_cov_nb(x, P)
+
+
+@numba.njit(cache=True)
 def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E,
                    cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
                    nu_out, s_out, u_out, cells_sig, init):
@@ -233,9 +254,7 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
         for j in range(m):
             R[i, j] = gk * x[6 + idx[j]] * Ra[k, idx[j]]
         R[i, i] += (gk * sig_v) ** 2
-    cons = np.zeros(n, dtype=np.bool_)
-    for i in range(6 + 3 * N, n):
-        cons[i] = True
+    cons = _consider_mask(n, N)
     # per-sensor prior innovation statistics (the fault detector of §5.1)
     for i in range(m):
         k = idx[i]
@@ -251,11 +270,7 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
     if not ok:
         return 0, np.nan, 1.0
-    for i in range(n):
-        x[i] += xn[i]
-        for j in range(n):
-            P[i, j] = Pn[i, j]
-    mrp_switch_cov_nb(x, P)
+    _apply_correction(x, P, xn, Pn)
     return m, nis, 1.0
 
 
@@ -343,9 +358,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     R = np.zeros((m, m))
     for i in range(m):
         R[i, i] = Rk[idx[i]]
-    cons = np.zeros(n, dtype=np.bool_)
-    for i in range(6 + 3 * N, n):
-        cons[i] = True
+    cons = _consider_mask(n, N)
     xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
     if not ok:
         return 0, np.nan, 1.0
@@ -355,11 +368,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         xn, Pn, nis2, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R * infl, cons)
         if not ok:
             return 0, np.nan, 1.0
-    for i in range(n):
-        x[i] += xn[i]
-        for j in range(n):
-            P[i, j] = Pn[i, j]
-    mrp_switch_cov_nb(x, P)
+    _apply_correction(x, P, xn, Pn)
     return m, nis, infl
 
 
@@ -407,8 +416,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     P = P0.copy()
     arw, rrw, qp = prm[7], prm[8], prm[9]
     tau, sig_b, sig_st = prm[10], prm[11], prm[12]
-    cons = np.zeros(n, dtype=np.bool_)
-    cons[6 + 3 * N:] = True
+    cons = _consider_mask(n, N)
     nu_k = np.empty(N)
     s_k = np.empty(N)
     u_k = np.empty(N)

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["ControlParams", "sun_pointing_mrp_nb", "mrp_control_nb", "sun_pointing_mrp"]
+__all__ = ["ControlParams", "sun_pointing_mrp_nb", "mrp_control_nb", "saturate_nb",
+           "sun_pointing_mrp"]
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,16 @@ class ControlParams:
     deadband_rad: float = np.radians(1.0)
     u_max: float = 0.03
     axis: tuple = (0.0, 0.0, 1.0)
+
+
+@numba.njit(cache=True)
+def saturate_nb(u, u_max):
+    """Clip each wheel motor torque of ``u`` to [−u_max, u_max] in place (N m)."""
+    for i in range(u.shape[0]):
+        if u[i] > u_max:
+            u[i] = u_max
+        elif u[i] < -u_max:
+            u[i] = -u_max
 
 
 @numba.njit(cache=True)
@@ -91,11 +102,7 @@ def mrp_control_nb(s_hat, valid, omega, I, G, h_w, G_pinv, k_gain, p_gain, deadb
         L[1] += omega[2] * H[0] - omega[0] * H[2]
         L[2] += omega[0] * H[1] - omega[1] * H[0]
     u = -(G_pinv @ L)
-    for i in range(u.shape[0]):
-        if u[i] > u_max:
-            u[i] = u_max
-        elif u[i] < -u_max:
-            u[i] = -u_max
+    saturate_nb(u, u_max)
     return u
 
 

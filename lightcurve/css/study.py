@@ -49,7 +49,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
+from ..io.atomic import atomic_path, atomic_write_text
+from ..io.study_folder import open_runs_folder, read_study_meta
 from ..io.tomlio import Section, load_toml
 from . import okeefe2015 as ok
 from ..core.constants import MU_EARTH, R_EARTH_M
@@ -294,30 +295,18 @@ def _read_task(path: Path) -> dict:
 
 
 def _prepare(out: Path, spec: StudySpec, force: bool):
-    from ..io.safe_open import read_text
-
     meta = out / "study.json"
+    discard = False
     if meta.exists() or meta.is_symlink():
-        # the folder's own state file, in a user-chosen folder: a regular file only
-        text = read_text(meta, max_bytes=256 * 1024 * 1024, what="study.json", track=False)
-        try:
-            old = json.loads(text).get("study_hash")
-        except (ValueError, AttributeError):
-            old = None
+        old = read_study_meta(meta).get("study_hash")
         if old != spec.hash:
             if not force:
                 raise InputError("the output folder holds runs of a different study; use "
                                  "--force to discard them, or another -o", file=spec.source,
                                  field="study_hash", value=spec.hash[:16],
                                  allowed=f"{str(old)[:16]} (stored in {meta})")
-            import shutil
-
-            shutil.rmtree(out / "runs", ignore_errors=True)
-            for f in ("summary.json", "report.html"):
-                (out / f).unlink(missing_ok=True)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
-    # temporary files of killed runs (never a live writer's: lightcurve.io.atomic)
-    clean_stale_temp(out / "runs")
+            discard = True
+    open_runs_folder(out, discard)
     atomic_write_text(meta, json.dumps({"format": "lightcurve-css-study", "format_version": 1,
                                         "study_hash": spec.hash, "name": spec.name,
                                         "study_toml": spec.text, "source": spec.source},

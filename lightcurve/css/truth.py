@@ -53,7 +53,7 @@ from ..estimation.rng import as_generator
 from .albedo import (AlbedoCells, AlbedoMap, albedo_sun_frame_nb, albedo_vectors_nb,
                      builtin_albedo_map, cell_areas_m2, earth_rotation_angle, sun_nadir_axis_nb)
 from .attitude_ekf import mv3_nb
-from .control import ControlParams, mrp_control_nb, sun_pointing_mrp_nb
+from .control import ControlParams, mrp_control_nb, saturate_nb, sun_pointing_mrp_nb
 from .gyro import GyroSpec, gyro_grade, gyro_step_nb
 from .okeefe2015 import SPACECRAFT, WHEEL_AXES
 from .sensors import CSSArray
@@ -217,11 +217,7 @@ def _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint, dw0, gai
     H = I @ w_ctrl + G @ h_abs
     rhs = K * sig + P * w_ctrl + P * kz + np.cross(kz, H)
     u = G_pinv @ rhs
-    for i in range(u.shape[0]):
-        if u[i] > umax:
-            u[i] = umax
-        elif u[i] < -umax:
-            u[i] = -umax
+    saturate_nb(u, umax)
     return u
 
 
@@ -416,12 +412,6 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                         have_prev = True
                     elif not use_gyro:
                         have_prev = False
-                    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-                    if nd > 0:
-                        s_est = d / nd
-                        valid = True
-                    PC[k] = P
-                    DH[k] = d
             elif kind <= 1:
                 # robust sun-line filters (sunline_ekf.py), propagated over the sample period
                 if not started:
@@ -451,13 +441,6 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                     if not use_gyro:
                         om_f = successive_rate_nb(d, d_prev, dt_c, om_f, alpha_r, rmax_r)
                     d_prev[:] = d
-                if started:
-                    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-                    if nd > 0:
-                        s_est = d / nd
-                        valid = True
-                    PC[k] = P
-                    DH[k] = d
             else:
                 yk = Y[k]
                 thr_sp = 0.0 if thesis else thr_r
@@ -492,6 +475,14 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                     valid = True
                 else:
                     valid = False
+            if kind <= 1 and started:
+                # the sun-line filters (thesis and robust): unit estimate, covariance, d
+                nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+                if nd > 0:
+                    s_est = d / nd
+                    valid = True
+                PC[k] = P
+                DH[k] = d
         Sh[k] = s_est if valid else np.zeros(3)
         w_acc[:] = 0.0
         n_acc = 0

@@ -86,3 +86,14 @@ def single_vec(v, name) -> np.ndarray:
     if v.shape != (3,):
         raise ValueError(f"{name}: expected shape (3,), got {v.shape}")
     return v
+
+
+def times(t, name) -> np.ndarray:
+    """Non-empty, finite, non-decreasing 1-D float array of times, s (repeats allowed;
+    ValueError naming ``name`` otherwise)."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    if t.ndim != 1 or t.size == 0 or not np.all(np.isfinite(t)):
+        raise ValueError(f"{name}: expected a non-empty finite 1-D array of times (s)")
+    if np.any(np.diff(t) < 0):
+        raise ValueError(f"{name}: times must be non-decreasing")
+    return t

@@ -19,6 +19,7 @@ from scipy.integrate import solve_ivp
 
 from .. import rotations as rot
 from ..core.dynamics import rk4_propagate_nb
+from . import _checks as ck
 from .rigid_body import check_inertia
 
 __all__ = ["rk4_propagate_nb", "rk4_propagate", "integrate_truth"]
@@ -78,13 +79,9 @@ def integrate_truth(x0, t_eval, rhs, rtol: float = 1e-12, atol: float = 1e-12, t
     array (N, n). Raises ``RuntimeError`` if the integrator fails.
     """
     x0 = np.asarray(x0, dtype=float)
-    t_eval = np.atleast_1d(np.asarray(t_eval, dtype=float))
     if x0.ndim != 1 or not np.all(np.isfinite(x0)):
         raise ValueError("x0: expected a finite 1-D state vector")
-    if t_eval.ndim != 1 or t_eval.size == 0 or not np.all(np.isfinite(t_eval)):
-        raise ValueError("t_eval: expected a non-empty finite 1-D array of times (s)")
-    if np.any(np.diff(t_eval) < 0):
-        raise ValueError("t_eval: times must be non-decreasing")
+    t_eval = ck.times(t_eval, "t_eval")
     t0 = float(t_eval[0]) if t0 is None else float(t0)
     if t_eval[0] < t0:
         raise ValueError("t_eval: times must not precede t0")

@@ -63,7 +63,6 @@ from ..geometry.eclipse import lit_fraction
 from ..geometry.time import sun_position_gcrs
 from . import _checks as ck
 from .integrators import integrate_truth
-from .kinematics import check_omega
 from .rigid_body import check_inertia
 from .torques import DragTorque, GravityGradientTorque, SRPTorque
 
@@ -142,29 +141,11 @@ def _rng(rng):
 
 
 def _times(t_s, t0):
-    t = np.atleast_1d(np.asarray(t_s, dtype=float))
-    if t.ndim != 1 or t.size == 0 or not np.all(np.isfinite(t)):
-        raise ValueError("t_s: expected a non-empty finite 1-D array of times (s)")
-    if np.any(np.diff(t) < 0):
-        raise ValueError("t_s: times must be non-decreasing")
+    t = ck.times(t_s, "t_s")
     t0 = float(t[0]) if t0 is None else float(t0)
     if t[0] < t0:
         raise ValueError(f"t_s: first time {t[0]} precedes the initial epoch t0_s = {t0}")
     return t, t0
-
-
-def _single_q(q, name):
-    q = rot.check_unit_quat(q, name)
-    if q.shape != (4,):
-        raise ValueError(f"{name}: expected a single quaternion of shape (4,), got {q.shape}")
-    return q.copy()
-
-
-def _single_w(w, name):
-    w = check_omega(w, name)
-    if w.shape != (3,):
-        raise ValueError(f"{name}: expected shape (3,), got {w.shape}")
-    return w.copy()
 
 
 class ControlledTruth:
@@ -191,8 +172,8 @@ class ControlledTruth:
 
     def __init__(self, q0, omega0_rad_s, acs_sigma_rad, rng=None, *, t0_s=None, mode="random_walk",
                  rate_sigma_rad_s: float = 0.0):
-        self.q0 = _single_q(q0, "q0")
-        self.omega0 = _single_w(omega0_rad_s, "omega0_rad_s")
+        self.q0 = ck.single_quat(q0, "q0").copy()
+        self.omega0 = ck.single_vec(omega0_rad_s, "omega0_rad_s").copy()
         self.acs_sigma = ck.finite_scalar(acs_sigma_rad, "acs_sigma_rad", nonneg=True)
         self.rate_sigma = ck.finite_scalar(rate_sigma_rad_s, "rate_sigma_rad_s", nonneg=True)
         if mode not in ("random_walk", "jitter"):
@@ -282,8 +263,8 @@ class UncontrolledTruth:
         if torque_forms not in ("physical", "thesis"):
             raise ValueError(f"torque_forms: expected 'physical' or 'thesis', got {torque_forms!r}")
         self.torque_forms = torque_forms
-        self.q0 = _single_q(q0, "q0")
-        self.omega0 = _single_w(omega0_rad_s, "omega0_rad_s")
+        self.q0 = ck.single_quat(q0, "q0").copy()
+        self.omega0 = ck.single_vec(omega0_rad_s, "omega0_rad_s").copy()
         self.J = check_inertia(J)
         self.J_inv = np.linalg.inv(self.J)
         self.torque_fns = []

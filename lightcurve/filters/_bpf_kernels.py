@@ -25,7 +25,7 @@ from ..core.particles import n_chunks
 from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, brdf_product_nb,
                                cook_torrance_fresnel_xyz, facet_flux_nb, fresnel_xyz)
 from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
-from .facet_states import fill_facet_arrays_nb
+from .facet_states import fill_facet_arrays_nb, from_unbounded_xyz
 
 __all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
            "chart_rows", "chart_stats", "roughen_chart", "roughen_compose", "liu_west_attitude",
@@ -469,7 +469,7 @@ def weighted_param_stats_nb(Z, w, logit):
             continue
         for d in range(D):
             zz = Z[i, d]
-            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            pp = from_unbounded_xyz(zz, logit[d])
             zm[d] += wi * zz
             pm[d] += wi * pp
     for i in range(N):
@@ -478,7 +478,7 @@ def weighted_param_stats_nb(Z, w, logit):
             continue
         for d in range(D):
             zz = Z[i, d]
-            pp = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+            pp = from_unbounded_xyz(zz, logit[d])
             z2[d] += wi * (zz - zm[d]) ** 2
             p2[d] += wi * (pp - pm[d]) ** 2
     return zm, z2, pm, p2

@@ -278,6 +278,33 @@ def reflection_histories(n, nb, nz):
     return b, bs, z, zc
 
 
+def store_epoch(rec, k, L: "StateLayout", q, w, b, z, P, hists) -> None:
+    """Record epoch k of a Kalman run: q, ω and their 6×6 covariance in ``rec`` (zeros when
+    the attitude is known), the site biases with their 1σ and the Model 3 states with their
+    covariance in ``hists`` (:func:`reflection_histories`)."""
+    b_hist, bs_hist, z_hist, zc_hist = hists
+    rec.store(k, q, w, P[:6, :6] if L.na else np.zeros((6, 6)))
+    if L.nb:
+        b_hist[k] = b
+        bs_hist[k] = np.sqrt(np.clip(np.diag(P)[L.ib], 0.0, None))
+    if L.nz:
+        z_hist[k] = z
+        zc_hist[k] = P[L.iz, L.iz]
+
+
+def attach_histories(est, L: "StateLayout", bias, facets, hists):
+    """``est`` with the histories of :func:`store_epoch` attached (biases, Model 3 states) and
+    ``meta["attitude"] = "truth"`` when the attitude was known."""
+    b_hist, bs_hist, z_hist, zc_hist = hists
+    if L.nb:
+        attach_bias(est, bias, b_hist, bs_hist)
+    if L.nz:
+        attach_facets(est, facets, z_hist, zc_hist)
+    if not L.na:
+        est.meta["attitude"] = "truth"
+    return est
+
+
 def truth_state(p: "FilterProblem", k):
     """The file's truth ``(q (4,), ω (3,))`` at epoch k (attitude-known mode)."""
     q = np.asarray(p.truth_q[k], float)

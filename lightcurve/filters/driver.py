@@ -30,8 +30,8 @@ from typing import Protocol
 
 import numpy as np
 
-from ._common import (FilterProblem, Recorder, StateLayout, attach_bias, attach_facets,
-                      initial_state_ext, layout_transition, reflection_histories, truth_state)
+from ._common import (FilterProblem, Recorder, StateLayout, attach_histories, initial_state_ext,
+                      layout_transition, reflection_histories, store_epoch, truth_state)
 from .gating import InnovationGate
 from .result import FLAG_NAN, Estimate
 
@@ -93,8 +93,8 @@ def run_kalman(problem: FilterProblem, step: KalmanStep, bias=None, facets=None)
     rec.gate = InnovationGate(p, auto=step.gate_auto)
     L, q, w, b, z, P = initial_state_ext(p, bias, facets)
     x = KalmanState(L, q, w, b, z, P)
-    na, nb, nz = L.na, L.nb, L.nz
-    b_hist, bs_hist, z_hist, zc_hist = reflection_histories(p.n, nb, nz)
+    na = L.na
+    hists = reflection_histories(p.n, L.nb, L.nz)
     zc = dyn.zeta_cov
     for k in range(p.n):
         if k > 0:
@@ -113,18 +113,6 @@ def run_kalman(problem: FilterProblem, step: KalmanStep, bias=None, facets=None)
             rec.skipped_nan += 1
         elif not rec.gate.skip_epoch(k, rec):   # unlit / below the horizon: flagged, counted
             step.update(x, k, y, rec)
-        rec.store(k, x.q, x.w, x.P[:6, :6] if na else np.zeros((6, 6)))
-        if nb:
-            b_hist[k] = x.b
-            bs_hist[k] = np.sqrt(np.clip(np.diag(x.P)[L.ib], 0.0, None))
-        if nz:
-            z_hist[k] = x.z
-            zc_hist[k] = x.P[L.iz, L.iz]
+        store_epoch(rec, k, L, x.q, x.w, x.b, x.z, x.P, hists)
     est = rec.gate.finish(rec.finish(time.perf_counter() - t0))
-    if nb:
-        attach_bias(est, bias, b_hist, bs_hist)
-    if nz:
-        attach_facets(est, facets, z_hist, zc_hist)
-    if not na:
-        est.meta["attitude"] = "truth"
-    return est
+    return attach_histories(est, L, bias, facets, hists)

@@ -70,7 +70,7 @@ from ..photometry.partials import kernel_capable, magnitude_partials
 from ..rotations import qrot_xyz_nb
 
 __all__ = ["KINDS", "LOGIT_KINDS", "FacetParameterStates", "to_unbounded", "from_unbounded",
-           "dp_dz", "mag_states_nb", "mag_z_states_nb", "partials_z_nb"]
+           "from_unbounded_xyz", "dp_dz", "mag_states_nb", "mag_z_states_nb", "partials_z_nb"]
 
 #: the four Cook–Torrance facet parameters Model 3 can estimate
 KINDS = ("xi", "a", "m", "A")
@@ -148,6 +148,12 @@ def mag_states_nb(Q, s, o, normals, areas, ids, params, offset):
 
 
 @nb.njit(cache=True, inline="always")
+def from_unbounded_xyz(z, logit):
+    """:func:`from_unbounded` of one scalar: ``1/(1+e^{−z})`` when ``logit``, else ``e^{z}``."""
+    return 1.0 / (1.0 + math.exp(-z)) if logit else math.exp(z)
+
+
+@nb.njit(cache=True, inline="always")
 def fill_facet_arrays_nb(z, facet, kind_col, logit, areas0, params0, ar, pr):
     """Facet areas ``ar`` (F,) m² and BRDF parameters ``pr`` (F,P) of one Model 3 state z (D,).
 
@@ -162,7 +168,7 @@ def fill_facet_arrays_nb(z, facet, kind_col, logit, areas0, params0, ar, pr):
             pr[f, j] = params0[f, j]
     for d in range(z.shape[0]):
         zz = z[d]
-        v = 1.0 / (1.0 + math.exp(-zz)) if logit[d] else math.exp(zz)
+        v = from_unbounded_xyz(zz, logit[d])
         if kind_col[d] == 3:
             ar[facet[d]] = v
         else:

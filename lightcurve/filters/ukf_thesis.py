@@ -49,13 +49,13 @@ from ._common import (
     Recorder,
     StateLayout,
     apply_grp,
-    attach_bias,
-    attach_facets,
+    attach_histories,
     grp_rel,
     initial_state_ext,
     layout_transition,
     reflection_histories,
     single_thread,
+    store_epoch,
     truth_state,
 )
 from .gating import InnovationGate
@@ -103,7 +103,7 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
     nq = _noise_dims(p, L)
     n_aug = nx + nq + 1
     wts = unscented_weights(n_aug, alpha, beta, kappa)
-    b_hist, bs_hist, z_hist, zc_hist = reflection_histories(p.n, nb, nz)
+    hists = reflection_histories(p.n, nb, nz)
     controlled = dyn.kind == "controlled"
     for k in range(p.n):
         dt = float(m.t[k] - m.t[k - 1]) if k > 0 else 0.0
@@ -122,7 +122,7 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
         if not ok:
             rec.flags[k] |= FLAG_REFUSED
             q, w, b, P = _linear_step(p, L, bias, facets, q, w, b, P, dt)
-            _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
+            store_epoch(rec, k, L, q, w, b, z, P, hists)
             continue
         La = np.zeros((n_aug, n_aug))
         La[:nx, :nx] = Lp
@@ -170,16 +170,10 @@ def _run(p, L, alpha, beta, kappa, bias, facets):
             q = apply_grp(x[None, :3], q0)[0]        # eq. 7.74 / eq. 7.82
             w = x[3:6].copy()
         b, z, P = x[L.ib].copy(), x[L.iz].copy(), 0.5 * (Pk + Pk.T)
-        _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist)
+        store_epoch(rec, k, L, q, w, b, z, P, hists)
     est = gate.finish(rec.finish(time.perf_counter() - t0))
     est.meta["variant"] = "thesis"
-    if nb:
-        attach_bias(est, bias, b_hist, bs_hist)
-    if nz:
-        attach_facets(est, facets, z_hist, zc_hist)
-    if not na:
-        est.meta["attitude"] = "truth"
-    return est
+    return attach_histories(est, L, bias, facets, hists)
 
 
 def _measurement(k, y, R, Qs, chi, D, xm, Pm, wts, L, nq, controlled, bias, facets, b, z, m,
@@ -229,13 +223,3 @@ def _linear_step(p, L, bias, facets, q, w, b, P, dt):
         b = phib * b
     Pn = Phi @ P @ Phi.T + Qd
     return q, w, b, 0.5 * (Pn + Pn.T)
-
-
-def _store(rec, k, q, w, b, z, P, L, b_hist, bs_hist, z_hist, zc_hist):
-    rec.store(k, q, w, P[:6, :6] if L.na else np.zeros((6, 6)))
-    if L.nb:
-        b_hist[k] = b
-        bs_hist[k] = np.sqrt(np.clip(np.diag(P)[L.ib], 0.0, None))
-    if L.nz:
-        z_hist[k] = z
-        zc_hist[k] = P[L.iz, L.iz]

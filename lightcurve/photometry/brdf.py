@@ -194,39 +194,32 @@ def _load_entry_points() -> None:
         return
     _ENTRY_POINTS_LOADED = True
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name in _REGISTRY:
-            continue
-        try:
-            obj = ep.load()
-        except Exception as exc:  # a broken plug-in must not break the built-ins
-            warnings.warn(f"BRDF entry point {ep.name!r} ({ep.value}) failed to load: {exc}",
-                          RuntimeWarning, stacklevel=2)
-            continue
-        if ep.name not in _REGISTRY:  # the module may have registered itself on import
-            _register(ep.name, obj, replace=False)
+        if ep.name not in _REGISTRY:
+            _load_ep(ep, stacklevel=2)
 
 
 def _load_entry_point(name: str) -> None:
     """Load only the plug-in registered under ``name`` (a name read from a data file must not
     import every installed plug-in)."""
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         if ep.name != name:
             continue  # never imported
-        if ep.name in _REGISTRY:
-            return
-        try:
-            obj = ep.load()
-        except Exception as exc:  # a broken plug-in must not break the built-ins
-            import warnings
-
-            warnings.warn(f"BRDF entry point {ep.name!r} ({ep.value}) failed to load: {exc}",
-                          RuntimeWarning, stacklevel=3)
-            return
         if ep.name not in _REGISTRY:
-            _register(ep.name, obj, replace=False)
+            _load_ep(ep, stacklevel=3)
         return
+
+
+def _load_ep(ep, stacklevel: int) -> None:
+    """Import entry point ``ep`` and register its BRDF; a plug-in that fails to load is a
+    warning (``stacklevel`` as seen from the caller), never an error."""
+    try:
+        obj = ep.load()
+    except Exception as exc:  # a broken plug-in must not break the built-ins
+        warnings.warn(f"BRDF entry point {ep.name!r} ({ep.value}) failed to load: {exc}",
+                      RuntimeWarning, stacklevel=stacklevel + 1)
+        return
+    if ep.name not in _REGISTRY:  # the module may have registered itself on import
+        _register(ep.name, obj, replace=False)
 
 
 def _entry_point_names() -> list:

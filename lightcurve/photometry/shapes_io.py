@@ -369,6 +369,31 @@ def _facets_from_toml(root: Section, materials, file, probs):
     return np.array(areas), normals, np.array(centers), mats, tangents
 
 
+def triangle_areas_normals(tri):
+    """Areas (T,) m² and unit normals (T,3) of triangles ``tri`` (T,3,3) (right-handed vertex
+    order); a degenerate triangle has area 0 and normal 0."""
+    cr = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(cr, axis=1)
+    return area, cr / np.maximum(2.0 * area, 1e-300)[:, None]
+
+
+def coplanar_groups(mesh, tri_area, merge=True) -> list:
+    """The mesh loader's facets: index arrays of the triangles of each trimesh ``facets``
+    group (coplanar neighbours; only groups without a degenerate triangle, and only when
+    ``merge``), every other triangle alone, sorted by smallest triangle index."""
+    groups = []
+    used = np.zeros(len(tri_area), bool)
+    if merge:
+        for g in mesh.facets:
+            g = np.asarray(g, np.int64)
+            if np.all(tri_area[g] > 0):
+                groups.append(g)
+                used[g] = True
+    groups.extend(np.array([i]) for i in np.flatnonzero(~used))
+    groups.sort(key=lambda g: int(g.min()))
+    return groups
+
+
 def _facets_from_mesh(path: Path, scale, merge, probs):
     import trimesh
 
@@ -393,20 +418,9 @@ def _facets_from_mesh(path: Path, scale, merge, probs):
     if not np.all(np.isfinite(V)):
         raise InputError("mesh has non-finite vertex coordinates", file=path)
     tri = V[Fc]
-    cr = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    tri_area = 0.5 * np.linalg.norm(cr, axis=1)
-    tri_norm = cr / np.maximum(2.0 * tri_area, 1e-300)[:, None]
+    tri_area, tri_norm = triangle_areas_normals(tri)
     tri_cent = tri.mean(axis=1)
-    groups = []
-    used = np.zeros(len(Fc), bool)
-    if merge:
-        for g in mesh.facets:
-            g = np.asarray(g, np.int64)
-            if np.all(tri_area[g] > 0):
-                groups.append(g)
-                used[g] = True
-    groups.extend(np.array([i]) for i in np.flatnonzero(~used))
-    groups.sort(key=lambda g: int(g.min()))
+    groups = coplanar_groups(mesh, tri_area, merge)
     areas = np.array([tri_area[g].sum() for g in groups])
     normals = np.array([(tri_norm[g] * tri_area[g, None]).sum(0) / max(tri_area[g].sum(), 1e-300)
                         for g in groups])

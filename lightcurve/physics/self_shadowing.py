@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..photometry.partials import facet_products
+from ..photometry.shapes_io import coplanar_groups, triangle_areas_normals
 from .registry import Effect, register_effect
 
 __all__ = ["SelfShadowing", "facet_triangles", "facet_samples", "visible_fraction_nb"]
@@ -51,22 +52,12 @@ def facet_triangles(shape):
     V = np.asarray(shape.vertices_m, float)
     Fc = np.asarray(shape.faces, np.int64)
     tri = V[Fc]
-    cr = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area = 0.5 * np.linalg.norm(cr, axis=1)
-    tn = cr / np.maximum(2 * area, 1e-300)[:, None]
+    area, tn = triangle_areas_normals(tri)
     owner = None
     try:
         import trimesh
 
-        mesh = trimesh.Trimesh(V, Fc, process=False)
-        groups, used = [], np.zeros(len(Fc), bool)
-        for g in mesh.facets:
-            g = np.asarray(g, np.int64)
-            if np.all(area[g] > 0):
-                groups.append(g)
-                used[g] = True
-        groups.extend(np.array([i]) for i in np.flatnonzero(~used))
-        groups.sort(key=lambda g: int(g.min()))
+        groups = coplanar_groups(trimesh.Trimesh(V, Fc, process=False), area)
         if len(groups) == shape.n_facets:
             cand = np.empty(len(Fc), np.int64)
             for k, g in enumerate(groups):

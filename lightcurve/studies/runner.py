@@ -27,7 +27,6 @@ import functools
 import itertools
 import json
 import os
-import shutil
 import time
 import traceback
 import warnings
@@ -38,6 +37,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import atomic_path, atomic_write_text, clean_stale_temp
+from ..io.study_folder import open_runs_folder, read_study_meta
 from .metrics import cell_summary, run_metrics
 from .study import GRID_KEYS, RunTask, Study
 
@@ -261,17 +261,9 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
     meta = out / "study.json"
     h = study.hash
     fp = code_fingerprint()
+    discard = False
     if meta.exists() or meta.is_symlink():
-        from ..io.safe_open import read_text
-
-        # the folder's own state file, but in a user-chosen folder: a regular file only
-        text = read_text(meta, max_bytes=256 * 1024 * 1024, what="study.json", track=False)
-        try:
-            olddoc = json.loads(text)
-        except ValueError:
-            olddoc = {}
-        if not isinstance(olddoc, dict):
-            olddoc = {}
+        olddoc = read_study_meta(meta)
         old = olddoc.get("study_hash")
         if old != h:
             if not force:
@@ -292,12 +284,8 @@ def prepare_output(out_dir, study: Study, force: bool = False) -> None:
                     "of its scenario files changed); use --force to discard them, or another -o",
                     file=study.source, field="study_hash", value=h[:16],
                     allowed=f"{str(old)[:16]} (stored in {meta})")
-            shutil.rmtree(out / "runs", ignore_errors=True)
-            for f in ("summary.json", "report.html"):
-                (out / f).unlink(missing_ok=True)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
-    # temporary files of killed runs (never a live writer's: lightcurve.io.atomic)
-    clean_stale_temp(out / "runs")
+            discard = True
+    open_runs_folder(out, discard)
     clean_stale_temp(out)
     if not meta.exists() or force:
         doc = {"format": "lightcurve-study", "format_version": 1, "study_hash": h,
