@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -42,19 +41,6 @@ DEFAULT_CASES = [
     "pipelines/thesis/leo-ic1-fast-spin-uncontrolled-1site.toml",
     "pipelines/acquisition/rocket-body-tumbling-1site.toml",
 ]
-
-
-def true_period(lc, shape):
-    """Spin period of the truth at the first epoch: the symmetry axis's precession period for an
-    axisymmetric body (two equal principal moments), else 2π/|ω|."""
-    w = lc.truth_omega_rad_s[0]
-    J = np.asarray(shape.inertia_kg_m2, float)
-    ev = np.sort(np.linalg.eigvalsh(J))
-    if abs(ev[0] - ev[1]) < 1e-6 * ev[2] or abs(ev[1] - ev[2]) < 1e-6 * ev[2]:
-        It = ev[1] if abs(ev[1] - ev[2]) < 1e-6 * ev[2] else ev[0]
-        if not abs(ev[0] - ev[2]) < 1e-6 * ev[2]:
-            return 2 * math.pi * It / np.linalg.norm(J @ w)
-    return 2 * math.pi / np.linalg.norm(w)
 
 
 def shape_symmetries(shape, tol=1e-6):
@@ -117,7 +103,7 @@ def main(argv=None):
 
     import lightcurve
     from lightcurve.acquisition.global_init import GlobalInitConfig
-    from lightcurve.acquisition.period import analyse_period
+    from lightcurve.acquisition.period import analyse_period, truth_spin_period_s
     from lightcurve.photometry import load_shape
     from lightcurve.rotations import attitude_error_angle
 
@@ -129,7 +115,7 @@ def main(argv=None):
             lc = lightcurve.simulate(ROOT / case, seed=seed)
             shape = load_shape(lc.attrs["shape"])
             sym = shape_symmetries(shape)
-            Pt = true_period(lc, shape)
+            Pt = truth_spin_period_s(lc, shape.inertia_kg_m2)
             t0, c0 = time.perf_counter(), time.process_time()
             per = analyse_period(lc)
             cfg = GlobalInitConfig(particles=args.particles, moves=args.moves)

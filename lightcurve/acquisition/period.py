@@ -65,6 +65,7 @@ from ..core.constants import AU_M
 from ..errors import InputError
 
 __all__ = ["PeriodResult", "analyse_period", "reduced_magnitude", "pab_rate_rad_s",
+           "truth_spin_period_s",
            "INDISTINGUISHABLE_DBIC", "MAX_FREQUENCIES"]
 
 #: two-sided 99 % quantile of the standard normal distribution
@@ -87,6 +88,31 @@ def reduced_magnitude(curve) -> np.ndarray:
     """
     return (np.asarray(curve.mag, float) - 5.0 * np.log10(curve.range_obs_m / _REF_RANGE_M)
             - 5.0 * np.log10(curve.range_sun_m / AU_M))
+
+
+def truth_spin_period_s(curve, inertia_kg_m2=None):
+    """The simulated truth's brightness-relevant period, s, or None without a truth rate.
+
+    From the truth body rate ω at the first epoch: for an axisymmetric body (two equal principal
+    moments, given ``inertia_kg_m2``) the precession period of the symmetry axis 2π I_t / |H|
+    (torque-free motion, e.g. Landau & Lifshitz, Mechanics §37), since a symmetric body looks the
+    same after any roll about that axis; else the spin period 2π/|ω|.
+    """
+    w_all = getattr(curve, "truth_omega_rad_s", None)
+    if w_all is None:
+        return None
+    w = np.asarray(w_all, float)[0]
+    if not np.linalg.norm(w) > 0:
+        return None
+    if inertia_kg_m2 is not None:
+        J = np.asarray(inertia_kg_m2, float)
+        ev = np.sort(np.linalg.eigvalsh(J))
+        low_pair = abs(ev[0] - ev[1]) < 1e-6 * ev[2]
+        high_pair = abs(ev[1] - ev[2]) < 1e-6 * ev[2]
+        if (low_pair or high_pair) and not abs(ev[0] - ev[2]) < 1e-6 * ev[2]:
+            It = ev[1] if high_pair else ev[0]
+            return float(2.0 * math.pi * It / np.linalg.norm(J @ w))
+    return float(2.0 * math.pi / np.linalg.norm(w))
 
 
 def pab_rate_rad_s(curve, rows=None) -> float:

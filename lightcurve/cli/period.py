@@ -11,7 +11,8 @@ __all__ = ["register"]
 
 
 def _cmd_period(args) -> int:
-    from ..acquisition.period import analyse_period
+    from ..acquisition.period import analyse_period, truth_spin_period_s
+    from ..errors import InputError
     from ..io.atomic import atomic_write_text
     from ..io.lightcurve_h5 import read_lightcurve
     from ..io.paths import safe_output_path
@@ -53,13 +54,12 @@ def _cmd_period(args) -> int:
         jpath = safe_output_path(out, f"{stem}.period", ".json", field="file name")
         atomic_write_text(jpath, json.dumps(res.summary(), indent=2))
         truth = None
-        if curve.truth_omega_rad_s is not None:   # a simulation: mark 2π/|ω| at the first epoch
-            import math
-
-            import numpy as np
-
-            w = float(np.linalg.norm(np.asarray(curve.truth_omega_rad_s, float)[0]))
-            truth = 2.0 * math.pi / w if w > 0 else None
+        if curve.truth_omega_rad_s is not None:   # a simulation: mark the truth's period
+            try:
+                inertia = curve.resolve_shape().inertia_kg_m2
+            except InputError:
+                inertia = None
+            truth = truth_spin_period_s(curve, inertia)
         ppath = res.plot(safe_output_path(out, f"{stem}.period", ".png", field="file name"),
                          title=Path(args.file).name, true_period_s=truth)
         print(f"wrote {jpath} and {ppath}")

@@ -165,3 +165,21 @@ def test_bad_input_is_one_clear_error():
     with pytest.raises(InputError, match="period"):
         analyse_period(fixed_geometry_curve(np.full(t.size, 9.0), t, 0.01), min_period_s=50,
                        max_period_s=40)
+
+
+def test_truth_spin_period_is_the_precession_period_of_a_symmetric_body():
+    """Torque-free axisymmetric body (I_t = 2, I_a = 1 kg m²), ω = [0.1, 0, 0.2] rad/s: the
+    symmetry axis precesses about H = J ω = [0.2, 0, 0.2] at |H|/I_t, period 2π·2/0.28284 =
+    44.43 s (Landau & Lifshitz §37); a body without two equal moments gives 2π/|ω|; no truth
+    rate gives None."""
+    from types import SimpleNamespace
+
+    from lightcurve.acquisition.period import truth_spin_period_s
+
+    c = SimpleNamespace(truth_omega_rad_s=np.array([[0.1, 0.0, 0.2]]))
+    assert truth_spin_period_s(c, np.diag([2.0, 2.0, 1.0])) == pytest.approx(
+        2 * math.pi * 2.0 / math.hypot(0.2, 0.2), rel=1e-12)
+    assert truth_spin_period_s(c, np.diag([1.0, 2.0, 3.0])) == pytest.approx(
+        2 * math.pi / math.hypot(0.1, 0.2), rel=1e-12)
+    assert truth_spin_period_s(c) == pytest.approx(2 * math.pi / math.hypot(0.1, 0.2))
+    assert truth_spin_period_s(SimpleNamespace(truth_omega_rad_s=None)) is None
