@@ -20,7 +20,7 @@ def _cmd_warmup(args) -> int:
     from ..warmup import warm_up
 
     t0 = time.perf_counter()
-    steps = warm_up(reflection=args.reflection)
+    steps = warm_up(reflection=args.reflection, css=not args.no_css)
     if not args.quiet:
         print("compiled or loaded from the cache: " + ", ".join(
             f"{k} {v:.1f} s" for k, v in steps.items()) + f"; total {time.perf_counter() - t0:.1f} s")
@@ -44,8 +44,11 @@ def register(sub) -> None:
         description="Run a tiny simulation and every attitude filter on it so that numba "
         "compiles the hot kernels and stores them in its on-disk cache (next to the package, or "
         "~/.cache/numba when that is read-only). Later processes load them instead of "
-        "recompiling. Safe to run again: then it only loads the cache.")
+        "recompiling; also runs a 60 s coarse-sun-sensor closed loop per CSS estimator. Safe "
+        "to run again: then it only loads the cache.")
     p.add_argument("--reflection", action="store_true",
                    help="also compile the Model 3 reflection-state filters (slower)")
+    p.add_argument("--no-css", action="store_true",
+                   help="skip the coarse-sun-sensor kernels (compiled by default)")
     add_quiet(p, help="print nothing")
     p.set_defaults(func=_cmd_warmup)
