@@ -102,5 +102,5 @@ def register(sub) -> None:
     p.add_argument("--clip-mad", type=number(0.0, 100.0), default=3.0,
                    help="winsorise detrended magnitudes beyond this many robust sigma (specular "
                    "glints a few harmonics cannot follow); 0 keeps every value (default 3)")
-    add_quiet(p, help="print one line: the period, its 99 % interval and the verdict")
+    add_quiet(p, help="print one line: the period, its 99 %% interval and the verdict")
     p.set_defaults(func=_cmd_period)
