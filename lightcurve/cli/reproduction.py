@@ -13,7 +13,8 @@ def _cmd_reproduction(args) -> int:
 
     dirs = list(args.study or [])
     sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
-                css_section(list(args.css or []))]
+                css_section(list(args.css or []), timing=args.css_timing,
+                            tables4=args.css_tables4, sun_models=args.css_sun_models)]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
     print(f"wrote {args.output} ({n} study output(s) read)")
@@ -35,6 +36,12 @@ def register(sub) -> None:
     p.add_argument("--css", action="append", metavar="DIR",
                    help="an output folder of 'lightcurve css study' (repeatable; O'Keefe, "
                    "DiGregorio)")
+    p.add_argument("--css-timing", default=None, metavar="FILE",
+                   help="output of python benchmarks/css.py (O'Keefe Table 3.1)")
+    p.add_argument("--css-tables4", default=None, metavar="FILE",
+                   help="output of python benchmarks/css_tables_4.py (O'Keefe Tables 4.1-4.3)")
+    p.add_argument("--css-sun-models", default=None, metavar="FILE",
+                   help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",
                    help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.7/10.8)")
     add_output(p, what="file", default="docs/reproduction.md",
