@@ -14,7 +14,8 @@ def _cmd_reproduction(args) -> int:
     dirs = list(args.study or [])
     sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
                 css_section(list(args.css or []), timing=args.css_timing,
-                            tables4=args.css_tables4, sun_models=args.css_sun_models)]
+                            tables4=args.css_tables4, sun_models=args.css_sun_models,
+                            table44=args.css_table44)]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
     print(f"wrote {args.output} ({n} study output(s) read)")
@@ -40,6 +41,8 @@ def register(sub) -> None:
                    help="output of python benchmarks/css.py (O'Keefe Table 3.1)")
     p.add_argument("--css-tables4", default=None, metavar="FILE",
                    help="output of python benchmarks/css_tables_4.py (O'Keefe Tables 4.1-4.3)")
+    p.add_argument("--css-table44", default=None, metavar="FILE",
+                   help="output of python benchmarks/css_table_4_4.py (O'Keefe Table 4.4)")
     p.add_argument("--css-sun-models", default=None, metavar="FILE",
                    help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",
