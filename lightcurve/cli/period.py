@@ -5,12 +5,20 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ._args import add_output, add_quiet, number
+from ._args import add_command, add_output, add_quiet, number, report_written
 
 __all__ = ["register"]
 
 
 def _cmd_period(args) -> int:
+    """Find the spin period of a lightcurve: Lomb-Scargle and phase-dispersion minimisation
+    periodograms of the distance-reduced, detrended magnitudes, a multi-harmonic least-squares
+    fit choosing the period and the number of harmonics by BIC, the period's 1-sigma, the
+    aliases that also fit, and the 99 % interval of the sidereal spin period including the
+    synodic correction for the moving phase-angle bisector. With -o DIR writes
+    DIR/STEM.period.json and a periodogram PNG. The result seeds the rate prior of 'invert
+    --initial global'.
+    """
     from ..acquisition.period import analyse_period, truth_spin_period_s
     from ..errors import InputError
     from ..io.atomic import atomic_write_text
@@ -45,7 +53,7 @@ def _cmd_period(args) -> int:
         ppath = res.plot(safe_output_path(out, f"{stem}.period", ".png", field="file name"),
                          title=Path(args.file).name, true_period_s=truth)
         if not args.quiet:
-            print(f"wrote {jpath} and {ppath}")
+            report_written(jpath, ppath)
     return 0
 
 
@@ -79,15 +87,9 @@ def _print_details(args, res, lo, hi) -> None:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "period", help="spin-period analysis of a lightcurve (periodogram, aliases, uncertainty)",
-        description="Find the spin period of a lightcurve: Lomb-Scargle and phase-dispersion "
-        "minimisation periodograms of the distance-reduced, detrended magnitudes, a "
-        "multi-harmonic least-squares fit choosing the period and the number of harmonics by "
-        "BIC, the period's 1-sigma, the aliases that also fit, and the 99 % interval of the "
-        "sidereal spin period including the synodic correction for the moving phase-angle "
-        "bisector. With -o DIR writes DIR/STEM.period.json and a periodogram PNG. The result "
-        "seeds the rate prior of 'invert --initial global'.")
+    p = add_command(
+        sub, "period", _cmd_period,
+        help="spin-period analysis of a lightcurve (periodogram, aliases, uncertainty)")
     p.add_argument("file", metavar="FILE.h5", help="lightcurve HDF5 file")
     add_output(p, what="folder", help="folder for the JSON summary and the periodogram PNG "
                "(default: print only)")
@@ -103,4 +105,3 @@ def register(sub) -> None:
                    help="winsorise detrended magnitudes beyond this many robust sigma (specular "
                    "glints a few harmonics cannot follow); 0 keeps every value (default 3)")
     add_quiet(p, help="print one line: the period, its 99 %% interval and the verdict")
-    p.set_defaults(func=_cmd_period)

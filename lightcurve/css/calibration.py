@@ -70,7 +70,7 @@ from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
 from .albedo import (AlbedoCells, AlbedoMap, albedo_coefficient_cov_nb, albedo_vectors_nb,
                      builtin_albedo_map, earth_rotation_angle)
-from .attitude_ekf import (mrp_propagate_nb, mrp_switch_cov_nb, mtv3_nb, mv3_nb,
+from .attitude_ekf import (mrp_apply_correction_nb, mrp_propagate_nb, mtv3_nb, mv3_nb,
                            star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
 
@@ -194,14 +194,18 @@ def _consider_mask(n, N):
 
 
 @numba.njit(cache=True)
-def _apply_correction(x, P, xn, Pn):
-    """In place ``x += δx``, ``P ← P⁺``, then the MRP shadow-set switch (O'Keefe eq. 4.2)."""
-    n = x.shape[0]
-    for i in range(n):
-        x[i] += xn[i]
-        for j in range(n):
-            P[i, j] = Pn[i, j]
-    mrp_switch_cov_nb(x, P)
+def _innovation_variance(P, Hrow, r):
+    """``Hrow P Hrowᵀ + r``: the prior variance of one sensor's innovation (zero entries of
+    the Jacobian row skipped)."""
+    n = P.shape[0]
+    v = r
+    for a in range(n):
+        if Hrow[a] != 0.0:
+            acc = 0.0
+            for b in range(n):
+                acc += P[a, b] * Hrow[b]
+            v += Hrow[a] * acc
+    return v
 
 
 @numba.njit(cache=True)
@@ -258,19 +262,12 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     # per-sensor prior innovation statistics (the fault detector of §5.1)
     for i in range(m):
         k = idx[i]
-        v = R[i, i]
-        for a in range(n):
-            if Hm[i, a] != 0.0:
-                acc = 0.0
-                for b in range(n):
-                    acc += P[a, b] * Hm[i, b]
-                v += Hm[i, a] * acc
         nu_out[k] = nu[i]
-        s_out[k] = v
+        s_out[k] = _innovation_variance(P, Hm[i], R[i, i])
     xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
     if not ok:
         return 0, np.nan, 1.0
-    _apply_correction(x, P, xn, Pn)
+    mrp_apply_correction_nb(x, P, xn, Pn)
     return m, nis, 1.0
 
 
@@ -338,13 +335,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         # the innovations of weakly lit sensors upwards; a clearly lit output (y > 3 thr)
         # is used as well, so that a badly predicted sensor cannot lock itself out
         if pred or (y[k] > 3.0 * thr and D[k] + A[k] > 0.0):
-            v = Rk[k]
-            for a in range(n):
-                if H[k, a] != 0.0:
-                    acc = 0.0
-                    for b in range(n):
-                        acc += P[a, b] * H[k, b]
-                    v += H[k, a] * acc
+            v = _innovation_variance(P, H[k], Rk[k])
             if pred:
                 nu_out[k] = y[k] - h[k]
                 s_out[k] = v
@@ -368,7 +359,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         xn, Pn, nis2, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R * infl, cons)
         if not ok:
             return 0, np.nan, 1.0
-    _apply_correction(x, P, xn, Pn)
+    mrp_apply_correction_nb(x, P, xn, Pn)
     return m, nis, infl
 
 

@@ -481,6 +481,15 @@ def _ukf_rss(s, **key):
     return None if c is None else c.get("rss_att_deg_median")
 
 
+def _ukf_rss_ratios(fast, slow, key, a, b):
+    """Median final UKF RSS with ``key = b`` over that with ``key = a`` (the rest controlled,
+    one site, :func:`_ukf_rss`) in the ``fast`` and in the ``slow`` study: ``(fast ratio, slow
+    ratio)``, or None when a cell is missing."""
+    base = dict(dynamics="controlled", sites=1)
+    v = [_ukf_rss(st, **{**base, key: x}) for st in (fast, slow) for x in (a, b)]
+    return None if None in v else (v[1] / v[0], v[3] / v[2])
+
+
 def _bernard_claims(sums):
     """The seven conclusions of §9.4 (bullets in the order of the text)."""
     rows = []
@@ -550,26 +559,20 @@ def _bernard_claims(sums):
     # 5. second site: big gain slow, not fast
     claim = ("a second observatory improves the slow-spinning cases significantly, not the "
              "fast-spinning ones")
-    f1, f2 = (_ukf_rss(f94, dynamics="controlled", sites=1),
-              _ukf_rss(f94, dynamics="controlled", sites=2))
-    s1, s2 = (_ukf_rss(nadir, dynamics="controlled", sites=1),
-              _ukf_rss(nadir, dynamics="controlled", sites=2))
-    if None in (f1, f2, s1, s2):
+    ratios = _ukf_rss_ratios(f94, nadir, "sites", 1, 2)
+    if ratios is None:
         rows.append((claim, "–", "not testable (Fig. 9.4 and `thesis-claims-leo-nadir` needed)"))
     else:
-        rf, rs = f2 / f1, s2 / s1
+        rf, rs = ratios
         rows.append((claim, f"median RSS two sites / one site: fast {_fmt(rf)}, nadir "
                      f"{_fmt(rs)}", _verdict(rs < SIGNIFICANT and rf > SIGNIFICANT)))
     # 6. dynamics matter only for fast spin
     claim = "controlled vs uncontrolled dynamics differ only for the fast-spinning spacecraft"
-    fc, fu = (_ukf_rss(f94, dynamics="controlled", sites=1),
-              _ukf_rss(f94, dynamics="uncontrolled", sites=1))
-    nc, nu = (_ukf_rss(nadir, dynamics="controlled", sites=1),
-              _ukf_rss(nadir, dynamics="uncontrolled", sites=1))
-    if None in (fc, fu, nc, nu):
+    ratios = _ukf_rss_ratios(f94, nadir, "dynamics", "controlled", "uncontrolled")
+    if ratios is None:
         rows.append((claim, "–", "not testable (Fig. 9.4 and `thesis-claims-leo-nadir` needed)"))
     else:
-        rf, rn = fu / fc, nu / nc
+        rf, rn = ratios
         sig = (lambda r: r < SIGNIFICANT or r > 1 / SIGNIFICANT)
         rows.append((claim, f"median RSS uncontrolled / controlled: fast {_fmt(rf)}, nadir "
                      f"{_fmt(rn)}", _verdict(sig(rf) and not sig(rn))))
