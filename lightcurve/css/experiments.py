@@ -67,19 +67,22 @@ def thesis_filter_params(estimator: str, gyro) -> np.ndarray:
         spec = gyro_grade(name) if not isinstance(gyro, GyroSpec) else gyro
         sw, sr, sd = spec.arw, spec.bias_sigma, spec.rrw
         grade = name if name in ok.GYRO_TABLE_2_3 else "intermediate"
-    shadow = 5.0 * ok.CSS_SIM["noise_sigma"]
+    shadow = ok.EKF_TUNING["shadow_level"]
+    sfrac = ok.EKF_TUNING["shadow_fraction"]
     if estimator == "ekf":
         e = ok.EKF_TUNING
         return thesis_params("ekf", sigma_v=e["sigma_v"], sigma_s=e["sigma_s"][grade],
                              sigma_w=sw, sigma_wd=sd, sigma_wr=sr,
                              strong_frac=e["strong_fraction"],
-                             strong_factor=e["strong_sigma_factor"], shadow_level=shadow)
+                             strong_factor=e["strong_sigma_factor"], shadow_level=shadow,
+                             shadow_frac=sfrac)
     e = ok.ECKF_TUNING
     return thesis_params("eckf", sigma_v=e["sigma_v"], sigma_s=e["sigma_s"], sigma_w=sw,
                          sigma_wd=sd, sigma_wr=sr,
                          strong_frac=ok.EKF_TUNING["strong_fraction"],
                          strong_factor=ok.EKF_TUNING["strong_sigma_factor"],
-                         shadow_level=shadow, cons_sigmas=e["consistency_sigmas"],
+                         shadow_level=shadow, shadow_frac=sfrac,
+                         cons_sigmas=e["consistency_sigmas"],
                          sigma_mis=np.radians(e["sigma_misalignment_deg"]),
                          sigma_valpha=e["sigma_v_alpha"], sigma_ck=e["sigma_c_kappa"],
                          sigma_d_dot=e["sigma_d_dot"])

@@ -110,6 +110,10 @@ EKF_TUNING = {
     "sigma_s": {"inertial": 5e-4, "intermediate": 5e-4, "moderate": 4e-3, "low": 4e-2},
     "strong_fraction": 0.5,
     "strong_sigma_factor": 2.0,    # open (§3.2.1.2)
+    # B ∈ S of eq. 3.1/3.31 (open: OPEN_CHOICES "shadow_detection"): no output reaches the same
+    # 50 % of the expected maximum — |d̂| once running, the nominal Ĉ = 1 before the start
+    "shadow_fraction": 0.5,
+    "shadow_level": 0.5,
 }
 
 # §3.3: "For the ECKF estimator, the process noise σ_s is set to 1e-15 rad/√s, and the standard
@@ -259,8 +263,11 @@ OPEN_CHOICES = {
     "ekf_init": ("§3.2 does not give the initial estimate: d̂₀ = WAVG direction scaled by the "
                  "largest output, P₀ = I, at the first sample with an output above the shadow "
                  "level"),
-    "shadow_detection": ("eq. 3.1/3.31 condition B ∉ S: the estimator declares shadow when "
-                         "every output is below 5σ_V = 0.25"),
+    "shadow_detection": ("eq. 3.1/3.31 condition B ∉ S, decided from the CSS outputs alone: "
+                         "shadow when no output reaches 50 % of the expected maximum (§3.2.1.2's "
+                         "strong-measurement level; a directly lit sensor reads ≥ cos 60° = 50 % "
+                         "with the §2.1.3 FOV): of |d̂| once the filter runs, of the nominal "
+                         "scale Ĉ = 1 before it starts"),
     "eckf_selection": ("§3.2.2.2 'measurements above some threshold': the same 50 % of the "
                        "expected maximum as the EKF"),
     "sigma_v_alpha": "ECKF V_αβ σ = 0.1 from §3.2.3",

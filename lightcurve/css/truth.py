@@ -59,7 +59,8 @@ from .okeefe2015 import SPACECRAFT, WHEEL_AXES
 from .sensors import CSSArray
 from .single_point import lsmn_nb, wavg_nb
 from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
-from .sunline_thesis import thesis_init_nb, thesis_propagate_nb, thesis_update_nb
+from .sunline_thesis import (THESIS_PRM, thesis_init_nb, thesis_propagate_nb, thesis_sunlit_nb,
+                             thesis_update_nb)
 
 __all__ = ["Spacecraft", "Dispersions", "CSSScenario", "SimResult", "simulate_css",
            "simulate_css_cases", "ESTIMATORS", "truth_loop_nb"]
@@ -393,7 +394,7 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
         if kind >= 0:
             dt_c = t[1] - t[0] if k == 0 else t[k] - t[k - 1]
             if kind <= 1 and thesis:
-                shadow = ymax < tprm[8]
+                shadow = not thesis_sunlit_nb(Y[k], d, tprm, started)
                 if not started:
                     if thesis_init_nb(Y[k], n_nom, tprm, d, P, Lb, Lam, Beta, Bnu):
                         started = True
@@ -715,7 +716,7 @@ def simulate_css(sc: CSSScenario, rng, *, _albedo_cache=None) -> SimResult:
     if thesis and sc.thesis_params is None and sc.estimator in ("ekf", "eckf"):
         raise ValueError("variant 'thesis' needs thesis_params (lightcurve.css.experiments)")
     tprm = (np.asarray(sc.thesis_params, float) if sc.thesis_params is not None
-            else np.zeros(17))
+            else np.zeros(len(THESIS_PRM)))
     if tprm[8] == 0.0:
         tprm = tprm.copy()
         tprm[8] = 0.25

@@ -337,3 +337,42 @@ def test_thesis_calibration_parameters_from_the_text():
     assert 3 * np.degrees(p.sigma_mis0_rad) == pytest.approx(3.0)
     r = CalibrationParams.thesis_reduced()
     assert not r.use_albedo and r.sigma_css == 0.05 and r.consider_sigma == 0.1
+
+
+def test_thesis_shadow_decision_and_no_update_on_a_fading_sun():
+    # eq. 3.1/3.31: no direct-Sun model (B ∈ S) when no output reaches 50 % of the expected
+    # maximum |d̂| (§3.2.1.2's strong-measurement level; with the 60° FOV of §2.1.3 a directly
+    # lit sensor reads at least cos 60° = 50 %): the penumbra's fading Sun must not drag d̂.
+    from lightcurve.css.sunline_thesis import thesis_sunlit_nb
+
+    for kind in ("ekf", "eckf"):
+        css, prm, (d, P, L, Lam, B, Bnu), az, el = _setup(kind, None)
+        assert prm[8] == pytest.approx(0.5) and prm[17] == pytest.approx(0.5)
+        s = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+        C = 1.3
+        y_full = C * np.clip(css.normals @ s, 0.0, None) * (css.normals @ s
+                                                             >= np.cos(css.fov_half_angle_rad))
+        assert thesis_init_nb(y_full, css.normals, prm, d, P, L, Lam, B, Bnu)
+        d[:] = C * s
+        P[:, :] = np.eye(3) * 1e-3
+        cf = np.cos(css.fov_half_angle_rad)
+        # plain rule, written out: sunlit ⇔ max y ≥ 0.5 and (not started or max y ≥ 0.5 |d̂|)
+        for lit in (1.0, 0.8, 0.45, 0.2, 0.0):
+            y = lit * y_full
+            ref = y.max() >= 0.5 and y.max() >= 0.5 * np.linalg.norm(d)
+            assert thesis_sunlit_nb(y, d, prm, True) == ref
+            assert thesis_sunlit_nb(y, d, prm, False) == (y.max() >= 0.5)
+        d0, P0 = d.copy(), P.copy()
+        y = 0.45 * y_full    # penumbra: max output 0.45·1.3·cos(≈17°) < 0.5·1.3
+        assert y.max() < 0.5 * np.linalg.norm(d)
+        m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
+                                  css.horizon_normals, prm)
+        assert m == 0 and np.isnan(nis)
+        assert np.array_equal(d, d0) and np.array_equal(P, P0)
+        # the same fading Sun with the rule off (the earlier absolute level only) is processed
+        # and pulls |d̂| down (the run-away of the penumbra)
+        prm_off = prm.copy()
+        prm_off[8], prm_off[17] = 0.25, 0.0
+        m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
+                                  css.horizon_normals, prm_off)
+        assert m > 0 and np.linalg.norm(d) < np.linalg.norm(d0)
