@@ -9,7 +9,9 @@ Configurations (``--config``, each one change from ``fix``, the package default)
 * ``rel_only``  — the 50 %-of-|d̂| rule with the earlier absolute level 0.25 (before start);
 * ``p0x10``     — initial covariance P₀ = 10 I instead of I;
 * ``cyl``       — cylindrical Earth shadow in the truth (no penumbra);
-* ``cyl_noalb`` — ``cyl`` without Earth albedo in the truth.
+* ``cyl_noalb`` — ``cyl`` without Earth albedo in the truth;
+* ``valpha02``  — ECKF albedo-bias σ_Vα 0.2 instead of 0.1 (§3.3 does not give it for the
+                  ECKF; 0.1 is §3.2.3's value): a sensitivity, not a tuning.
 
 Per estimator (thesis EKF and ECKF; ``--variant robust`` runs the robust pair instead): the
 p99 level as the CSS study reports it (:func:`lightcurve.css.study.envelope_level` over the
@@ -38,6 +40,7 @@ CONFIGS = {
     "p0x10": ({"p0": 10.0}, False, True),
     "cyl": ({}, True, True),
     "cyl_noalb": ({}, True, False),
+    "valpha02": ({"sigma_valpha": 0.2}, False, True),
 }
 
 
