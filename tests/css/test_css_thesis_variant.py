@@ -376,3 +376,56 @@ def test_thesis_shadow_decision_and_no_update_on_a_fading_sun():
         m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
                                   css.horizon_normals, prm_off)
         assert m > 0 and np.linalg.norm(d) < np.linalg.norm(d0)
+
+
+def test_eckf_measurement_bias_jacobian_matches_finite_differences():
+    # eq. 3.57f against central differences of the measurement model eq. 3.1 (as in §3.2.2.2)
+    # h = C_κ n(θ+θ_β, φ+φ_β)ᵀ d + |d| C_κ V_αβ at Ĉ_κ = 1, θ̂_β = φ̂_β = V̂_αβ = 0: one sensor,
+    # one bias with a prior at a time, P_x ≈ 0 and Λ = 0, so the innovation variance of
+    # eq. 3.47 is W = J_p² σ_p² + |d|² σ_V² and J_p is read back from the kernel's NIS.
+    th, ph = np.radians(30.0), np.radians(20.0)
+
+    def nvec(t, p):
+        return np.array([np.cos(p) * np.cos(t), np.cos(p) * np.sin(t), np.sin(p)])
+
+    n = nvec(th, ph)
+    a = np.cross(n, [0.3, -0.5, 0.8])     # a generic direction: every derivative non-zero
+    a /= np.linalg.norm(a)
+    ang = np.radians(25.0)          # 25° inside the 60° FOV: no §3.2.3 inflation
+    d0 = 1.2 * (np.cos(ang) * n + np.sin(ang) * np.cross(a, n))
+
+    def h(C=1.0, dth=0.0, dph=0.0, V=0.0):
+        return C * nvec(th + dth, ph + dph) @ d0 + np.linalg.norm(d0) * C * V
+
+    eps = 1e-6
+    fd = [(h(C=1 + eps) - h(C=1 - eps)) / (2 * eps), (h(dth=eps) - h(dth=-eps)) / (2 * eps),
+          (h(dph=eps) - h(dph=-eps)) / (2 * eps), (h(V=eps) - h(V=-eps)) / (2 * eps)]
+    prm = thesis_filter_params("eckf", "intermediate")
+    sig_v = prm[1]
+    normals = n[None, :].copy()
+    for p in range(4):
+        d = d0.copy()
+        P = np.eye(3) * 1e-20
+        L, Lam, B = np.zeros((3, 6)), np.zeros((3, 4)), np.zeros((6, 6))
+        Bnu = np.zeros(4)
+        sig_p = 0.3
+        Bnu[p] = sig_p ** 2
+        y = np.array([h() + 0.2])
+        m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, normals, np.array([th]),
+                                  np.array([ph]), np.array([0.5]), np.zeros((1, 3)), prm)
+        assert m == 1
+        W = 0.2 ** 2 / nis
+        Jp2 = (W - (np.linalg.norm(d0) * sig_v) ** 2) / sig_p ** 2
+        assert abs(fd[p]) > 0.05
+        assert np.sqrt(Jp2) == pytest.approx(abs(fd[p]), rel=1e-6)
+        # the sign, through the cross term H Λ Jᵀ + J Λᵀ Hᵀ of eq. 3.47 (Λ column p = λ n)
+        lam = 1e-3
+        d = d0.copy()
+        P = np.eye(3) * 1e-20
+        Lam = np.zeros((3, 4))
+        Lam[:, p] = lam * n
+        m, nis2 = thesis_update_nb(d, P, np.zeros((3, 6)), Lam, np.zeros((6, 6)), Bnu.copy(), y,
+                                   normals, np.array([th]), np.array([ph]), np.array([0.5]),
+                                   np.zeros((1, 3)), prm)
+        Jp = (0.2 ** 2 / nis2 - W) / (2 * lam)
+        assert Jp == pytest.approx(fd[p], rel=1e-5)
