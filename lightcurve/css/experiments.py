@@ -112,7 +112,8 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
     ``albedo``: "toms" (TOMS 1°×1.25° with its spread, §2.1.2.1), "builtin", "none", an
     AlbedoMap or a (mean, std) pair; ``sim``: overrides of the §2.4 values (keys
     altitude_km, inclination_deg, raan_deg, epoch_utc, perturbations, css_rate_hz,
-    gyro_rate_hz and the CSS_SIM keys); extra keywords go to :class:`CSSScenario`."""
+    gyro_rate_hz, shadow_model (truth Earth shadow, default the binary one of eq. 2.21) and the
+    CSS_SIM keys); extra keywords go to :class:`CSSScenario`."""
     sim = dict(sim or {})
     orb = {**ok.ORBIT}
     for k in ("inclination_deg", "raan_deg", "epoch_utc"):
@@ -122,6 +123,7 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
         orb["altitude_m"] = 1e3 * float(sim.pop("altitude_km"))
     perturbations = bool(sim.pop("perturbations", perturbations))
     rates = {k: float(sim.pop(k, ok.CSS_SIM[k])) for k in ("css_rate_hz", "gyro_rate_hz")}
+    shadow_model = str(sim.pop("shadow_model", ok.TRUTH_SHADOW_MODEL))
     unknown = set(sim) - set(ok.CSS_SIM)
     if unknown:
         raise ValueError(f"unknown simulation keys: {', '.join(sorted(unknown))}")
@@ -150,5 +152,6 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
         start_sunlit=False, variant=variant, thesis_params=tp,
         thesis_control=(c["k_gain"], c["p_gain"], c["ki_gain"], float(np.radians(c["deadband_deg"]))),
         control=ControlParams(axis=c["axis"]), noise_in_scale=True,
+        shadow_model=shadow_model,
         gyroless={"rate_limit_deg_s": gl["rate_limit_deg_s"], "lowpass_hz": gl["lowpass_hz"],
                   "sigma_s": gl["sigma_s"]}, **kw)

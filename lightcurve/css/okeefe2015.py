@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ORBIT", "SPACECRAFT", "WHEEL_AXES", "CSS_SIM", "GYRO_TABLE_2_3", "GYRO_DRIFT_TAU_S",
+__all__ = ["ORBIT", "SPACECRAFT", "WHEEL_AXES", "CSS_SIM", "TRUTH_SHADOW_MODEL", "GYRO_TABLE_2_3",
+           "GYRO_DRIFT_TAU_S",
            "EKF_TUNING", "ECKF_TUNING", "CONTROL", "GYROLESS", "CALIBRATION", "FAULT",
            "THESIS_RESULTS", "OPEN_CHOICES", "gyro_sigmas"]
 
@@ -77,6 +78,10 @@ CSS_SIM = {
     "gyro_rate_hz": 10.0,
     "initial_rate_max_deg_s": 2.0,  # §2.4 "uniformly distributed ... maximum value of 2.0°/s"
 }
+
+# eq. 2.21: V_d = V_α = 0 "if B ∈ S", S "the region of space in the Earth's shadow" (§2.1.2):
+# a binary shadow with no penumbra; its shape is open (OPEN_CHOICES "truth_shadow").
+TRUTH_SHADOW_MODEL = "cylindrical"
 
 # Table 2.3 (rate noise σ_ω in °/√s, bias stability σ_ωr in °/s) and §2.3.3
 # σ_ωd² = (2/τ) σ_ωr² with τ the drift stability interval, §2.4 "over 1000 s".
@@ -255,6 +260,9 @@ OPEN_CHOICES = {
     "attitude_torques": ("§2.4 lists orbit perturbations only: the truth attitude carries the "
                          "gravity-gradient torque, no other disturbance"),
     "truth_integrator": "§2.4 leaves it open: fixed-step RK4 at the 10 Hz gyro rate",
+    "truth_shadow": ("eq. 2.21 switches the direct and albedo terms off inside the Earth's "
+                     "shadow S (l. 416: 'the region of space in the Earth's shadow'), with no "
+                     "partial illumination; the shape of S is left open: cylindrical"),
     "gyro_frame": "[GB] = I and no gyro scale-factor or misalignment errors (Table 2.3 gives none)",
     "gyro_bias": ("§2.3.2: ω_β = ω_r + ω_d; ω_r ~ N(0, σ_ωr²) per axis constant, ω_d a random "
                   "walk from zero (eq. 2.50)"),

@@ -623,6 +623,9 @@ def load_css_study(path) -> StudySpec:
         for k in list(sim.data):
             if k not in allowed:
                 continue
+            if k == "shadow_model":
+                d[k] = sim.str(k, choices=("conical", "cylindrical"))
+                continue
             d[k] = sim.bool(k) if isinstance(sim.data[k], bool) else (
                 sim.str(k) if isinstance(sim.data[k], str) else sim.float(k))
         sim.check_unknown()
@@ -634,4 +637,4 @@ def load_css_study(path) -> StudySpec:
 _SIM_KEYS = ("altitude_km", "inclination_deg", "raan_deg", "epoch_utc", "perturbations",
              "css_rate_hz", "gyro_rate_hz", "fov_half_angle_deg", "noise_sigma",
              "misalignment_sigma_deg", "scale_common_max", "scale_individual_sigma",
-             "initial_rate_max_deg_s")
+             "initial_rate_max_deg_s", "shadow_model")

@@ -429,3 +429,24 @@ def test_eckf_measurement_bias_jacobian_matches_finite_differences():
                                    np.zeros((1, 3)), prm)
         Jp = (0.2 ** 2 / nis2 - W) / (2 * lam)
         assert Jp == pytest.approx(fd[p], rel=1e-5)
+
+
+def test_thesis_truth_shadow_is_binary_as_eq_2_21():
+    # eq. 2.21: V_d = V_α = 0 "if B ∈ S" — no partial Sun; the conical model (user default)
+    # has a penumbra of a few seconds at 400 km; both agree outside it
+    from lightcurve.css.truth import simulate_css
+
+    kw = dict(duration_s=6000.0, albedo="none", perturbations=False)   # > one orbit
+    sc_t = thesis_scenario("dual_pyramid", "wavg", **kw)
+    assert sc_t.shadow_model == ok.TRUTH_SHADOW_MODEL == "cylindrical"
+    sc_c = thesis_scenario("dual_pyramid", "wavg", sim={"shadow_model": "conical"}, **kw)
+    rt = simulate_css(sc_t, np.random.default_rng([5, 1]))
+    rc = simulate_css(sc_c, np.random.default_rng([5, 1]))
+    assert set(np.unique(rt.lit)) == {0.0, 1.0}
+    pen = (rc.lit > 0) & (rc.lit < 1)
+    assert 2 <= pen.sum() <= 40        # a few seconds of penumbra at 2 Hz
+    assert np.all((rc.lit[~pen] > 0.5) == (rt.lit[~pen] > 0.5))
+    # no direct Sun on any sensor while B ∈ S
+    assert np.all(rt.direct[rt.lit == 0] == 0)
+    with pytest.raises(ValueError, match="shadow_model"):
+        thesis_scenario("dual_pyramid", "wavg", sim={"shadow_model": "flat"}, **kw)
