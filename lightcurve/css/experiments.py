@@ -67,19 +67,22 @@ def thesis_filter_params(estimator: str, gyro) -> np.ndarray:
         spec = gyro_grade(name) if not isinstance(gyro, GyroSpec) else gyro
         sw, sr, sd = spec.arw, spec.bias_sigma, spec.rrw
         grade = name if name in ok.GYRO_TABLE_2_3 else "intermediate"
-    shadow = 5.0 * ok.CSS_SIM["noise_sigma"]
+    shadow = ok.EKF_TUNING["shadow_level"]
+    sfrac = ok.EKF_TUNING["shadow_fraction"]
     if estimator == "ekf":
         e = ok.EKF_TUNING
         return thesis_params("ekf", sigma_v=e["sigma_v"], sigma_s=e["sigma_s"][grade],
                              sigma_w=sw, sigma_wd=sd, sigma_wr=sr,
                              strong_frac=e["strong_fraction"],
-                             strong_factor=e["strong_sigma_factor"], shadow_level=shadow)
+                             strong_factor=e["strong_sigma_factor"], shadow_level=shadow,
+                             shadow_frac=sfrac)
     e = ok.ECKF_TUNING
     return thesis_params("eckf", sigma_v=e["sigma_v"], sigma_s=e["sigma_s"], sigma_w=sw,
                          sigma_wd=sd, sigma_wr=sr,
                          strong_frac=ok.EKF_TUNING["strong_fraction"],
                          strong_factor=ok.EKF_TUNING["strong_sigma_factor"],
-                         shadow_level=shadow, cons_sigmas=e["consistency_sigmas"],
+                         shadow_level=shadow, shadow_frac=sfrac,
+                         cons_sigmas=e["consistency_sigmas"],
                          sigma_mis=np.radians(e["sigma_misalignment_deg"]),
                          sigma_valpha=e["sigma_v_alpha"], sigma_ck=e["sigma_c_kappa"],
                          sigma_d_dot=e["sigma_d_dot"])
@@ -109,7 +112,8 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
     ``albedo``: "toms" (TOMS 1°×1.25° with its spread, §2.1.2.1), "builtin", "none", an
     AlbedoMap or a (mean, std) pair; ``sim``: overrides of the §2.4 values (keys
     altitude_km, inclination_deg, raan_deg, epoch_utc, perturbations, css_rate_hz,
-    gyro_rate_hz and the CSS_SIM keys); extra keywords go to :class:`CSSScenario`."""
+    gyro_rate_hz, shadow_model (truth Earth shadow, default the binary one of eq. 2.21) and the
+    CSS_SIM keys); extra keywords go to :class:`CSSScenario`."""
     sim = dict(sim or {})
     orb = {**ok.ORBIT}
     for k in ("inclination_deg", "raan_deg", "epoch_utc"):
@@ -119,6 +123,7 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
         orb["altitude_m"] = 1e3 * float(sim.pop("altitude_km"))
     perturbations = bool(sim.pop("perturbations", perturbations))
     rates = {k: float(sim.pop(k, ok.CSS_SIM[k])) for k in ("css_rate_hz", "gyro_rate_hz")}
+    shadow_model = str(sim.pop("shadow_model", ok.TRUTH_SHADOW_MODEL))
     unknown = set(sim) - set(ok.CSS_SIM)
     if unknown:
         raise ValueError(f"unknown simulation keys: {', '.join(sorted(unknown))}")
@@ -147,5 +152,6 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
         start_sunlit=False, variant=variant, thesis_params=tp,
         thesis_control=(c["k_gain"], c["p_gain"], c["ki_gain"], float(np.radians(c["deadband_deg"]))),
         control=ControlParams(axis=c["axis"]), noise_in_scale=True,
+        shadow_model=shadow_model,
         gyroless={"rate_limit_deg_s": gl["rate_limit_deg_s"], "lowpass_hz": gl["lowpass_hz"],
                   "sigma_s": gl["sigma_s"]}, **kw)

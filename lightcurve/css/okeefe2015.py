@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ORBIT", "SPACECRAFT", "WHEEL_AXES", "CSS_SIM", "GYRO_TABLE_2_3", "GYRO_DRIFT_TAU_S",
+__all__ = ["ORBIT", "SPACECRAFT", "WHEEL_AXES", "CSS_SIM", "TRUTH_SHADOW_MODEL", "GYRO_TABLE_2_3",
+           "GYRO_DRIFT_TAU_S",
            "EKF_TUNING", "ECKF_TUNING", "CONTROL", "GYROLESS", "CALIBRATION", "FAULT",
            "THESIS_RESULTS", "OPEN_CHOICES", "gyro_sigmas"]
 
@@ -78,6 +79,10 @@ CSS_SIM = {
     "initial_rate_max_deg_s": 2.0,  # §2.4 "uniformly distributed ... maximum value of 2.0°/s"
 }
 
+# eq. 2.21: V_d = V_α = 0 "if B ∈ S", S "the region of space in the Earth's shadow" (§2.1.2):
+# a binary shadow with no penumbra; its shape is open (OPEN_CHOICES "truth_shadow").
+TRUTH_SHADOW_MODEL = "cylindrical"
+
 # Table 2.3 (rate noise σ_ω in °/√s, bias stability σ_ωr in °/s) and §2.3.3
 # σ_ωd² = (2/τ) σ_ωr² with τ the drift stability interval, §2.4 "over 1000 s".
 GYRO_TABLE_2_3 = {
@@ -110,6 +115,10 @@ EKF_TUNING = {
     "sigma_s": {"inertial": 5e-4, "intermediate": 5e-4, "moderate": 4e-3, "low": 4e-2},
     "strong_fraction": 0.5,
     "strong_sigma_factor": 2.0,    # open (§3.2.1.2)
+    # B ∈ S of eq. 3.1/3.31 (open: OPEN_CHOICES "shadow_detection"): no output reaches the same
+    # 50 % of the expected maximum — |d̂| once running, the nominal Ĉ = 1 before the start
+    "shadow_fraction": 0.5,
+    "shadow_level": 0.5,
 }
 
 # §3.3: "For the ECKF estimator, the process noise σ_s is set to 1e-15 rad/√s, and the standard
@@ -251,6 +260,9 @@ OPEN_CHOICES = {
     "attitude_torques": ("§2.4 lists orbit perturbations only: the truth attitude carries the "
                          "gravity-gradient torque, no other disturbance"),
     "truth_integrator": "§2.4 leaves it open: fixed-step RK4 at the 10 Hz gyro rate",
+    "truth_shadow": ("eq. 2.21 switches the direct and albedo terms off inside the Earth's "
+                     "shadow S (l. 416: 'the region of space in the Earth's shadow'), with no "
+                     "partial illumination; the shape of S is left open: cylindrical"),
     "gyro_frame": "[GB] = I and no gyro scale-factor or misalignment errors (Table 2.3 gives none)",
     "gyro_bias": ("§2.3.2: ω_β = ω_r + ω_d; ω_r ~ N(0, σ_ωr²) per axis constant, ω_d a random "
                   "walk from zero (eq. 2.50)"),
@@ -259,8 +271,11 @@ OPEN_CHOICES = {
     "ekf_init": ("§3.2 does not give the initial estimate: d̂₀ = WAVG direction scaled by the "
                  "largest output, P₀ = I, at the first sample with an output above the shadow "
                  "level"),
-    "shadow_detection": ("eq. 3.1/3.31 condition B ∉ S: the estimator declares shadow when "
-                         "every output is below 5σ_V = 0.25"),
+    "shadow_detection": ("eq. 3.1/3.31 condition B ∉ S, decided from the CSS outputs alone: "
+                         "shadow when no output reaches 50 % of the expected maximum (§3.2.1.2's "
+                         "strong-measurement level; a directly lit sensor reads ≥ cos 60° = 50 % "
+                         "with the §2.1.3 FOV): of |d̂| once the filter runs, of the nominal "
+                         "scale Ĉ = 1 before it starts"),
     "eckf_selection": ("§3.2.2.2 'measurements above some threshold': the same 50 % of the "
                        "expected maximum as the EKF"),
     "sigma_v_alpha": "ECKF V_αβ σ = 0.1 from §3.2.3",

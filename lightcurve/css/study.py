@@ -58,7 +58,7 @@ from .truth import ESTIMATORS
 
 __all__ = ["StudySpec", "load_css_study", "study_tasks", "run_task", "run_css_study",
            "summarize_css_study", "write_css_report", "settled_mask", "direction_nees",
-           "TAU_STEP_S", "ERR_BINS"]
+           "TAU_STEP_S", "ERR_BINS", "envelope_level"]
 
 TAU_STEP_S = 10.0
 """Resolution of the stored envelopes on the sunlit-time axis, s."""
@@ -368,6 +368,22 @@ def _pct_from_hist(h, q):
     return float(ERR_BINS[min(k + 1, ERR_BINS.size - 1)])
 
 
+def envelope_level(E, settle, q=99):
+    """Percentile envelopes over runs of the errors ``E`` (runs × sunlit-time grid, deg; NaN
+    where a run has no sample) and the reported level: the median over the grid points past
+    the settling time (boolean ``settle``) that half the runs or more reach of the ``q``-th
+    percentile envelope.  Returns (envelopes {"50", "90", "99", "mean"}, fraction of runs
+    present per grid point, level or None)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        envs = {str(p): np.nanpercentile(E, p, axis=0) for p in sorted({50, 90, 99, q})}
+        envs["mean"] = np.nanmean(E, axis=0)
+        frac = np.mean(np.isfinite(E), axis=0)
+        lv = envs[str(q)][settle & (frac >= 0.5)]
+        level = float(np.nanmedian(lv)) if np.any(np.isfinite(lv)) else None
+    return envs, frac, level
+
+
 def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
     """Aggregate the stored runs into ``summary.json`` (and return it)."""
     out = Path(out_dir)
@@ -404,13 +420,7 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
         entry = {"estimator": e, "variant": v, "gyro": g, "runs": len(a["env"])}
         if a["env"]:
             E = np.vstack(a["env"]).astype(float)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                envs = {str(q): np.nanpercentile(E, q, axis=0) for q in (50, 90, 99)}
-                envs["mean"] = np.nanmean(E, axis=0)
-                frac = np.mean(np.isfinite(E), axis=0)
-            lv = envs["99"][settle & (frac >= 0.5)]
-            entry["p99_level_deg"] = float(np.nanmedian(lv)) if np.any(np.isfinite(lv)) else None
+            envs, frac, entry["p99_level_deg"] = envelope_level(E, settle)
             entry["p99_pooled_deg"] = _pct_from_hist(a["hist"], 99)
             entry["p50_pooled_deg"] = _pct_from_hist(a["hist"], 50)
             sc = a["sc"]
@@ -613,6 +623,9 @@ def load_css_study(path) -> StudySpec:
         for k in list(sim.data):
             if k not in allowed:
                 continue
+            if k == "shadow_model":
+                d[k] = sim.str(k, choices=("conical", "cylindrical"))
+                continue
             d[k] = sim.bool(k) if isinstance(sim.data[k], bool) else (
                 sim.str(k) if isinstance(sim.data[k], str) else sim.float(k))
         sim.check_unknown()
@@ -624,4 +637,4 @@ def load_css_study(path) -> StudySpec:
 _SIM_KEYS = ("altitude_km", "inclination_deg", "raan_deg", "epoch_utc", "perturbations",
              "css_rate_hz", "gyro_rate_hz", "fov_half_angle_deg", "noise_sigma",
              "misalignment_sigma_deg", "scale_common_max", "scale_individual_sigma",
-             "initial_rate_max_deg_s")
+             "initial_rate_max_deg_s", "shadow_model")

@@ -18,7 +18,8 @@ field of view (``n̂_iᵀ d̂/|d̂| ≥ cos ψ``) and, for the dual pyramid, abo
 whose output is "above 50% of the expected maximum output" (``y_i > 0.5 |d̂|``) are processed
 too, with increased uncertainty (§3.2.1.2; the increase is left open — σ_V doubled,
 :data:`~lightcurve.css.okeefe2015.EKF_TUNING`).  No update in the Earth's shadow (eq. 3.1's
-``B ∉ S``), declared when every output is below ``shadow_level``.
+``B ∈ S``), which the filter decides from the outputs alone (:func:`thesis_sunlit_nb`: no output
+reaches 50 % of the expected maximum).
 
 EKF (§3.2.1): Joseph-form update (eq. 3.24) through
 :func:`lightcurve.core.kalman.joseph_update_nb`; σ_V = 1.84 and σ_s from §3.3.
@@ -55,23 +56,28 @@ from ..core.kalman import consider_update_nb, joseph_update_nb
 from ..core.rotations import skew_nb
 
 __all__ = ["thesis_state", "thesis_init_nb", "thesis_propagate_nb", "thesis_update_nb",
-           "THESIS_PRM", "thesis_params"]
+           "thesis_sunlit_nb", "THESIS_PRM", "thesis_params"]
 
 # layout of the parameter array of the thesis filters
 THESIS_PRM = ("kind", "sigma_v", "sigma_s", "sigma_w", "sigma_wd", "sigma_wr", "strong_frac",
               "strong_factor", "shadow_level", "cons_sigmas", "sigma_mis", "sigma_valpha",
-              "sigma_ck", "sdd_x", "sdd_y", "sdd_z", "p0")
+              "sigma_ck", "sdd_x", "sdd_y", "sdd_z", "p0", "shadow_frac")
 
 
 def thesis_params(kind: str, *, sigma_v, sigma_s, sigma_w, sigma_wd, sigma_wr, strong_frac=0.5,
                   strong_factor=2.0, shadow_level=0.25, cons_sigmas=3.0, sigma_mis=0.0,
-                  sigma_valpha=0.0, sigma_ck=0.0, sigma_d_dot=(0.0, 0.0, 0.0), p0=1.0):
+                  sigma_valpha=0.0, sigma_ck=0.0, sigma_d_dot=(0.0, 0.0, 0.0), p0=1.0,
+                  shadow_frac=0.0):
     """The parameter array of :func:`thesis_update_nb` / :func:`thesis_propagate_nb` (SI units;
-    kind 'ekf' or 'eckf'; see :data:`THESIS_PRM` for the order)."""
+    kind 'ekf' or 'eckf'; see :data:`THESIS_PRM` for the order).  ``shadow_level``: absolute
+    output level below which every sample is shadow; ``shadow_frac``: once the filter runs, a
+    sample is shadow too when no output reaches ``shadow_frac |d̂|`` (0: off; see
+    :func:`thesis_sunlit_nb`)."""
     k = {"ekf": 0.0, "eckf": 1.0}[kind]
     return np.array([k, sigma_v, sigma_s, sigma_w, sigma_wd, sigma_wr, strong_frac, strong_factor,
                      shadow_level, cons_sigmas, sigma_mis, sigma_valpha, sigma_ck,
-                     sigma_d_dot[0], sigma_d_dot[1], sigma_d_dot[2], p0], dtype=float)
+                     sigma_d_dot[0], sigma_d_dot[1], sigma_d_dot[2], p0, shadow_frac],
+                    dtype=float)
 
 
 def thesis_state(n_sensors: int):
@@ -79,6 +85,29 @@ def thesis_state(n_sensors: int):
     N = int(n_sensors)
     return (np.zeros(3), np.eye(3), np.zeros((3, 6)), np.zeros((3, 4 * N)), np.zeros((6, 6)),
             np.zeros(4 * N))
+
+
+@numba.njit(cache=True)
+def thesis_sunlit_nb(y, d, prm, started):
+    """The filter's own decision ``B ∉ S`` of eq. 3.1/3.31 (the spacecraft sees the Sun) from
+    the CSS outputs ``y`` alone (the ch. 3 filters know no orbit, §3 intro): False when every
+    output is below the absolute level ``prm[8]``, or, once the filter runs (``started``), below
+    ``prm[17] |d̂|`` — the "50 % of the expected maximum output" of §3.2.1.2.  With the 60° field
+    of view of §2.1.3 a sensor that sees the Sun directly reads at least cos 60° = 50 % of the
+    maximum, so a sample with no output that high carries no direct Sun (Earth's shadow, the
+    penumbra's fading Sun, or a coverage gap) and eq. 3.1's ``B ∈ S`` branch applies.  How the
+    filter decides ``B ∈ S`` is left open by §3.2 (okeefe2015.OPEN_CHOICES "shadow_detection")."""
+    ymax = 0.0
+    for i in range(y.shape[0]):
+        if y[i] > ymax:
+            ymax = y[i]
+    if ymax < prm[8]:
+        return False
+    if started and prm[17] > 0.0:
+        nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+        if ymax < prm[17] * nd:
+            return False
+    return True
 
 
 @numba.njit(cache=True)
@@ -97,7 +126,7 @@ def thesis_init_nb(y, normals, prm, d, P, L, Lam, Beta, Bnu):
             for j in range(3):
                 s[j] += y[i] * normals[i, j]
     ns = np.sqrt(s[0] ** 2 + s[1] ** 2 + s[2] ** 2)
-    if ymax < prm[8] or ns == 0.0:
+    if not thesis_sunlit_nb(y, d, prm, False) or ns == 0.0:
         return False
     for j in range(3):
         d[j] = s[j] / ns * ymax
@@ -209,11 +238,7 @@ def thesis_update_nb(d, P, L, Lam, Beta, Bnu, y, normals, az, el, cos_fov, horiz
     N = y.shape[0]
     eckf = prm[0] > 0.5
     sig_v, strong_frac, strong_fac = prm[1], prm[6], prm[7]
-    ymax = 0.0
-    for i in range(N):
-        if y[i] > ymax:
-            ymax = y[i]
-    if ymax < prm[8]:
+    if not thesis_sunlit_nb(y, d, prm, True):
         return 0, np.nan
     nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     if nd < 1e-12:

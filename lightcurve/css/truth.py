@@ -59,7 +59,8 @@ from .okeefe2015 import SPACECRAFT, WHEEL_AXES
 from .sensors import CSSArray
 from .single_point import lsmn_nb, wavg_nb
 from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
-from .sunline_thesis import thesis_init_nb, thesis_propagate_nb, thesis_update_nb
+from .sunline_thesis import (THESIS_PRM, thesis_init_nb, thesis_propagate_nb, thesis_sunlit_nb,
+                             thesis_update_nb)
 
 __all__ = ["Spacecraft", "Dispersions", "CSSScenario", "SimResult", "simulate_css",
            "simulate_css_cases", "ESTIMATORS", "truth_loop_nb"]
@@ -120,7 +121,10 @@ class CSSScenario:
     the built-in 10° zonal model, or False (off); filter_albedo: the albedo model of the
     robust filters, same choices except pairs; thesis_params: parameter array of the thesis
     filter (:func:`lightcurve.css.sunline_thesis.thesis_params`); thesis_control: (K, P, K_I,
-    deadband rad) of eq. 3.64; noise_in_scale: eq. 2.21's noise inside the scale factors.
+    deadband rad) of eq. 3.64; noise_in_scale: eq. 2.21's noise inside the scale factors;
+    shadow_model: Earth-shadow model of the truth, "conical" (umbra and penumbra: the direct
+    term scales with the visible fraction of the solar disc) or "cylindrical" (binary, the
+    ``B ∈ S`` of O'Keefe eq. 2.21, :func:`lightcurve.geometry.eclipse.lit_fraction`).
     """
 
     css: CSSArray
@@ -147,6 +151,7 @@ class CSSScenario:
     thesis_params: np.ndarray | None = None
     thesis_control: tuple = (0.041, 0.5, 0.001, float(np.radians(1.0)))
     noise_in_scale: bool = False
+    shadow_model: str = "conical"
     gyroless: dict = field(default_factory=lambda: {"rate_limit_deg_s": 10.0,
                                                     "lowpass_hz": 10.0, "sigma_s": 1.0})
 
@@ -159,6 +164,9 @@ class CSSScenario:
             raise ValueError(f"unknown variant {self.variant!r}; allowed: {', '.join(VARIANTS)}")
         if not (self.dt_s > 0 and self.duration_s > self.dt_s):
             raise ValueError("need dt_s > 0 and duration_s > dt_s")
+        if self.shadow_model not in ("conical", "cylindrical"):
+            raise ValueError(f"unknown shadow_model {self.shadow_model!r}; allowed: conical, "
+                             "cylindrical")
         if int(self.substeps) < 1:
             raise ValueError("substeps must be >= 1")
 
@@ -393,7 +401,7 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
         if kind >= 0:
             dt_c = t[1] - t[0] if k == 0 else t[k] - t[k - 1]
             if kind <= 1 and thesis:
-                shadow = ymax < tprm[8]
+                shadow = not thesis_sunlit_nb(Y[k], d, tprm, started)
                 if not started:
                     if thesis_init_nb(Y[k], n_nom, tprm, d, P, Lb, Lam, Beta, Bnu):
                         started = True
@@ -664,7 +672,7 @@ def simulate_css(sc: CSSScenario, rng, *, _albedo_cache=None) -> SimResult:
     for _ in range(1000):
         u0 = g_orb.uniform(0, 2 * np.pi)
         r0 = _kepler_orbit(sc.altitude_m, inc, raan, u0, np.array([0.0]))
-        if not sc.start_sunlit or lit_fraction(r0, sun0[None, :])[0] > 0.999:
+        if not sc.start_sunlit or lit_fraction(r0, sun0[None, :], sc.shadow_model)[0] > 0.999:
             break
     q0 = _random_quat(g_orb)
     if disp.rate_max_deg_s is not None:
@@ -680,7 +688,7 @@ def simulate_css(sc: CSSScenario, rng, *, _albedo_cache=None) -> SimResult:
     tc = np.arange(0.0, t[-1] + 60.0, 60.0)
     sun_c = sun_position_gcrs(sc.epoch_utc, tc)
     sun_m = np.column_stack([np.interp(t, tc, sun_c[:, i]) for i in range(3)])
-    lit = lit_fraction(r_I, sun_m)
+    lit = lit_fraction(r_I, sun_m, sc.shadow_model)
     sun_hat = np.ascontiguousarray(sun_m / np.linalg.norm(sun_m, axis=1, keepdims=True))
     theta = earth_rotation_angle(sc.epoch_utc, t)
     # ---- CSS errors and noise ----------------------------------------------------------
@@ -715,7 +723,7 @@ def simulate_css(sc: CSSScenario, rng, *, _albedo_cache=None) -> SimResult:
     if thesis and sc.thesis_params is None and sc.estimator in ("ekf", "eckf"):
         raise ValueError("variant 'thesis' needs thesis_params (lightcurve.css.experiments)")
     tprm = (np.asarray(sc.thesis_params, float) if sc.thesis_params is not None
-            else np.zeros(17))
+            else np.zeros(len(THESIS_PRM)))
     if tprm[8] == 0.0:
         tprm = tprm.copy()
         tprm[8] = 0.25

@@ -361,3 +361,114 @@ def test_calibration_timings_count_the_calls_of_table_4_4():
     assert np.all(np.isfinite(tm["update_us"])) and np.all(tm["update_us"] > 0)
     assert np.all(tm["propagation_us"] > 0)
     assert np.array_equal(timed.x, plain.x) and np.array_equal(timed.P_end, plain.P_end)
+def test_thesis_shadow_decision_and_no_update_on_a_fading_sun():
+    # eq. 3.1/3.31: no direct-Sun model (B ∈ S) when no output reaches 50 % of the expected
+    # maximum |d̂| (§3.2.1.2's strong-measurement level; with the 60° FOV of §2.1.3 a directly
+    # lit sensor reads at least cos 60° = 50 %): the penumbra's fading Sun must not drag d̂.
+    from lightcurve.css.sunline_thesis import thesis_sunlit_nb
+
+    for kind in ("ekf", "eckf"):
+        css, prm, (d, P, L, Lam, B, Bnu), az, el = _setup(kind, None)
+        assert prm[8] == pytest.approx(0.5) and prm[17] == pytest.approx(0.5)
+        s = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+        C = 1.3
+        y_full = C * np.clip(css.normals @ s, 0.0, None) * (css.normals @ s
+                                                             >= np.cos(css.fov_half_angle_rad))
+        assert thesis_init_nb(y_full, css.normals, prm, d, P, L, Lam, B, Bnu)
+        d[:] = C * s
+        P[:, :] = np.eye(3) * 1e-3
+        cf = np.cos(css.fov_half_angle_rad)
+        # plain rule, written out: sunlit ⇔ max y ≥ 0.5 and (not started or max y ≥ 0.5 |d̂|)
+        for lit in (1.0, 0.8, 0.45, 0.2, 0.0):
+            y = lit * y_full
+            ref = y.max() >= 0.5 and y.max() >= 0.5 * np.linalg.norm(d)
+            assert thesis_sunlit_nb(y, d, prm, True) == ref
+            assert thesis_sunlit_nb(y, d, prm, False) == (y.max() >= 0.5)
+        d0, P0 = d.copy(), P.copy()
+        y = 0.45 * y_full    # penumbra: max output 0.45·1.3·cos(≈17°) < 0.5·1.3
+        assert y.max() < 0.5 * np.linalg.norm(d)
+        m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
+                                  css.horizon_normals, prm)
+        assert m == 0 and np.isnan(nis)
+        assert np.array_equal(d, d0) and np.array_equal(P, P0)
+        # the same fading Sun with the rule off (the earlier absolute level only) is processed
+        # and pulls |d̂| down (the run-away of the penumbra)
+        prm_off = prm.copy()
+        prm_off[8], prm_off[17] = 0.25, 0.0
+        m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, css.normals, az, el, cf,
+                                  css.horizon_normals, prm_off)
+        assert m > 0 and np.linalg.norm(d) < np.linalg.norm(d0)
+
+
+def test_eckf_measurement_bias_jacobian_matches_finite_differences():
+    # eq. 3.57f against central differences of the measurement model eq. 3.1 (as in §3.2.2.2)
+    # h = C_κ n(θ+θ_β, φ+φ_β)ᵀ d + |d| C_κ V_αβ at Ĉ_κ = 1, θ̂_β = φ̂_β = V̂_αβ = 0: one sensor,
+    # one bias with a prior at a time, P_x ≈ 0 and Λ = 0, so the innovation variance of
+    # eq. 3.47 is W = J_p² σ_p² + |d|² σ_V² and J_p is read back from the kernel's NIS.
+    th, ph = np.radians(30.0), np.radians(20.0)
+
+    def nvec(t, p):
+        return np.array([np.cos(p) * np.cos(t), np.cos(p) * np.sin(t), np.sin(p)])
+
+    n = nvec(th, ph)
+    a = np.cross(n, [0.3, -0.5, 0.8])     # a generic direction: every derivative non-zero
+    a /= np.linalg.norm(a)
+    ang = np.radians(25.0)          # 25° inside the 60° FOV: no §3.2.3 inflation
+    d0 = 1.2 * (np.cos(ang) * n + np.sin(ang) * np.cross(a, n))
+
+    def h(C=1.0, dth=0.0, dph=0.0, V=0.0):
+        return C * nvec(th + dth, ph + dph) @ d0 + np.linalg.norm(d0) * C * V
+
+    eps = 1e-6
+    fd = [(h(C=1 + eps) - h(C=1 - eps)) / (2 * eps), (h(dth=eps) - h(dth=-eps)) / (2 * eps),
+          (h(dph=eps) - h(dph=-eps)) / (2 * eps), (h(V=eps) - h(V=-eps)) / (2 * eps)]
+    prm = thesis_filter_params("eckf", "intermediate")
+    sig_v = prm[1]
+    normals = n[None, :].copy()
+    for p in range(4):
+        d = d0.copy()
+        P = np.eye(3) * 1e-20
+        L, Lam, B = np.zeros((3, 6)), np.zeros((3, 4)), np.zeros((6, 6))
+        Bnu = np.zeros(4)
+        sig_p = 0.3
+        Bnu[p] = sig_p ** 2
+        y = np.array([h() + 0.2])
+        m, nis = thesis_update_nb(d, P, L, Lam, B, Bnu, y, normals, np.array([th]),
+                                  np.array([ph]), np.array([0.5]), np.zeros((1, 3)), prm)
+        assert m == 1
+        W = 0.2 ** 2 / nis
+        Jp2 = (W - (np.linalg.norm(d0) * sig_v) ** 2) / sig_p ** 2
+        assert abs(fd[p]) > 0.05
+        assert np.sqrt(Jp2) == pytest.approx(abs(fd[p]), rel=1e-6)
+        # the sign, through the cross term H Λ Jᵀ + J Λᵀ Hᵀ of eq. 3.47 (Λ column p = λ n)
+        lam = 1e-3
+        d = d0.copy()
+        P = np.eye(3) * 1e-20
+        Lam = np.zeros((3, 4))
+        Lam[:, p] = lam * n
+        m, nis2 = thesis_update_nb(d, P, np.zeros((3, 6)), Lam, np.zeros((6, 6)), Bnu.copy(), y,
+                                   normals, np.array([th]), np.array([ph]), np.array([0.5]),
+                                   np.zeros((1, 3)), prm)
+        Jp = (0.2 ** 2 / nis2 - W) / (2 * lam)
+        assert Jp == pytest.approx(fd[p], rel=1e-5)
+
+
+def test_thesis_truth_shadow_is_binary_as_eq_2_21():
+    # eq. 2.21: V_d = V_α = 0 "if B ∈ S" — no partial Sun; the conical model (user default)
+    # has a penumbra of a few seconds at 400 km; both agree outside it
+    from lightcurve.css.truth import simulate_css
+
+    kw = dict(duration_s=6000.0, albedo="none", perturbations=False)   # > one orbit
+    sc_t = thesis_scenario("dual_pyramid", "wavg", **kw)
+    assert sc_t.shadow_model == ok.TRUTH_SHADOW_MODEL == "cylindrical"
+    sc_c = thesis_scenario("dual_pyramid", "wavg", sim={"shadow_model": "conical"}, **kw)
+    rt = simulate_css(sc_t, np.random.default_rng([5, 1]))
+    rc = simulate_css(sc_c, np.random.default_rng([5, 1]))
+    assert set(np.unique(rt.lit)) == {0.0, 1.0}
+    pen = (rc.lit > 0) & (rc.lit < 1)
+    assert 2 <= pen.sum() <= 40        # a few seconds of penumbra at 2 Hz
+    assert np.all((rc.lit[~pen] > 0.5) == (rt.lit[~pen] > 0.5))
+    # no direct Sun on any sensor while B ∈ S
+    assert np.all(rt.direct[rt.lit == 0] == 0)
+    with pytest.raises(ValueError, match="shadow_model"):
+        thesis_scenario("dual_pyramid", "wavg", sim={"shadow_model": "flat"}, **kw)
