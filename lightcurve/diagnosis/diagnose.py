@@ -264,7 +264,7 @@ def _one_standard_error(ok):
 
 def _joint_pair(current, ok, models, by_name, folds, cur_hs, *, min_gain, n_top, max_nfev,
                 cv_nfev):
-    """Two effects fitted together when neither is identified alone (module docstring, step 5).
+    """Two effects fitted together when the best is not identified alone (module docstring, step 5).
 
     ``ok``: the first step's records (best held-out gain first); ``models``: their fitted
     models. The best candidate (an effect, not the surface refit) is fitted jointly with each
@@ -321,8 +321,8 @@ def _joint_pair(current, ok, models, by_name, folds, cur_hs, *, min_gain, n_top,
     if best is None:
         return None
     model, rb, rec_b, ident_a = best
-    why = ("added jointly with {}: neither is identified alone (each one's misfit inflates the "
-           "other's uncertainty); both are identified fitted together")
+    why = (f"added jointly with {{}}: {ra['name']} is not identified alone (fitted alone, the "
+           "other effect's misfit inflates its uncertainty); both are identified fitted together")
     rec_a = {k: v for k, v in rec_b.items() if k not in ("name", "identification")}
     rec_a.update(name=ra["name"], identification=ident_a, identified=True,
                  decision=why.format(rb["name"]))

@@ -182,10 +182,10 @@ def test_own_simulation_names_its_sensor_errors(tmp_path):
     """`lightcurve css simulate` with its defaults (dual pyramid 60°, 1800 s at 0.5 s, EKF,
     tactical gyro, built-in albedo, Dispersions(), seed 1), then `lightcurve diagnose`: the
     scale factors (common 1.12) and misalignments (1° rms) the simulator drew are both in the
-    data, so neither is identified alone — fitted alone, each leaves the other's misfit and the
-    χ²/dof-scaled covariance hides what the data say. The diagnosis fits the best candidate
-    jointly with the next and names both (before: "no effect can be named", χ²/dof 23.9).
-    Slow (one 1800 s simulation; ~30 s on an idle core)."""
+    data, so the misalignment (the best candidate) is not identified alone — fitted alone it
+    leaves the scale factors' misfit, and the χ²/dof-scaled covariance hides what the data
+    say. The diagnosis fits the best candidate jointly with the next and names both; the
+    named pair removes > 90 % of χ². Slow (one 1800 s EKF simulation and a diagnosis)."""
     from lightcurve.cli import main
 
     h5, out = tmp_path / "sim.h5", tmp_path / "dx"
