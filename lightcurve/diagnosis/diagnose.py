@@ -283,6 +283,10 @@ def _joint_pair(current, ok, models, by_name, folds, cur_hs, *, min_gain, n_top,
     ra, a = top[0], by_name[top[0]["name"]]
     best = None
     for rb in top[1:]:
+        # components held in the single fits (their uncertainty inflated by the other effect's
+        # misfit) are judged afresh in the joint fit
+        a["_eff"].hold_components = {}
+        by_name[rb["name"]]["_eff"].hold_components = {}
         try:
             rec, model = _evaluate(models[ra["name"]], by_name[rb["name"]], folds, cur_hs,
                                    max_nfev=max_nfev, cv_nfev=cv_nfev, first=False)
