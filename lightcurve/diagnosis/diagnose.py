@@ -228,6 +228,13 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
                 ident = _identify(model, cand, first)
     rec.update(applicable=True, identified=ident["identified"], identification=ident,
                in_sample=_in_sample(model.problem, model.fit, current.fit))
+    _score(rec, model, folds, cur_hs, cv_nfev)
+    return rec, model
+
+
+def _score(rec, model, folds, cur_hs, cv_nfev):
+    """Put the held-out numbers of ``model`` (and its gain over ``cur_hs``) into ``rec``;
+    without folds the gain is the in-sample ΔBIC of ``rec["in_sample"]``."""
     if folds is not None:
         cv = cv_predict(model, folds, max_nfev=cv_nfev)
         hs = held_out_summary(model.problem, cv["pred"], folds, cv["pred_var"])
@@ -239,7 +246,6 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
         rec["gain"] = hs["gain"]
     else:
         rec["gain"] = rec["in_sample"]["delta_bic"]
-    return rec, model
 
 
 def _one_standard_error(ok):
@@ -304,19 +310,13 @@ def _joint_pair(current, ok, models, by_name, folds, cur_hs, *, min_gain, n_top,
                 ident_b = identify_term(model.fit, 1)
                 rec.update(identified=ident_b["identified"], identification=ident_b,
                            in_sample=_in_sample(model.problem, model.fit, current.fit))
-                if folds is not None:
-                    cv = cv_predict(model, folds, max_nfev=cv_nfev)
-                    hs = held_out_summary(model.problem, cv["pred"], folds, cv["pred_var"])
-                    hs["gain"] = held_out_gain(cur_hs, hs)
-                    hs["folds_improved"] = folds_improved(cur_hs, hs)
-                    hs["n_folds"] = folds.n_folds
-                    hs["fold_params"] = cv["fold_params"]
-                    rec["held_out"] = hs
-                    rec["gain"] = hs["gain"]
-                else:
-                    rec["gain"] = rec["in_sample"]["delta_bic"]
+                _score(rec, model, folds, cur_hs, cv_nfev)
         if not rec["identified"]:
             continue
+        # the pair against the baseline (the record was scored against the first alone)
+        rec["in_sample"] = _in_sample(model.problem, model.fit, current.fit)
+        if folds is None:
+            rec["gain"] = rec["in_sample"]["delta_bic"]
         gain = rec["gain"]
         if ident_a["identified"] and np.isfinite(gain) and gain > min_gain \
                 and gain > max(ra["gain"], rb["gain"]):
