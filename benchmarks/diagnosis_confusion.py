@@ -15,7 +15,7 @@ the held-out χ²/n per seed, the wall time per case; plus the shared footer (wa
 numba threads, load).
 
 Usage: python benchmarks/diagnosis_confusion.py [--seeds 10] [--cases a,b,...] [--workers N]
-       [--verbose]
+       [--verbose]   (--verbose: one JSON line per recording on stderr as it finishes)
 
 On a shared machine: NUMBA_NUM_THREADS=1 (results are identical; every output element of the
 parallel kernels is independent).
@@ -24,6 +24,7 @@ parallel kernels is independent).
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -73,12 +74,25 @@ def main():
         if c not in C.CASES:
             ap.error(f"unknown case {c!r}; known: {', '.join(C.CASES)}")
     t0 = time.perf_counter()
-    jobs = [(c, s) for c in cases for s in range(a.seeds)]
+    # seed-major order: an interrupted run has the first seeds of every case
+    jobs = [(c, s) for s in range(a.seeds) for c in cases]
+    results = []
+
+    def done(r):
+        results.append(r)
+        if a.verbose:
+            print(json.dumps({k: r.get(k) for k in ("case", "seed", "verdict", "chosen", "first",
+                                                     "held_out_chi2_per_n", "unidentified",
+                                                     "named_unidentified", "error", "wall_s")}),
+                  file=sys.stderr, flush=True)
+
     if a.workers > 1:
         with ProcessPoolExecutor(a.workers) as ex:
-            results = list(ex.map(_one, jobs))
+            for r in ex.map(_one, jobs):
+                done(r)
     else:
-        results = [_one(j) for j in jobs]
+        for j in jobs:
+            done(_one(j))
     out = {"benchmark": "diagnosis_confusion", "seeds": a.seeds, "cases": {}}
     for c in cases:
         rs = [r for r in results if r["case"] == c]
@@ -100,9 +114,6 @@ def main():
             cons += r["verdict"] == "consistent"
             unid += bool(r["named_unidentified"])
             held.append(None if h is None else round(h, 3))
-            if a.verbose:
-                print(c, r["seed"], r["verdict"], r["chosen"], "held", h, "unid", r["unidentified"],
-                      "truth", r["truth"], f"{r['wall_s']:.1f}s", file=sys.stderr, flush=True)
         out["cases"][c] = {"confusion": conf, "named_first": first, "held_out_below_1_5": below,
                            "named_first_and_held_out_below_1_5": both, "consistent": cons,
                            "named_unidentified": unid, "held_out_chi2_per_n": held,

@@ -12,7 +12,8 @@ index) and step times (``t_start_s``) are not differentiable: they are held at t
 each start and enumerated by the caller (:mod:`.candidates`); so are the parameters an
 effect lists in ``hold`` (held at a reference value when the data do not identify them) and
 in its class attribute ``diagnosis_hold`` (parameters only identifiable in combination with
-others, e.g. a common CSS scale factor with the individual ones).
+others, e.g. a common CSS scale factor with the individual ones); single components of a
+per-site/camera/sensor parameter listed in ``hold_components`` are held likewise.
 
 Uncertainties: the covariance of the fitted vector is (JᵀJ)⁺ (J the Jacobian of z at the
 solution), scaled by max(1, χ²/dof) — the usual inflation when the residuals are wider
@@ -126,7 +127,8 @@ def param_layout(effect, ctx) -> _Layout:
         if n is None:
             entries.append((s, None))
         else:
-            entries.extend((s, k) for k in range(n))
+            off = (getattr(effect, "hold_components", None) or {}).get(s.name, ())
+            entries.extend((s, k) for k in range(n) if k not in off)
     return _Layout(effect, entries, tuple(fixed), sizes)
 
 

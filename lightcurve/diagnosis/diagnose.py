@@ -20,7 +20,15 @@ Steps (:func:`diagnose`):
    reported as "fits, but unidentifiable with these data" and the search stops: naming a
    lesser, identified candidate would present an inferior explanation as the answer. A fixable parameter (``ParamSpec.fixable``,
    e.g. the penumbra's atmospheric shadow height) that the data do not identify is held at its
-   reference value and the candidate refitted before it is judged;
+   reference value and the candidate refitted before it is judged; so are single components
+   of a per-site/camera/sensor parameter that the data hardly constrain
+   (:func:`~.identify.weak_components`: e.g. the elevation misalignment of a sensor that
+   sees the Sun only briefly). When no candidate is
+   identified alone (with two effects present, each one fitted alone leaves the other's
+   misfit, and the covariance scaled by that χ²/dof hides what the data identify), the best
+   candidate is fitted jointly with each of the next best effects (``pair_candidates`` in
+   all); the first pair whose members are both identified, with a held-out gain above
+   ``min_gain`` and above either member's alone, is named (:func:`_joint_pair`);
 6. verdict: ``consistent`` when the baseline already explains the recording, ``mismatch``
    otherwise; the final model is the baseline plus the named effects. Further groupings
    (``cv_report``) re-evaluate the baseline and the final model held out, for the report.
@@ -42,7 +50,7 @@ from ..report.views import DiagnosisViews
 from .baseline import bic_gain, fit_baseline, fit_terms
 from .candidates import score_candidates
 from .folds import DEFAULT_FOLDS, make_folds
-from .identify import identify_free, identify_term
+from .identify import identify_free, identify_term, weak_components
 from .residuals import consistency, find_segments
 from .selection import (MIN_GAIN, Model, cv_predict, folds_improved, gain_standard_error,
                         held_out_gain, held_out_summary)
@@ -159,6 +167,28 @@ def _refit_holding(model, eff_index, names, max_nfev):
     return Model(model.problem, model.effects, fixed, fit, model.names)
 
 
+def _refit_holding_components(model, eff_index, comps, max_nfev):
+    """Refit ``model`` with components ``comps`` ({name: indices}) of one effect's
+    per-site/camera/sensor parameters held at their reference (null) value."""
+    eff = model.effects[eff_index]
+    specs = {s.name: s for s in eff.params}
+    hc = {k: frozenset(v) for k, v in (getattr(eff, "hold_components", None) or {}).items()}
+    fixed = [dict(f) for f in model.fixed]
+    terms = [dict(p) for _, p in model.fit.terms]
+    for nm, idx in comps.items():
+        hc[nm] = frozenset(set(hc.get(nm, ())) | set(idx))
+        ref = specs[nm].null if specs[nm].null is not None else specs[nm].default
+        v = np.array(terms[eff_index][nm], float, copy=True)
+        v[sorted(hc[nm])] = ref
+        terms[eff_index][nm] = v
+        fixed[eff_index][nm] = v
+    eff.hold_components = hc
+    fit = fit_terms(model.problem, model.effects, [terms],
+                    theta0=model.fit.theta if model.problem.n_free else None,
+                    max_nfev=max_nfev, fixed_effect_params=fixed)
+    return Model(model.problem, model.effects, fixed, fit, model.names)
+
+
 def _identify(model, cand, first):
     if cand["name"] == SURFACE:
         return identify_free(model.fit, set(cand.get("_kept", ())))
@@ -191,8 +221,20 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
             if held:
                 model = _refit_holding(model, len(model.effects) - 1, held, max_nfev)
                 ident = _identify(model, cand, first)
+        if not ident["identified"] and cand["name"] != SURFACE:
+            weak = weak_components(model.fit, len(model.effects) - 1, ident)
+            if weak:
+                model = _refit_holding_components(model, len(model.effects) - 1, weak, max_nfev)
+                ident = _identify(model, cand, first)
     rec.update(applicable=True, identified=ident["identified"], identification=ident,
                in_sample=_in_sample(model.problem, model.fit, current.fit))
+    _score(rec, model, folds, cur_hs, cv_nfev)
+    return rec, model
+
+
+def _score(rec, model, folds, cur_hs, cv_nfev):
+    """Put the held-out numbers of ``model`` (and its gain over ``cur_hs``) into ``rec``;
+    without folds the gain is the in-sample ΔBIC of ``rec["in_sample"]``."""
     if folds is not None:
         cv = cv_predict(model, folds, max_nfev=cv_nfev)
         hs = held_out_summary(model.problem, cv["pred"], folds, cv["pred_var"])
@@ -204,7 +246,6 @@ def _evaluate(current, cand, folds, cur_hs, *, max_nfev, cv_nfev, first):
         rec["gain"] = hs["gain"]
     else:
         rec["gain"] = rec["in_sample"]["delta_bic"]
-    return rec, model
 
 
 def _one_standard_error(ok):
@@ -225,6 +266,72 @@ def _one_standard_error(ok):
         ok.insert(0, simplest)
         simplest["one_se_rule"] = (f"within one standard error of {best['name']}'s held-out gain "
                                    "with fewer parameters")
+
+
+def _joint_pair(current, ok, models, by_name, folds, cur_hs, *, min_gain, n_top, max_nfev,
+                cv_nfev):
+    """Two effects fitted together when the best is not identified alone (module docstring, step 5).
+
+    ``ok``: the first step's records (best held-out gain first); ``models``: their fitted
+    models. The best candidate (an effect, not the surface refit) is fitted jointly with each
+    of the next ``n_top - 1`` effects whose gain alone exceeds ``min_gain``, in the order of
+    those gains — the best explanation must be part of what is named, as in every step; the
+    first pair whose members' parameters are BOTH identified in the joint fit, with a held-out
+    gain above ``min_gain`` and above either member's alone, is named. Returns ``(model,
+    [record of the best, record of its partner])`` or None.
+    """
+    top = [r for r in ok if r["gain"] > min_gain and r["name"] != SURFACE
+           and r["name"] in models][:n_top]
+    if len(top) < 2 or top[0].get("identified"):
+        return None
+    if top[0] is not ok[0]:
+        return None            # the best explanation is the surface refit: no effect pair
+    ra, a = top[0], by_name[top[0]["name"]]
+    best = None
+    for rb in top[1:]:
+        # components held in the single fits (their uncertainty inflated by the other effect's
+        # misfit) are judged afresh in the joint fit
+        a["_eff"].hold_components = {}
+        by_name[rb["name"]]["_eff"].hold_components = {}
+        try:
+            rec, model = _evaluate(models[ra["name"]], by_name[rb["name"]], folds, cur_hs,
+                                   max_nfev=max_nfev, cv_nfev=cv_nfev, first=False)
+        except Exception:  # pragma: no cover - a failing pair is skipped
+            continue
+        if model is None or not rec.get("identified"):
+            continue
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            ident_a = identify_term(model.fit, 0, profiles=a.get("_profiles"))
+            weak = {} if ident_a["identified"] else weak_components(model.fit, 0, ident_a)
+            if weak:
+                model = _refit_holding_components(model, 0, weak, max_nfev)
+                ident_a = identify_term(model.fit, 0, profiles=a.get("_profiles"))
+                ident_b = identify_term(model.fit, 1)
+                rec.update(identified=ident_b["identified"], identification=ident_b,
+                           in_sample=_in_sample(model.problem, model.fit, current.fit))
+                _score(rec, model, folds, cur_hs, cv_nfev)
+        if not rec["identified"]:
+            continue
+        # the pair against the baseline (the record was scored against the first alone)
+        rec["in_sample"] = _in_sample(model.problem, model.fit, current.fit)
+        if folds is None:
+            rec["gain"] = rec["in_sample"]["delta_bic"]
+        gain = rec["gain"]
+        if ident_a["identified"] and np.isfinite(gain) and gain > min_gain \
+                and gain > max(ra["gain"], rb["gain"]):
+            best = (model, rb, rec, ident_a)
+            break
+    if best is None:
+        return None
+    model, rb, rec_b, ident_a = best
+    why = (f"added jointly with {{}}: {ra['name']} is not identified alone (fitted alone, the "
+           "other effect's misfit inflates its uncertainty); both are identified fitted together")
+    rec_a = {k: v for k, v in rec_b.items() if k not in ("name", "identification")}
+    rec_a.update(name=ra["name"], identification=ident_a, identified=True,
+                 decision=why.format(rb["name"]))
+    rec_b["decision"] = why.format(ra["name"])
+    return model, [rec_a, rec_b]
 
 
 def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: float = MIN_GAIN,
@@ -324,6 +431,24 @@ def diagnose(problem, *, folds="auto", n_folds: int = DEFAULT_FOLDS, min_gain: f
             else:
                 r["decision"] = "smaller held-out gain than " + pick["name"]
         steps.append({"step": step, "base": list(chosen), "records": recs})
+        if pick is None and not chosen and max_effects >= 2:
+            joint = _joint_pair(current, ok, models, by_name, fo, cur_hs, min_gain=min_gain,
+                                n_top=pair_candidates, max_nfev=max_nfev, cv_nfev=cv_nfev)
+            if joint is not None:
+                step += 1
+                model, jrecs = joint
+                for r in jrecs:
+                    r["step"] = step
+                    by_name[r["name"]].setdefault("steps", []).append(r)
+                steps.append({"step": step, "base": [], "records": jrecs, "joint": True})
+                current = model
+                chosen.extend(r["name"] for r in jrecs)
+                unidentified[:] = [u for u in unidentified if u["name"] not in chosen]
+                chk = consistency(current.fit.z, current.problem.t, current.fit.n_params)
+                if fo is not None:
+                    cv = cv_predict(current, fo, max_nfev=cv_nfev)
+                    cur_hs = held_out_summary(current.problem, cv["pred"], fo, cv["pred_var"])
+                break
         if pick is None:
             break
         current = models[pick["name"]]

@@ -23,7 +23,11 @@ An effect is *named* only when every parameter the data constrain is identified;
 
 Parameters the data do not touch at all (zero Jacobian column: a per-site value of a site
 without measurements, a sensor that never sees the Sun) cannot change any prediction; they
-are listed as "no data" and do not block naming. Integer and grid parameters (a CSS sensor
+are listed as "no data" and do not block naming. A component of a per-site/camera/sensor
+parameter that fails criterion 2 alone (a sensor that sees the Sun only briefly, or along a
+path that hardly moves its normal in one direction) is held at its reference value by the
+diagnosis and the effect refitted (:func:`weak_components`); the effect is named when the
+rest is identified and still detected. Integer and grid parameters (a CSS sensor
 index, a fault time) are identified by their profile likelihood over the enumerated values:
 the best value must beat every other sensor by Δχ² > ``GRID_DELTA_CHI2_INTEGER``; a step
 time is identified when its profile rises by Δχ² > ``GRID_DELTA_CHI2_STEP`` somewhere on the
@@ -49,7 +53,7 @@ from scipy import stats
 
 from .baseline import prior_support
 
-__all__ = ["identify_term", "identify_free", "AT_BOUND_FRACTION", "MAX_POSTERIOR_TO_PRIOR_SD",
+__all__ = ["identify_term", "identify_free", "weak_components", "AT_BOUND_FRACTION", "MAX_POSTERIOR_TO_PRIOR_SD",
            "DETECTION_SIGMAS", "MAX_CORRELATION", "GRID_DELTA_CHI2_INTEGER",
            "GRID_DELTA_CHI2_STEP", "prior_sd"]
 
@@ -157,6 +161,13 @@ def identify_term(fit, effect_index: int, profiles=None) -> dict:
     for name, why in (getattr(eff, "diagnosis_hold", {}) or {}).items():
         out[name] = {"value": _scalar(params.get(name)), "sd": None, "ok": True,
                      "status": f"held: {why}"}
+    for name, comps in (getattr(eff, "hold_components", None) or {}).items():
+        v = params.get(name)
+        for c in sorted(comps):
+            out[f"{name}[{c}]"] = {"value": float(np.asarray(v)[c]) if v is not None else None,
+                                   "sd": None, "ok": True,
+                                   "status": "held at its reference value (this component is "
+                                             "not constrained by these data)"}
     for name in getattr(eff, "hold", ()) or ():
         if name not in out:
             out[name] = {"value": _scalar(params.get(name)), "sd": None, "ok": True,
@@ -236,3 +247,32 @@ def _grid_identification(eff, params, profiles):
                                 if ok else f"profile likelihood flat over the whole grid "
                                 f"(Δχ² ≤ {GRID_DELTA_CHI2_STEP:g})")})
     return recs
+
+
+def weak_components(fit, effect_index: int, ident: dict) -> dict:
+    """{parameter name: {component indices}} of the per-site/camera/sensor components of term
+    ``effect_index`` whose only failed criterion is 2 (posterior too wide); empty when any
+    other entry of the term fails, or when every component of a parameter would be held."""
+    bad = {k: r for k, r in ident["params"].items() if not r.get("ok", True)}
+    out = {}
+    comps = {}
+    for i, (owner, spec, comp) in enumerate(fit.owners):
+        if owner != effect_index or comp is None:
+            continue
+        label = fit.names[i].split(".", 1)[1] if "." in fit.names[i] else fit.names[i]
+        comps.setdefault(spec.name, []).append(comp)
+        r = bad.get(label)
+        if r is None:
+            continue
+        if not str(r.get("status", "")).startswith("posterior sd"):
+            return {}
+        out.setdefault(spec.name, set()).add(comp)
+    for k in bad:
+        base = k.split("[", 1)[0]
+        if base not in out and not k.endswith("(all)"):
+            return {}
+        if k.endswith("(all)"):
+            return {}
+    if any(len(v) >= len(comps.get(n, ())) for n, v in out.items()):
+        return {}
+    return out

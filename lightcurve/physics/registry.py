@@ -183,6 +183,9 @@ class Effect:
     diagnosis_hold: dict = {}
     #: parameters a fit holds at the value it is given (set per instance by the diagnosis)
     hold: frozenset = frozenset()
+    #: components of per-site/camera/sensor parameters a fit holds at the value it is given,
+    #: {name: frozenset(indices)} (set per instance by the diagnosis)
+    hold_components: dict = {}
 
     def __init__(self, **options):
         unknown = set(options) - set(self.options)
