@@ -291,3 +291,30 @@ def test_errors_name_the_file(tmp_path, capsys):
     assert code == 2
     bad = [ln for ln in err.splitlines() if "no_such_shape" in ln]
     assert bad and str(q) in bad[0], err
+
+
+def test_site_file_fault_names_the_site_file(tmp_path, capsys):
+    """A fault inside a site catalog file reached through a scenario's `[[sites]] name` (a
+    latitude of 1000°, a FIFO in the `--sites` folder) is reported on the site file, its key
+    and value — it used to be reported as `s.toml: field 'sites[0].name' ... (got 'socorro')`,
+    naming neither the faulty file nor the faulty value."""
+    import os
+
+    scen = _scenario(tmp_path, DEFAULT)
+    sites = tmp_path / "sites"
+    sites.mkdir()
+    text = (data_dir("observatories") / "socorro.toml").read_text()
+    bad = tmp_path / "sites" / "socorro.toml"
+    bad.write_text("\n".join("lat_deg = 1000.0" if ln.startswith("lat_deg") else ln
+                             for ln in text.splitlines()) + "\n")
+    assert "lat_deg = 1000.0" in bad.read_text()
+    code, err = run_cli(["simulate", scen, "-o", tmp_path / "o.h5", "--sites", sites], capsys)
+    line = one_line(err)
+    assert code == 2 and str(bad) in line and "lat_deg" in line and "1000" in line, line
+    assert "'socorro'" in line and str(scen) in line  # where it was asked for
+    bad.unlink()
+    os.mkfifo(tmp_path / "sites" / "pipe.toml")
+    code, err = run_cli(["simulate", scen, "-o", tmp_path / "o.h5", "--sites", sites], capsys)
+    line = one_line(err)
+    assert code == 2 and str(tmp_path / "sites" / "pipe.toml") in line and "FIFO" in line, line
+    assert not (tmp_path / "o.h5").exists()
