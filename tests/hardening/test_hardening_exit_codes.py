@@ -318,3 +318,25 @@ def test_site_file_fault_names_the_site_file(tmp_path, capsys):
     line = one_line(err)
     assert code == 2 and str(tmp_path / "sites" / "pipe.toml") in line and "FIFO" in line, line
     assert not (tmp_path / "o.h5").exists()
+
+
+def test_embedded_shape_inertia_too_large_names_the_dataset(tmp_path, capsys):
+    """A received lightcurve whose stored shape has inertia 1e308: exit 2 naming
+    `shape/inertia_kg_m2`, the value and the limit, as for a shape TOML (it used to end in
+    "corrupted or unexpected HDF5 content: Eigenvalues did not converge")."""
+    import h5py
+
+    from lightcurve.photometry import load_shape
+
+    lc = small_curve()
+    lc.shape = load_shape("cube_1u")
+    p = tmp_path / "heavy.h5"
+    lc.write(p)
+    with h5py.File(p, "r+") as h:
+        h["shape/inertia_kg_m2"][...] = np.eye(3) * 1e308
+    code, err = run_cli(["invert", p, "-o", tmp_path / "inv", "--workers", "1", "-q"], capsys)
+    lines = [ln for ln in err.splitlines() if ln.startswith("lightcurve: error:")]
+    assert code == 2 and len(lines) == 1, err
+    line = lines[0]
+    assert str(p) in line and "shape/inertia_kg_m2" in line, line
+    assert "1e+308" in line and "1e+12" in line, line
