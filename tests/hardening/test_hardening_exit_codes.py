@@ -340,3 +340,16 @@ def test_embedded_shape_inertia_too_large_names_the_dataset(tmp_path, capsys):
     line = lines[0]
     assert str(p) in line and "shape/inertia_kg_m2" in line, line
     assert "1e+308" in line and "1e+12" in line, line
+
+
+def test_numpy_values_shown_as_plain_numbers(tmp_path, capsys):
+    """`omega_deg_s = [1e308, ...]` is reported as `(got 1e+308)`, not `(got
+    np.float64(1e+308))` (NumPy 2's repr of its scalars leaked into the one-line message)."""
+    text = DEFAULT.replace("omega_deg_s = [2.0, 1.0, 3.6]", "omega_deg_s = [1e308, 1.0, 3.6]")
+    assert text != DEFAULT
+    p = _scenario(tmp_path, text)
+    code, err = run_cli(["simulate", p, "-o", tmp_path / "o.h5"], capsys)
+    line = one_line(err)
+    assert code == 2 and "attitude.omega_deg_s" in line and "(got 1e+308)" in line, line
+    assert str(InputError("x", value=np.float64(0.5))) == "x (got 0.5)"
+    assert str(InputError("x", value=np.int64(3))) == "x (got 3)"
