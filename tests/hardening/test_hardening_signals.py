@@ -212,6 +212,55 @@ def test_sigterm_and_sighup_end_like_ctrl_c(signame, code, capsys, monkeypatch):
         signal.signal(sig, prev)
 
 
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
+def test_signal_swallowed_in_a_weakref_callback_is_delivered_again(signame):
+    """A signal whose handler runs inside a weakref callback (where Python only prints
+    "Exception ignored in" and goes on) still ends the block: it is delivered again from
+    ordinary code. Before, the SIGTERM was lost and later ones ignored — a `compare
+    --dask-local` killed with SIGTERM ran all its remaining runs and exited 0."""
+    import gc
+    import weakref
+
+    from lightcurve.process import Terminated, handle_termination
+
+    sig = getattr(signal, signame)
+    expected = Terminated if signame == "SIGTERM" else KeyboardInterrupt
+    prev_int = signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    class Obj:
+        pass
+
+    def callback(ref):  # the handler runs here, between two of these bytecodes
+        os.kill(os.getpid(), sig)
+        for _ in range(10000):
+            pass
+
+    swallowed = []
+    old_hook = sys.unraisablehook
+    try:
+        with pytest.raises(expected):
+            with handle_termination():
+                hook = sys.unraisablehook
+
+                def spy(u):  # the exception really is lost in the callback first
+                    swallowed.append(type(u.exc_value))
+                    hook(u)
+
+                sys.unraisablehook = spy
+                obj = Obj()
+                ref = weakref.ref(obj, callback)
+                del obj
+                gc.collect()
+                t0 = time.monotonic()
+                while time.monotonic() - t0 < 5:  # ordinary code: the re-delivery lands here
+                    time.sleep(0.01)
+        assert swallowed and issubclass(swallowed[0], KeyboardInterrupt), swallowed
+        assert ref() is None
+    finally:
+        sys.unraisablehook = old_hook
+        signal.signal(signal.SIGINT, prev_int)
+
+
 def test_stop_pool_terminates_busy_workers():
     """lightcurve.process.stop_pool ends workers busy with long tasks at once instead of
     waiting for the tasks (what `with ProcessPoolExecutor` does on an exception)."""
