@@ -120,30 +120,35 @@ def _read_to_eof(fd, timeout_s):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
-def test_killed_compare_leaves_no_process_and_closes_the_pipe(sig, tmp_path):
+@pytest.mark.parametrize("sig, executor", [
+    (signal.SIGTERM, ("--workers", "2")), (signal.SIGKILL, ("--workers", "2")),
+    (signal.SIGKILL, ("--dask-local", "2")),  # the LocalCluster's worker processes
+], ids=["SIGTERM-pool", "SIGKILL-pool", "SIGKILL-dask-local"])
+def test_killed_compare_leaves_no_process_and_closes_the_pipe(sig, executor, tmp_path):
     (tmp_path / "tiny-controlled-1site.toml").write_text(SCENARIO)
     (tmp_path / "study.toml").write_text(STUDY)
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     # like `lightcurve compare … 2>&1 | cat`: one pipe for stdout and stderr
     proc = subprocess.Popen([sys.executable, "-m", "lightcurve", "compare", "study.toml", "-o",
-                             str(out), "--workers", "2", "-q"], env=env, cwd=tmp_path,
+                             str(out), *executor, "-q"], env=env, cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     procs = {}
+    need = 3 if "--dask-local" in executor else 4
     try:
         deadline = time.monotonic() + 180
         runs = out / "runs"
         while time.monotonic() < deadline and proc.poll() is None:
             procs.update(_descendants(proc.pid))
             stored = len(list(runs.glob("*.h5"))) if runs.is_dir() else 0
-            # pool running: forkserver + resource tracker + 2 workers, and runs stored
-            if len(procs) >= 4 and stored >= 2:
+            # pool running: forkserver + resource tracker + 2 workers (Dask: the nannies live in
+            # the main process; 2 worker processes + resource tracker), and runs stored
+            if len(procs) >= need and stored >= 2:
                 break
             time.sleep(0.05)
         assert proc.poll() is None, f"compare ended early: {proc.communicate()}"
         procs.update(_descendants(proc.pid))
-        assert len(procs) >= 4, procs
+        assert len(procs) >= need, procs
         os.kill(proc.pid, sig)  # the main process only, as `kill PID` does
         text = _read_to_eof(proc.stdout.fileno(), 30 if sig == signal.SIGTERM else 10)
         code = proc.wait(timeout=30)
