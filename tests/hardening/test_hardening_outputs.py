@@ -140,6 +140,31 @@ def test_batch_write_failure_recorded_and_batch_goes_on(tmp_path, capsys):
         assert Path(summary[k]["result"]).is_file() and "error" not in summary[k]
 
 
+def test_interrupted_batch_still_writes_the_summary(tmp_path, monkeypatch):
+    """A batch interrupted (Ctrl-C, SIGTERM) after its first file writes summary.json listing
+    the file finished, then lets the interruption through."""
+    import lightcurve.studies.batch as batch
+
+    files = []
+    for k in (1, 2, 3):
+        _curve(tmp_path / f"b{k}.h5")
+        files.append(tmp_path / f"b{k}.h5")
+    real_store, calls = batch._store, []
+
+    def store_then_interrupt(*a, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_store(*a, **kw)
+
+    monkeypatch.setattr(batch, "_store", store_then_interrupt)
+    out = tmp_path / "r"
+    with pytest.raises(KeyboardInterrupt):
+        batch.invert_files([str(f) for f in files], "ukf", out, workers=1, progress=False)
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary) == ["b1"] and (out / "b1.ukf.h5").is_file(), summary
+
+
 def test_batch_plot_write_failure_recorded(tmp_path, capsys):
     d = tmp_path / "in"
     d.mkdir()
