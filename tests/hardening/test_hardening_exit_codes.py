@@ -353,3 +353,24 @@ def test_numpy_values_shown_as_plain_numbers(tmp_path, capsys):
     assert code == 2 and "attitude.omega_deg_s" in line and "(got 1e+308)" in line, line
     assert str(InputError("x", value=np.float64(0.5))) == "x (got 0.5)"
     assert str(InputError("x", value=np.int64(3))) == "x (got 3)"
+
+
+def test_dask_local_success_is_silent_on_stderr(tmp_path):
+    """A successful `invert --dask-local 1 -q` (a real subprocess: the scheduler, nanny and
+    worker log through `logging`, which capsys does not see) prints nothing on stderr — no
+    Dask nanny or scheduler chatter."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    p = tmp_path / "a.h5"
+    small_curve().write(p)
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, "-m", "lightcurve", "invert", str(p), "-o",
+                           str(tmp_path / "inv"), "--dask-local", "1", "-q"], env=env,
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "", proc.stderr
+    assert (tmp_path / "inv" / "a.ukf.h5").is_file()
