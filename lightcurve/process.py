@@ -209,6 +209,10 @@ def stop_pool(executor, grace_s: float = 2.0) -> None:
     its workers, SIGKILL those still alive after ``grace_s``, reap them, and fail the tasks
     they were running (``BrokenProcessPool``)."""
     procs = list((getattr(executor, "_processes", None) or {}).values())
+    # the executor forgets its manager thread on the first shutdown call: keep it, so that it
+    # is joined before the tasks are failed here (else both set the same future's exception
+    # and the thread dies with InvalidStateError, a traceback on stderr)
+    manager = getattr(executor, "_executor_manager_thread", None)
     with contextlib.suppress(Exception):
         executor.shutdown(wait=False, cancel_futures=True)
     for p in procs:
@@ -225,6 +229,8 @@ def stop_pool(executor, grace_s: float = 2.0) -> None:
                 p.join(1.0)
     with contextlib.suppress(Exception):  # reap the executor's threads and queues now
         executor.shutdown(wait=True)
+    if manager is not None and manager is not threading.current_thread():
+        manager.join(5.0)
     # a task whose worker was killed is failed at once (the executor's own thread does this
     # asynchronously, and not at all when it had already left on the shutdown request)
     from concurrent.futures.process import BrokenProcessPool
