@@ -8,6 +8,7 @@ is a usage error (exit 2) at parse time, never a crash later on.
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
 
 import numpy as np
@@ -18,7 +19,8 @@ __all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input", "naming
            "output_path", "csv_floats", "initial_q", "initial_omega_rad_s", "SHARED_OPTIONS", "add_output",
            "add_library", "add_sites", "add_shape", "add_model_options", "add_seed",
            "add_executors", "add_workers", "add_quiet", "add_plot", "add_variant", "add_device",
-           "given", "refuse_inapplicable", "progress_bar"]
+           "given", "refuse_inapplicable", "progress_bar", "add_command", "add_group",
+           "report_written"]
 
 
 def number(lo=None, hi=None, *, lo_open=False, hi_open=False, integer=False):
@@ -315,12 +317,35 @@ def progress_bar(total=None, desc=None, quiet=False, unit="it"):
                 dynamic_ncols=True, leave=False)
 
 
+def add_command(sub, name, func, *, help, description=None, **defaults):
+    """The subcommand ``name`` of the subparsers ``sub``, run by ``func(args) -> exit status``:
+    its parser, with ``help`` (its line in the command list) and ``description`` (its
+    ``--help`` text; default: the handler's docstring, so the command is described in one
+    place), and ``func`` stored as ``args.func`` (with ``defaults``, e.g. the ``resume_hint``
+    printed on interruption). Returns the parser for the command's options."""
+    if description is None and func.__doc__:
+        description = inspect.cleandoc(func.__doc__)
+    p = sub.add_parser(name, help=help, description=description)
+    p.set_defaults(func=func, **defaults)
+    return p
+
+
+def report_written(*paths, detail="") -> int:
+    """Print the line a command ends with, ``wrote A``, ``wrote A and B`` or ``wrote A, B and
+    C`` followed by ``detail``, and return the success exit status 0 (``return
+    report_written(...)`` ends a handler)."""
+    names = [str(p) for p in paths]
+    listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    print(f"wrote {listed}{detail}")
+    return 0
+
+
 def add_group(sub, name, *, title, metavar, help, description):
     """A command group ``name`` with its own actions: returns ``(parser, actions)`` (the
     subparsers to add the actions to); the group alone prints its help and exits 2."""
-    p = sub.add_parser(name, help=help, description=description)
+    p = add_command(sub, name, lambda args: (p.print_help(), 2)[1], help=help,
+                    description=description)
     actions = p.add_subparsers(title=title, metavar=metavar)
-    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
     return p, actions
 
 

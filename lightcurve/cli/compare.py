@@ -4,12 +4,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._args import add_device, add_executors, add_model_options, add_output, add_quiet, number
+from ._args import (add_command, add_device, add_executors, add_model_options, add_output,
+                    add_quiet, number, report_written)
 
 __all__ = ["register"]
 
 
 def _cmd_compare(args) -> int:
+    """Run every cell of a study TOML (grid of filters, dynamics, sites, initial errors, noise
+    levels) RUNS times: simulate, invert, score. Each finished run is stored under DIR/runs/ as
+    it completes; rerunning the same command resumes. Writes DIR/summary.json and a
+    self-contained DIR/report.html (Bernard 2021 fig. 9.4 table). Results do not depend on the
+    executor or the worker count.
+    """
     from ..studies.runner import run_study
     from ..studies.study import load_study
 
@@ -31,19 +38,14 @@ def _cmd_compare(args) -> int:
         print(f"Bernard (2021) Fig. {summary['thesis_figure']}, {summary.get('variant')} "
               f"variant: {agr['agree']} of {agr['compared']} run cells agree ({pct:.0f} %; "
               f"{byf}){ind}")
-    print(f"wrote {Path(args.output) / 'summary.json'} and {Path(args.output) / 'report.html'}")
-    return 0
+    return report_written(Path(args.output) / "summary.json", Path(args.output) / "report.html")
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "compare",
-        help="run a Monte Carlo filter-comparison study (resumable; process pool or Dask)",
-        description="Run every cell of a study TOML (grid of filters, dynamics, sites, initial "
-        "errors, noise levels) RUNS times: simulate, invert, score. Each finished run is stored "
-        "under DIR/runs/ as it completes; rerunning the same command resumes. Writes "
-        "DIR/summary.json and a self-contained DIR/report.html (Bernard 2021 fig. 9.4 table). "
-        "Results do not depend on the executor or the worker count.")
+    p = add_command(
+        sub, "compare", _cmd_compare, resume_hint="finished runs are kept in {output}/runs; run "
+        "the same command again to resume",
+        help="run a Monte Carlo filter-comparison study (resumable; process pool or Dask)")
     p.add_argument("study", metavar="STUDY.toml", help="study file (docs/formats.md, Studies)")
     p.add_argument("--runs", type=number(1, 1_000_000, integer=True), default=None,
                    help="runs per cell (default: the study's [study] runs)")
@@ -56,5 +58,3 @@ def register(sub) -> None:
     add_quiet(p, help="no progress bar")
     add_model_options(p, shape=False)
     add_device(p)
-    p.set_defaults(func=_cmd_compare, resume_hint="finished runs are kept in {output}/runs; "
-                   "run the same command again to resume")

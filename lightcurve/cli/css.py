@@ -6,8 +6,8 @@ import argparse
 
 import numpy as np
 
-from ._args import (add_executors, add_output, add_plot, add_quiet, add_seed, add_workers, number,
-                    output_not_input, output_path)
+from ._args import (add_command, add_executors, add_group, add_output, add_plot, add_quiet,
+                    add_seed, add_workers, number, output_not_input, output_path, report_written)
 
 __all__ = ["register"]
 
@@ -32,6 +32,11 @@ def _css_albedo(spec):
 
 def _cmd_css_simulate(args) -> int:
 
+    """Simulate one §2.4 run: 400 km polar orbit, dispersed attitude, rates and sensor errors, CSS
+    outputs with albedo, gyro, the chosen estimator and optionally the MRP sun-pointing
+    controller. Prints the angular error and optionally writes an HDF5 recording for 'css
+    estimate'.
+    """
     from ..css.recording import write_css_recording
     from ..css.study import settled_mask
     from ..css.sunline_ekf import gyroless_params
@@ -87,12 +92,15 @@ def _cmd_css_simulate(args) -> int:
         print(f"final pointing error {pe[-1]:.2f} deg")
     if args.output:
         write_css_recording(args.output, r, css, args.epoch, gyro is not None)
-        print(f"wrote {args.output}")
+        report_written(args.output)
     return 0
 
 
 def _cmd_css_estimate(args) -> int:
 
+    """Run WAVG, LSMN, WLSMN, the sun-line EKF or the ECKF on a CSS recording (HDF5 written by 'css
+    simulate'); prints the error against the truth when present.
+    """
     from ..css.recording import read_css_recording
     from ..css.single_point import angle_deg, estimate
     from ..css.sunline_ekf import gyroless_params
@@ -123,11 +131,17 @@ def _cmd_css_estimate(args) -> int:
         with atomic_path(args.output, suffix=".csv") as tmp:
             np.savetxt(tmp, np.column_stack([rec["t"], s_hat]), delimiter=",",
                        header="t_s,s_hat_x,s_hat_y,s_hat_z (body axes)", comments="")
-        print(f"wrote {args.output}")
+        report_written(args.output)
     return 0
 
 
 def _cmd_css_study(args) -> int:
+    """Run or resume a CSS Monte Carlo study (pipelines/css/okeefe2015/*.toml: the thesis's
+    experiments, thesis and robust variants side by side) and write summary.json and a
+    self-contained report.html: the 99th-percentile error level next to the thesis's number,
+    percentile envelopes against sunlit time, time above 15/30 deg per orbit. Finished runs are
+    kept under DIR/runs and skipped on restart.
+    """
     from ..css.study import load_css_study, run_css_study
 
     spec = load_css_study(args.pipeline)
@@ -161,12 +175,12 @@ def _output(q, text) -> None:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "css", help="coarse sun sensors: simulate, estimate the Sun direction, Monte Carlo studies",
+    _, css_sub = add_group(
+        sub, "css", title="css commands", metavar="CSS_COMMAND",
+        help="coarse sun sensors: simulate, estimate the Sun direction, Monte Carlo studies",
         description="Coarse-sun-sensor (CSS) tools after O'Keefe (2015): cosine sensors with "
         "Earth albedo, rate gyros, single-point (WAVG/LSMN/WLSMN) and sequential (EKF/ECKF) "
         "sun-direction estimators and MRP sun-pointing control.")
-    css_sub = p.add_subparsers(title="css commands", metavar="CSS_COMMAND")
 
     def common(q):
         q.add_argument("--config", default="dual_pyramid",
@@ -174,12 +188,9 @@ def register(sub) -> None:
         q.add_argument("--fov-deg", type=number(0.0, 90.0, lo_open=True), default=60.0,
                        help="FOV half angle of the bundled sets, deg (default 60, O'Keefe §2.1.3)")
 
-    s = css_sub.add_parser(
-        "simulate", help="simulate one dispersed run (truth, CSS, gyro, estimator, control)",
-        description="Simulate one §2.4 run: 400 km polar orbit, dispersed attitude, rates and "
-        "sensor errors, CSS outputs with albedo, gyro, the chosen estimator and optionally the "
-        "MRP sun-pointing controller. Prints the angular error and optionally writes an HDF5 "
-        "recording for 'css estimate'.")
+    s = add_command(
+        css_sub, "simulate", _cmd_css_simulate,
+        help="simulate one dispersed run (truth, CSS, gyro, estimator, control)")
     common(s)
     s.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
                    help="estimator in the loop (default ekf)")
@@ -204,12 +215,9 @@ def register(sub) -> None:
     s.add_argument("--settle-s", type=number(0.0), default=300.0,
                    help="ignore errors this long after entering sunlight, s (default 300)")
     _output(s, "write the run to this HDF5 file (a CSS recording: 'css estimate', 'diagnose', 'plot')")
-    s.set_defaults(func=_cmd_css_simulate)
 
-    e = css_sub.add_parser(
-        "estimate", help="run an estimator on a CSS recording",
-        description="Run WAVG, LSMN, WLSMN, the sun-line EKF or the ECKF on a CSS recording "
-        "(HDF5 written by 'css simulate'); prints the error against the truth when present.")
+    e = add_command(
+        css_sub, "estimate", _cmd_css_estimate, help="run an estimator on a CSS recording")
     e.add_argument("recording", help="HDF5 CSS recording")
     e.add_argument("--estimator", default="ekf", choices=("ekf", "eckf", "wavg", "lsmn", "wlsmn"),
                    help="sun-direction estimator: sun-line EKF or ECKF, or the single-point "
@@ -220,15 +228,10 @@ def register(sub) -> None:
                    help="activity threshold of the single-point methods (default 0.5)")
     e.add_argument("--settle-s", type=number(0.0), default=300.0, help="skip this long before scoring, s")
     _output(e, "write the estimates to this CSV file (t_s,s_hat_x,s_hat_y,s_hat_z)")
-    e.set_defaults(func=_cmd_css_estimate)
 
-    st = css_sub.add_parser(
-        "study", help="Monte Carlo study (O'Keefe ch. 3 experiments): envelopes, p99, time above 15/30 deg",
-        description="Run or resume a CSS Monte Carlo study (pipelines/css/okeefe2015/*.toml: "
-        "the thesis's experiments, thesis and robust variants side by side) and write "
-        "summary.json and a self-contained report.html: the 99th-percentile error level next "
-        "to the thesis's number, percentile envelopes against sunlit time, time above "
-        "15/30 deg per orbit. Finished runs are kept under DIR/runs and skipped on restart.")
+    st = add_command(
+        css_sub, "study", _cmd_css_study,
+        help="Monte Carlo study (O'Keefe ch. 3 experiments): envelopes, p99, time above 15/30 deg")
     st.add_argument("pipeline", help="study TOML file")
     st.add_argument("--runs", type=number(1, 100000, integer=True), help="override the number of runs")
     add_output(st, what="folder", help="output folder; finished runs are kept there and "
@@ -239,7 +242,6 @@ def register(sub) -> None:
     st.add_argument("--force", action="store_true",
                     help="discard stored runs of a different study in the output folder")
     add_quiet(st)
-    st.set_defaults(func=_cmd_css_study)
 
     # --- calibration, fault detection, VMM/SMM, Sun models (handlers in
     # lightcurve/css/cli_tools.py) ---
@@ -250,8 +252,9 @@ def register(sub) -> None:
             return getattr(cli_tools, name)(args)
         return run
 
-    ca = css_sub.add_parser(
-        "calibrate", help="on-orbit CSS calibration filters (full and reduced) on a simulated orbit",
+    ca = add_command(
+        css_sub, "calibrate", _lazy("cmd_calibrate"),
+        help="on-orbit CSS calibration filters (full and reduced) on a simulated orbit",
         description="Simulate O'Keefe's §4.4 case (one orbit, tumbling, dual pyramid, scale "
         "factors dispersed 30 %, misalignments, albedo, gyro, star tracker) and run the full "
         "calibration ECKF (MRP, gyro bias, scale factors, misalignments, albedo model) and the "
@@ -274,10 +277,10 @@ def register(sub) -> None:
     ca.add_argument("--albedo-filter", default=None,
                     help="albedo map of the full filter (default: the truth's map)")
     _output(ca, "write the summary to this JSON file")
-    ca.set_defaults(func=_lazy("cmd_calibrate"))
 
-    fa = css_sub.add_parser(
-        "faults", help="fault detection by averaged per-sensor NIS (off / stuck / random failures)",
+    fa = add_command(
+        css_sub, "faults", _lazy("cmd_faults"),
+        help="fault detection by averaged per-sensor NIS (off / stuck / random failures)",
         description="Monte Carlo of O'Keefe §5.1: one sensor fails (off, stuck or random) at "
         "--fail-s; the averaged per-sensor NIS of the calibration filter is tested against "
         "the chi-square bound, and a dark-sensor test flags a lit sensor whose gain is "
@@ -300,10 +303,10 @@ def register(sub) -> None:
                     help="star-tracker period, s; 0 for none (default 10)")
     _output(fa, "write the summary to this JSON file")
     add_quiet(fa, help="no progress bar")
-    fa.set_defaults(func=_lazy("cmd_faults"))
 
-    vm = css_sub.add_parser(
-        "vmm", help="voltage vs sun-vector measurement model in a full-attitude MEKF",
+    vm = add_command(
+        css_sub, "vmm", _lazy("cmd_vmm"),
+        help="voltage vs sun-vector measurement model in a full-attitude MEKF",
         description="DiGregorio's comparison: MEKF with magnetometer, gyro and photodiodes, "
         "photodiodes used as a least-squares Sun vector (SMM) or as individual voltages (VMM); "
         "attitude errors grouped by the number of lit photodiodes, with a plot.")
@@ -318,14 +321,20 @@ def register(sub) -> None:
     add_plot(vm, help="also write the figure: OUTPUT with the suffix .png (css-vmm.png without -o)")
     _output(vm, "write the summary to this JSON file")
     add_quiet(vm, help="no progress bar")
-    vm.set_defaults(func=_lazy("cmd_vmm"))
 
-    sm = css_sub.add_parser(
-        "sun-models", help="almanac (Vallado) vs DE421 Sun direction (table 4.5)",
+    sm = add_command(
+        css_sub, "sun-models", _lazy("cmd_sun_models"),
+        help="almanac (Vallado), ERFA and DE421 Sun directions (table 4.5)",
         description="Angular difference between the low-precision almanac Sun formula "
-        "(O'Keefe eq. 4.39) and skyfield/DE421 at the given dates.")
+        "(O'Keefe eq. 4.39) and skyfield/DE421 at the given dates; with --table the whole of "
+        "O'Keefe's table 4.5 (models, 6 h clock error, relative cost) measured over a year.")
     sm.add_argument("dates", nargs="*", default=["2005-01-01T00:00:00Z", "2010-01-01T00:00:00Z",
                                                  "2015-03-01T00:00:00Z", "2020-01-01T00:00:00Z",
                                                  "2025-01-01T00:00:00Z"],
                     help="ISO 8601 UTC dates")
-    sm.set_defaults(func=_lazy("cmd_sun_models"))
+    sm.add_argument("--table", action="store_true",
+                    help="measure O'Keefe table 4.5 instead: almanac (eq. 4.39) and ERFA epv00 "
+                    "vs DE421 over one year from the §2.4 epoch, also with a 6 h clock error, "
+                    "and the time per call, beside the thesis's numbers")
+    _output(sm, "with --table: write the table to this JSON file "
+            "(input of 'python -m lightcurve.studies.reproduction --css-sun-models')")

@@ -3,13 +3,23 @@
 
 from __future__ import annotations
 
-from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_list, naming_file,
-                    number)
+from ._args import (add_command, add_model_options, add_output, add_quiet, add_seed, csv_list,
+                    naming_file, number, report_written)
 
 __all__ = ["register"]
 
 
 def _cmd_diagnose(args) -> int:
+    """Test the residuals of a recording against its model (chi-square band, Ljung-Box, runs,
+    systematic segments), fit every registered physics effect and a refit of the object's
+    surfaces as candidates, and add them greedily by their gain on held-out data (blocked
+    cross-validation over objects, nights, passes or time blocks — whatever the recording has);
+    an effect is named only when its parameters are identified. Writes DIR/diagnosis.json and
+    DIR/report.html. With --apply FIT.json the fitted model of an earlier diagnosis is applied
+    unchanged to this recording and the report says whether it transfers (DIR/transfer.json,
+    DIR/transfer.html). A coarse-sun-sensor recording (HDF5 from 'css simulate', detected from
+    the file) is diagnosed against its sensors' direct-Sun model with the css_* effects.
+    """
     from ..diagnosis.folds import GROUPINGS
     from ..errors import InputError
     from ..studies.runner import limit_blas_threads
@@ -29,8 +39,7 @@ def _cmd_diagnose(args) -> int:
             print(f"{r['component']:>24}: RMS {r['rms']:.4f}, chi2/dof {r['chi2_dof']:.3g}, "
                   f"R {r['r']:.3f}{ok}")
         print(tr.verdict)
-        print(f"wrote {jp} and {hp}")
-        return 0
+        return report_written(jp, hp)
     from ..diagnosis.diagnose import diagnose_recording
     from ..diagnosis.report import write_report
 
@@ -65,23 +74,13 @@ def _cmd_diagnose(args) -> int:
             print(f"held out ({sch['grouping']}): {sch['reason']}")
     for u in js["unidentified"]:
         print(f"fits, but unidentifiable with these data: {u['name']} ({'; '.join(u['reasons'][:2])})")
-    print(f"wrote {jpath} and {hpath}")
-    return 0
+    return report_written(jpath, hpath)
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "diagnose", help="find where a model and a recording differ and name the missing physics",
-        description="Test the residuals of a recording against its model (chi-square band, "
-        "Ljung-Box, runs, systematic segments), fit every registered physics effect and a refit of "
-        "the object's surfaces as candidates, and add them greedily by their gain on held-out data "
-        "(blocked cross-validation over objects, nights, passes or time blocks — whatever the "
-        "recording has); an effect is named only when its parameters are identified. Writes "
-        "DIR/diagnosis.json and DIR/report.html. With --apply FIT.json the fitted model of an "
-        "earlier diagnosis is applied unchanged to this recording and the report says whether it "
-        "transfers (DIR/transfer.json, DIR/transfer.html). A coarse-sun-sensor recording (HDF5 "
-        "from 'css simulate', detected from the file) is diagnosed against its sensors' direct-Sun "
-        "model with the css_* effects.")
+    p = add_command(
+        sub, "diagnose", _cmd_diagnose,
+        help="find where a model and a recording differ and name the missing physics")
     p.add_argument("recording", nargs="+",
                    help="lightcurve HDF5 file, CSS recording HDF5, or a CSV recording (needs "
                    "--scenario); several lightcurve files (one object each, as 'lightcurve "
@@ -116,4 +115,3 @@ def register(sub) -> None:
     add_seed(p, default=0, help="seed of the random fit starts")
     add_quiet(p, help="no progress messages")
     add_model_options(p)
-    p.set_defaults(func=_cmd_diagnose)

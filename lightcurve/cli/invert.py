@@ -7,10 +7,9 @@ from dataclasses import fields
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import (add_device, add_executors, add_model_options, add_output, add_plot,
+from ._args import (add_command, add_device, add_executors, add_model_options, add_output, add_plot,
                     add_quiet, add_seed, add_variant, csv_ints, csv_list, initial_omega_rad_s,
-                    initial_q, number,
-                    refuse_inapplicable)
+                    initial_q, number, refuse_inapplicable)
 
 __all__ = ["register", "configs_from_args"]
 
@@ -77,6 +76,18 @@ def configs_from_args(args):
 
 
 def _cmd_invert(args) -> int:
+    """Run an attitude filter on each lightcurve HDF5 file and write one result HDF5 per input plus
+    DIR/summary.json (per file: method, final RSS attitude and rate error, final 3-sigma bounds,
+    whether every component ended inside 3 sigma, divergence flag, runtime; or the error of a
+    file that failed — the others go on). The initial estimate (--initial) is the file's truth
+    perturbed by --sigma-theta-deg / --sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or
+    --initial-q / --initial-omega-deg-s with those sigmas as their uncertainty, or — for a
+    recording with neither — the global initialisation, which needs no first guess and reports
+    every attitude mode the data allow. The shape is the one the file carries unless --shape is
+    given. Many files run in parallel on the executors of 'compare' (process pool, Dask); the
+    results do not depend on the executor. Exit code 2 if an input was rejected, 1 if a run
+    failed.
+    """
     from ..studies.batch import expand_inputs, invert_files
 
     _refuse_inapplicable_options(args)
@@ -107,22 +118,10 @@ def _cmd_invert(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "invert",
-        help="estimate attitude and rate from lightcurve files (MEKF, UKF, particle filter)",
-        description="Run an attitude filter on each lightcurve HDF5 file and write one result "
-        "HDF5 per input plus DIR/summary.json (per file: method, final RSS attitude and rate "
-        "error, final 3-sigma bounds, whether every component ended inside 3 sigma, "
-        "divergence flag, runtime; or the error of a file that failed — the others go on). "
-        "The initial estimate (--initial) is the file's truth perturbed by --sigma-theta-deg / "
-        "--sigma-omega-deg-s using --seed (Bernard 2021 ch. 9), or --initial-q / "
-        "--initial-omega-deg-s with those sigmas as their uncertainty, or — for a recording "
-        "with neither — the global initialisation, which needs no first guess and reports every "
-        "attitude mode the data allow. "
-        "The shape is the one the file carries unless --shape is given. Many files run in "
-        "parallel on "
-        "the executors of 'compare' (process pool, Dask); the results do not depend on the "
-        "executor. Exit code 2 if an input was rejected, 1 if a run failed.")
+    p = add_command(
+        sub, "invert", _cmd_invert, resume_hint="finished files are kept in {output} and listed "
+        "in {output}/summary.json; run the command again on the others",
+        help="estimate attitude and rate from lightcurve files (MEKF, UKF, particle filter)")
     p.add_argument("files", nargs="+", metavar="FILE.h5",
                    help="lightcurve HDF5 file(s) or glob patterns (expanded here, so quoted "
                    "patterns work; a pattern matching nothing is an error)")
@@ -224,5 +223,3 @@ def register(sub) -> None:
                    help="probability that the gate flags a good magnitude (default 1e-4: "
                    "NIS > 15.14)")
     add_plot(p, help="also write the estimate figure (PNG) next to each result")
-    p.set_defaults(func=_cmd_invert, resume_hint="finished files are kept in {output} and "
-                   "listed in {output}/summary.json; run the command again on the others")

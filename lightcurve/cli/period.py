@@ -5,12 +5,20 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ._args import add_output, number
+from ._args import add_command, add_output, add_quiet, number, report_written
 
 __all__ = ["register"]
 
 
 def _cmd_period(args) -> int:
+    """Find the spin period of a lightcurve: Lomb-Scargle and phase-dispersion minimisation
+    periodograms of the distance-reduced, detrended magnitudes, a multi-harmonic least-squares
+    fit choosing the period and the number of harmonics by BIC, the period's 1-sigma, the
+    aliases that also fit, and the 99 % interval of the sidereal spin period including the
+    synodic correction for the moving phase-angle bisector. With -o DIR writes
+    DIR/STEM.period.json and a periodogram PNG. The result seeds the rate prior of 'invert
+    --initial global'.
+    """
     from ..acquisition.period import analyse_period, truth_spin_period_s
     from ..errors import InputError
     from ..io.atomic import atomic_write_text
@@ -22,6 +30,35 @@ def _cmd_period(args) -> int:
                          max_harmonics=args.max_harmonics, trend_degree=args.trend_degree,
                          clip_mad=None if args.clip_mad == 0 else args.clip_mad)
     lo, hi = res.interval_99_s
+    if args.quiet:   # one line: the result and its verdict
+        print(f"{args.file}: period {res.period_s:.5g} ± {res.period_sigma_s:.2g} s "
+              f"(sidereal 99 %: {lo:.5g} to {hi:.5g} s, "
+              f"{'significant' if res.significant else 'NOT significant'}"
+              f"{', AMBIGUOUS' if res.ambiguous else ''})")
+    else:
+        _print_details(args, res, lo, hi)
+    if args.output:
+        out = Path(args.output)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = Path(args.file).stem
+        jpath = safe_output_path(out, f"{stem}.period", ".json", field="file name")
+        atomic_write_text(jpath, json.dumps(res.summary(), indent=2))
+        truth = None
+        if curve.truth_omega_rad_s is not None:   # a simulation: mark the truth's period
+            try:
+                inertia = curve.resolve_shape().inertia_kg_m2
+            except InputError:
+                inertia = None
+            truth = truth_spin_period_s(curve, inertia)
+        ppath = res.plot(safe_output_path(out, f"{stem}.period", ".png", field="file name"),
+                         title=Path(args.file).name, true_period_s=truth)
+        if not args.quiet:
+            report_written(jpath, ppath)
+    return 0
+
+
+def _print_details(args, res, lo, hi) -> None:
+    """The full console report of one period analysis."""
     print(f"{args.file}: {res.n_points} magnitudes over {res.span_s:.1f} s")
     print(f"brightness (synodic) period {res.period_s:.5g} ± {res.period_sigma_s:.2g} s "
           f"({res.n_harmonics} harmonics, chi2/dof {res.chi2_dof:.3g}, false-alarm probability "
@@ -47,35 +84,12 @@ def _cmd_period(args) -> int:
         print("aliases (period s, relation, delta BIC):")
         for a in res.aliases[:6]:
             print(f"  {a['period_s']:10.5g}  {a['relation']:<14s} {a['delta_bic']:10.1f}")
-    if args.output:
-        out = Path(args.output)
-        out.mkdir(parents=True, exist_ok=True)
-        stem = Path(args.file).stem
-        jpath = safe_output_path(out, f"{stem}.period", ".json", field="file name")
-        atomic_write_text(jpath, json.dumps(res.summary(), indent=2))
-        truth = None
-        if curve.truth_omega_rad_s is not None:   # a simulation: mark the truth's period
-            try:
-                inertia = curve.resolve_shape().inertia_kg_m2
-            except InputError:
-                inertia = None
-            truth = truth_spin_period_s(curve, inertia)
-        ppath = res.plot(safe_output_path(out, f"{stem}.period", ".png", field="file name"),
-                         title=Path(args.file).name, true_period_s=truth)
-        print(f"wrote {jpath} and {ppath}")
-    return 0
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "period", help="spin-period analysis of a lightcurve (periodogram, aliases, uncertainty)",
-        description="Find the spin period of a lightcurve: Lomb-Scargle and phase-dispersion "
-        "minimisation periodograms of the distance-reduced, detrended magnitudes, a "
-        "multi-harmonic least-squares fit choosing the period and the number of harmonics by "
-        "BIC, the period's 1-sigma, the aliases that also fit, and the 99 % interval of the "
-        "sidereal spin period including the synodic correction for the moving phase-angle "
-        "bisector. With -o DIR writes DIR/STEM.period.json and a periodogram PNG. The result "
-        "seeds the rate prior of 'invert --initial global'.")
+    p = add_command(
+        sub, "period", _cmd_period,
+        help="spin-period analysis of a lightcurve (periodogram, aliases, uncertainty)")
     p.add_argument("file", metavar="FILE.h5", help="lightcurve HDF5 file")
     add_output(p, what="folder", help="folder for the JSON summary and the periodogram PNG "
                "(default: print only)")
@@ -90,4 +104,4 @@ def register(sub) -> None:
     p.add_argument("--clip-mad", type=number(0.0, 100.0), default=3.0,
                    help="winsorise detrended magnitudes beyond this many robust sigma (specular "
                    "glints a few harmonics cannot follow); 0 keeps every value (default 3)")
-    p.set_defaults(func=_cmd_period)
+    add_quiet(p, help="print one line: the period, its 99 %% interval and the verdict")

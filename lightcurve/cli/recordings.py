@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import add_model_options, add_output, add_quiet, number
+from ._args import add_command, add_model_options, add_output, add_quiet, number, report_written
 
 __all__ = ["register", "output_paths", "find_passes"]
 
@@ -67,6 +67,13 @@ def output_paths(out, keys) -> dict:
 
 
 def _cmd_import(args) -> int:
+    """Read a CSV recording (docs/formats.md 'Recordings (CSV)': UTC or JD times, magnitudes,
+    sigma, band, exposure start/end or duration, object, camera, site; geometry from alt/az +
+    range or height, from range + solar phase angle, or from the object's TLE/OMM element set or
+    the model scenario's orbit) and write one lightcurve HDF5 per object and band, carrying the
+    model scenario and its shape so that every later command works on it without further
+    options.
+    """
     from ..io.recording import read_recordings, recording_spec_from_section
     from ..io.tomlio import Section, load_toml
 
@@ -240,6 +247,10 @@ def find_passes(element_sets, site, start, end, *, min_elevation_deg=10.0, twili
 
 
 def _cmd_passes(args) -> int:
+    """Search the time span for passes of every object in a TLE/OMM file above --min-elevation-deg
+    at the site (skyfield find_events) and keep those with the object sunlit while the site is
+    dark. Prints CSV (or writes -o FILE.csv).
+    """
     import csv
     import io
 
@@ -276,7 +287,7 @@ def _cmd_passes(args) -> int:
         from ..io.atomic import atomic_write_text
 
         atomic_write_text(args.output, buf.getvalue())
-        print(f"wrote {args.output}: {len(rows)} visible pass(es) over {site.id}")
+        report_written(args.output, detail=f": {len(rows)} visible pass(es) over {site.id}")
     else:
         sys.stdout.write(buf.getvalue())
         print(f"{len(rows)} visible pass(es) over {site.id} (object sunlit, Sun below "
@@ -286,14 +297,9 @@ def _cmd_passes(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "import", help="import an observatory CSV recording into self-contained lightcurve files",
-        description="Read a CSV recording (docs/formats.md 'Recordings (CSV)': UTC or JD times, "
-        "magnitudes, sigma, band, exposure start/end or duration, object, camera, site; "
-        "geometry from alt/az + range or height, from range + solar phase angle, or from the "
-        "object's TLE/OMM element set or the model scenario's orbit) and write one lightcurve "
-        "HDF5 per object and band, carrying the model scenario and its shape so that every "
-        "later command works on it without further options.")
+    p = add_command(
+        sub, "import", _cmd_import,
+        help="import an observatory CSV recording into self-contained lightcurve files")
     p.add_argument("recording", metavar="RECORDING.csv", help="the CSV recording")
     add_output(p, what="file", required=True,
                help="output file OUT.h5 (one object and band), or the stem of "
@@ -314,13 +320,10 @@ def register(sub) -> None:
                    "(default keep when the scenario ignores the eclipse)")
     add_quiet(p, help="accepted for consistency (import prints one line per written file)")
     add_model_options(p)
-    p.set_defaults(func=_cmd_import)
 
-    p = sub.add_parser(
-        "passes", help="list visible, sunlit passes of TLE/OMM objects over a site",
-        description="Search the time span for passes of every object in a TLE/OMM file above "
-        "--min-elevation-deg at the site (skyfield find_events) and keep those with the object "
-        "sunlit while the site is dark. Prints CSV (or writes -o FILE.csv).")
+    p = add_command(
+        sub, "passes", _cmd_passes,
+        help="list visible, sunlit passes of TLE/OMM objects over a site")
     p.add_argument("elements", metavar="ELEMENTS", help="TLE or OMM file")
     p.add_argument("--site", required=True, metavar="ID|LAT,LON,H",
                    help="catalogue site id, or an inline site as latitude,longitude (deg, "
@@ -339,4 +342,3 @@ def register(sub) -> None:
     add_output(p, what="file", help="write the CSV to this file instead of stdout")
     add_quiet(p)
     add_model_options(p, shape=False, library=False)
-    p.set_defaults(func=_cmd_passes)

@@ -6,13 +6,22 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._args import (add_model_options, add_output, add_quiet, add_seed, csv_ints, csv_list,
-                    naming_file, number, output_not_input, refuse_inapplicable)
+from ._args import (add_command, add_model_options, add_output, add_quiet, add_seed, csv_ints,
+                    csv_list, naming_file, number, output_not_input, refuse_inapplicable,
+                    report_written)
 
 __all__ = ["register"]
 
 
 def _cmd_fit_reflection(args) -> int:
+    """Sample the posterior of the Cook-Torrance parameters (xi, a, m) and areas of the shape's
+    facets from one lightcurve HDF5 file with the attitude held fixed (the file's truth or an
+    'invert' estimate). Unbounded coordinates: logit for xi and a, log for m and A; Gaussian
+    prior centred on the shape file's values with sigma = --prior-frac times the value. Refuses
+    (exit 1) to report a posterior whose chain has not converged (autocorrelation time,
+    acceptance) and says why. Writes DIR/STEM.reflection.json (posterior table, identifiability,
+    diagnostics), a corner plot and a posterior-predictive lightcurve PNG.
+    """
     import json
 
     from ..io.lightcurve_h5 import read_lightcurve
@@ -69,22 +78,13 @@ def _cmd_fit_reflection(args) -> int:
               + (f"  truth {r['truth']:.4g}{'' if r['truth_in_99'] else ' OUTSIDE 99%'}"
                  if "truth" in r else ""))
     print(f"posterior-predictive 95% coverage of the measurements: {s['predictive_coverage_95']:.3f}")
-    print(f"wrote {jpath}, {cpath}, {ppath}")
-    return 0
+    return report_written(jpath, cpath, ppath)
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "fit-reflection",
-        help="MCMC (emcee) posterior of facet reflection parameters given a known attitude",
-        description="Sample the posterior of the Cook-Torrance parameters (xi, a, m) and areas "
-        "of the shape's facets from one lightcurve HDF5 file with the attitude held fixed "
-        "(the file's truth or an 'invert' estimate). Unbounded coordinates: logit for xi and a, "
-        "log for m and A; Gaussian prior centred on the shape file's values with sigma = "
-        "--prior-frac times the value. Refuses (exit 1) to report a posterior whose chain has "
-        "not converged (autocorrelation time, acceptance) and says why. Writes "
-        "DIR/STEM.reflection.json (posterior table, identifiability, diagnostics), a corner "
-        "plot and a posterior-predictive lightcurve PNG.")
+    p = add_command(
+        sub, "fit-reflection", _cmd_fit_reflection,
+        help="MCMC (emcee) posterior of facet reflection parameters given a known attitude")
     p.add_argument("file", metavar="FILE.h5", help="lightcurve HDF5 file")
     p.add_argument("--attitude", choices=("truth", "estimate"), default="truth",
                    help="attitude history to hold fixed (default: truth)")
@@ -105,4 +105,3 @@ def register(sub) -> None:
     add_output(p, what="folder", required=True,
                help="output folder (STEM.reflection.json, corner and predictive plots)")
     add_quiet(p, help="no progress lines")
-    p.set_defaults(func=_cmd_fit_reflection)

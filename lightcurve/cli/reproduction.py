@@ -2,41 +2,49 @@
 
 from __future__ import annotations
 
-from ._args import add_output
+from ._args import add_command, add_output, report_written
 
 __all__ = ["register"]
 
 
 def _cmd_reproduction(args) -> int:
+    """Read the summary.json of finished studies (lightcurve compare -o DIR) and write, per source
+    document, every claim we can test with our number, the document's and agrees / disagrees /
+    not testable (Bernard 2021: Fig. 9.4 and B.1-B.4 cell by cell, the seven conclusions of sec.
+    9.4, the particle filter of Fig. 9.5-9.7, the reflection models of ch. 10).
+    """
     from ..studies.reproduction import (bernard_section, css_section, load_summaries,
                                         write_reproduction)
 
     dirs = list(args.study or [])
     sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
-                css_section(list(args.css or []))]
+                css_section(list(args.css or []), timing=args.css_timing,
+                            tables4=args.css_tables4, sun_models=args.css_sun_models,
+                            table44=args.css_table44)]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
-    print(f"wrote {args.output} ({n} study output(s) read)")
-    return 0
+    return report_written(args.output, detail=f" ({n} study output(s) read)")
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "reproduction",
+    p = add_command(
+        sub, "reproduction", _cmd_reproduction,
         help="write docs/reproduction.md: every testable claim of the source documents, ours "
-        "vs theirs",
-        description="Read the summary.json of finished studies (lightcurve compare -o DIR) and "
-        "write, per source document, every claim we can test with our number, the document's "
-        "and agrees / disagrees / not testable (Bernard 2021: Fig. 9.4 and B.1-B.4 cell by "
-        "cell, the seven conclusions of sec. 9.4, the particle filter of Fig. 9.5-9.7, the "
-        "reflection models of ch. 10).")
+        "vs theirs")
     p.add_argument("--study", action="append", metavar="DIR",
                    help="a study output folder (repeatable; identified by its study name)")
     p.add_argument("--css", action="append", metavar="DIR",
                    help="an output folder of 'lightcurve css study' (repeatable; O'Keefe, "
                    "DiGregorio)")
+    p.add_argument("--css-timing", default=None, metavar="FILE",
+                   help="output of python benchmarks/css.py (O'Keefe Table 3.1)")
+    p.add_argument("--css-tables4", default=None, metavar="FILE",
+                   help="output of python benchmarks/css_tables_4.py (O'Keefe Tables 4.1-4.3)")
+    p.add_argument("--css-table44", default=None, metavar="FILE",
+                   help="output of python benchmarks/css_table_4_4.py (O'Keefe Table 4.4)")
+    p.add_argument("--css-sun-models", default=None, metavar="FILE",
+                   help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",
                    help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.7/10.8)")
     add_output(p, what="file", default="docs/reproduction.md",
                help="Markdown file to write")
-    p.set_defaults(func=_cmd_reproduction)

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-from ._args import add_quiet
+from ._args import add_command, add_quiet
 
 __all__ = ["register"]
 
 
 def _cmd_selfcheck(args) -> int:
+    """Run quick numerical self-checks of the installed package (rotation algebra against scipy,
+    angular-momentum conservation of the rigid-body integrator, offline ephemeris availability)
+    and print one line per check.
+    """
     from ..selfcheck import run_selfcheck
 
     ok = run_selfcheck(verbose=not args.quiet)
@@ -15,12 +19,18 @@ def _cmd_selfcheck(args) -> int:
 
 
 def _cmd_warmup(args) -> int:
+    """Run a tiny simulation and every attitude filter on it so that numba compiles the hot kernels
+    and stores them in its on-disk cache (next to the package, or ~/.cache/numba when that is
+    read-only). Later processes load them instead of recompiling; also runs a 60 s
+    coarse-sun-sensor closed loop per CSS estimator. Safe to run again: then it only loads the
+    cache.
+    """
     import time
 
     from ..warmup import warm_up
 
     t0 = time.perf_counter()
-    steps = warm_up(reflection=args.reflection)
+    steps = warm_up(reflection=args.reflection, css=not args.no_css)
     if not args.quiet:
         print("compiled or loaded from the cache: " + ", ".join(
             f"{k} {v:.1f} s" for k, v in steps.items()) + f"; total {time.perf_counter() - t0:.1f} s")
@@ -28,24 +38,17 @@ def _cmd_warmup(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "selfcheck",
+    p = add_command(
+        sub, "selfcheck", _cmd_selfcheck,
         help="check the installation: rotation algebra, dynamics, ephemeris files",
-        description="Run quick numerical self-checks of the installed package (rotation "
-        "algebra against scipy, angular-momentum conservation of the rigid-body integrator, "
-        "offline ephemeris availability) and print one line per check.",
     )
     add_quiet(p, help="print only failures")
-    p.set_defaults(func=_cmd_selfcheck)
 
-    p = sub.add_parser(
-        "warmup",
-        help="compile the numba kernels once (run after installing; later runs start fast)",
-        description="Run a tiny simulation and every attitude filter on it so that numba "
-        "compiles the hot kernels and stores them in its on-disk cache (next to the package, or "
-        "~/.cache/numba when that is read-only). Later processes load them instead of "
-        "recompiling. Safe to run again: then it only loads the cache.")
+    p = add_command(
+        sub, "warmup", _cmd_warmup,
+        help="compile the numba kernels once (run after installing; later runs start fast)")
     p.add_argument("--reflection", action="store_true",
                    help="also compile the Model 3 reflection-state filters (slower)")
+    p.add_argument("--no-css", action="store_true",
+                   help="skip the coarse-sun-sensor kernels (compiled by default)")
     add_quiet(p, help="print nothing")
-    p.set_defaults(func=_cmd_warmup)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InputError
-from ._args import add_group, add_library
+from ._args import add_command, add_group, add_library
 
 __all__ = ["register"]
 
@@ -30,6 +30,10 @@ def _cmd_shapes_show(args) -> int:
 
 
 def _cmd_shapes_validate(args) -> int:
+    """Report zero-area or degenerate facets, non-unit normals, materials outside their ranges (xi
+    in [0,1], a in (0,1), m in (0,1]) and non-convex shapes (self-shadowing is not modelled).
+    Exit code 0: no problems (or only non-convexity); 2: problems.
+    """
     from ..photometry.shapes_io import validate_shape
 
     problems = validate_shape(args.spec, library_dirs=_dirs(args))
@@ -63,18 +67,14 @@ def register(sub) -> None:
         description="Faceted shape library: bundled shapes/ plus folders given with --library. "
         "Shapes are TOML facet lists or OBJ/STL meshes with a TOML material map.")
     add_library(p)
-    pl = ssub.add_parser("list", help="list the shapes in the library")
+    pl = add_command(ssub, "list", _cmd_shapes_list, help="list the shapes in the library")
     _sub_library(pl)
-    pl.set_defaults(func=_cmd_shapes_list)
-    ps = ssub.add_parser("show", help="print a shape's facets, materials and mass properties")
+    ps = add_command(ssub, "show", _cmd_shapes_show,
+                     help="print a shape's facets, materials and mass properties")
     ps.add_argument("name", help="library name or path to a shape TOML")
     _sub_library(ps)
-    ps.set_defaults(func=_cmd_shapes_show)
-    pv = ssub.add_parser(
-        "validate", help="check a shape: degenerate facets, normals, material ranges, convexity",
-        description="Report zero-area or degenerate facets, non-unit normals, materials outside "
-        "their ranges (xi in [0,1], a in (0,1), m in (0,1]) and non-convex shapes (self-shadowing "
-        "is not modelled). Exit code 0: no problems (or only non-convexity); 2: problems.")
+    pv = add_command(
+        ssub, "validate", _cmd_shapes_validate,
+        help="check a shape: degenerate facets, normals, material ranges, convexity")
     pv.add_argument("spec", metavar="PATH_OR_NAME", help="library name or path to a shape TOML")
     _sub_library(pv)
-    pv.set_defaults(func=_cmd_shapes_validate)

@@ -8,12 +8,16 @@ from pathlib import Path
 import numpy as np
 
 from ..studies.scenario import SCENARIO_ALIASES, resolve_scenario
-from ._args import (add_model_options, add_output, add_plot, add_quiet, add_seed,
-                    number, output_not_input)
+from ._args import (add_command, add_model_options, add_output, add_plot, add_quiet, add_seed,
+                    number, output_not_input, report_written)
 
 __all__ = ["register", "resolve_scenario", "SCENARIO_ALIASES"]
 
 def _cmd_simulate(args) -> int:
+    """Simulate apparent magnitudes of a faceted spacecraft seen from one or more ground sites
+    (Bernard 2021 ch. 5, consistent form) and write the HDF5 lightcurve (docs/formats.md)
+    atomically. The file carries the resolved shape, so later commands need no --library.
+    """
     import warnings
 
     from ..studies.scenario import load_scenario
@@ -44,19 +48,23 @@ def _cmd_simulate(args) -> int:
 
         png = Path(args.output).with_suffix(".png")
         plot_lightcurve(lc, png, title=scen.name)
-        print(f"wrote {png}")
+        report_written(png)
     return 0
 
 
 def _cmd_plot(args) -> int:
+    """Draw a PNG figure of a lightcurve HDF5 (magnitude versus UTC per site), an estimate HDF5
+    (attitude, rates, spin axis, fitted lightcurve, errors against the truth when known), a CSS
+    recording HDF5, a 'css estimate' CSV, an invert or compare summary.json or a fit-reflection
+    JSON. The kind is read from the file.
+    """
     from ..report.plot_any import file_kind, plot_file
 
     if args.output:
         output_not_input(args.output, args.file)
     kind = file_kind(args.file)
     out = plot_file(args.file, args.output)
-    print(f"wrote {out} ({kind.replace('-', ' ')} figure)")
-    return 0
+    return report_written(out, detail=f" ({kind.replace('-', ' ')} figure)")
 
 
 def _pass_facts(lc):
@@ -79,6 +87,12 @@ def _pass_facts(lc):
 
 
 def _cmd_demo(args) -> int:
+    """Simulate the bundled default scenario (pipelines/default.toml: a 1U CubeSat spinning at 4.2
+    deg/s on a real, sunlit LEO pass over Socorro, NM, at dusk), invert it with an attitude
+    filter (UKF by default) started off the truth, print what was found, and write the
+    lightcurve, the estimate and their figures into the output folder. Bernard's thesis case
+    (the object in the Earth's shadow, computed as if sunlit) is --scenario thesis.
+    """
     import warnings
 
     from ..io.paths import safe_output_path
@@ -192,38 +206,24 @@ def _cmd_demo(args) -> int:
 
 
 def register(sub) -> None:
-    p = sub.add_parser(
-        "simulate", help="simulate a lightcurve from a scenario TOML",
-        description="Simulate apparent magnitudes of a faceted spacecraft seen from one or more "
-        "ground sites (Bernard 2021 ch. 5, consistent form) and write the HDF5 lightcurve "
-        "(docs/formats.md) atomically. The file carries the resolved shape, so later commands "
-        "need no --library.")
+    p = add_command(
+        sub, "simulate", _cmd_simulate, help="simulate a lightcurve from a scenario TOML")
     p.add_argument("scenario", help="scenario TOML file, or a bundled name: "
                    + ", ".join(SCENARIO_ALIASES) + " or thesis/<case> (docs/formats.md)")
     add_output(p, what="file", required=True, help="output lightcurve HDF5 file")
     add_seed(p, default=None, help="random seed of the attitude and measurement noise")
     add_plot(p, help="also write OUTPUT.png (magnitude versus UTC)")
     add_model_options(p)
-    p.set_defaults(func=_cmd_simulate)
 
-    p = sub.add_parser(
-        "plot", help="draw any file the tool writes (lightcurve, estimate, CSS recording, summary)",
-        description="Draw a PNG figure of a lightcurve HDF5 (magnitude versus UTC per site), an "
-        "estimate HDF5 (attitude, rates, spin axis, fitted lightcurve, errors against the truth "
-        "when known), a CSS recording HDF5, a 'css estimate' CSV, an invert or compare "
-        "summary.json or a fit-reflection JSON. The kind is read from the file.")
+    p = add_command(
+        sub, "plot", _cmd_plot,
+        help="draw any file the tool writes (lightcurve, estimate, CSS recording, summary)")
     p.add_argument("file", help="a file written by lightcurve (kind detected from its content)")
     add_output(p, what="file", help="PNG path (default: FILE with the suffix .png)")
-    p.set_defaults(func=_cmd_plot)
 
-    p = sub.add_parser(
-        "demo", help="the main job: simulate a real lit pass, estimate the attitude, plot both",
-        description="Simulate the bundled default scenario (pipelines/default.toml: a 1U CubeSat "
-        "spinning at 4.2 deg/s on a real, sunlit LEO pass over Socorro, NM, at dusk), invert it "
-        "with an attitude filter (UKF by default) started off the truth, print what was found, "
-        "and write the lightcurve, the estimate and their figures into the output folder. "
-        "Bernard's thesis case (the object in the Earth's shadow, computed as if sunlit) is "
-        "--scenario thesis.")
+    p = add_command(
+        sub, "demo", _cmd_demo,
+        help="the main job: simulate a real lit pass, estimate the attitude, plot both")
     add_output(p, what="folder", default="out", help="output folder")
     p.add_argument("--scenario", default="default",
                    help="scenario TOML file or bundled name: " + ", ".join(SCENARIO_ALIASES)
@@ -237,4 +237,3 @@ def register(sub) -> None:
     p.add_argument("--sigma-omega-deg-s", type=number(0.0, 360.0, lo_open=True), default=0.02,
                    help="1-sigma initial rate error per axis, deg/s (default 0.02)")
     add_quiet(p, help="print nothing (files are still written)")
-    p.set_defaults(func=_cmd_demo)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._args import add_group, add_sites
+from ._args import add_command, add_group, add_sites
 
 __all__ = ["register"]
 
@@ -37,10 +37,8 @@ def register(sub) -> None:
         "given with --sites (later folders override earlier ones). Each site is one TOML "
         "file with id, name, lat_deg, lon_deg (WGS84), height_m and optional band and "
         "[horizon_mask].")
-    pl = ssub.add_parser("list", help="list all known sites")
+    pl = add_command(ssub, "list", _cmd_sites_list, help="list all known sites")
     add_sites(pl)
-    pl.set_defaults(func=_cmd_sites_list)
-    ps = ssub.add_parser("show", help="show one site")
+    ps = add_command(ssub, "show", _cmd_sites_show, help="show one site")
     ps.add_argument("id", help="site id, e.g. socorro")
     add_sites(ps)
-    ps.set_defaults(func=_cmd_sites_show)

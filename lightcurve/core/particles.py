@@ -34,7 +34,7 @@ import numba as nb
 import numpy as np
 
 __all__ = [
-    "n_chunks", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
+    "n_chunks", "chunk_bounds", "chunk_sums", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
     "ess_tempered", "temper_exponent", "innovation_loglik", "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
@@ -59,6 +59,24 @@ def n_chunks(N):
     return c
 
 
+@nb.njit(cache=True, inline="always")
+def chunk_bounds(c, N, nch):
+    """Items ``lo:hi`` of chunk ``c`` of ``nch`` (:func:`n_chunks`) over N items."""
+    return c * N // nch, (c + 1) * N // nch
+
+
+@nb.njit(cache=True, inline="always")
+def chunk_sums(part):
+    """Column sums (K,) of the per-chunk partials ``part`` (nch, K), added in chunk order: the
+    combining step of every chunked reduction (the same sums on any thread count)."""
+    K = part.shape[1]
+    out = np.zeros(K)
+    for c in range(part.shape[0]):
+        for k in range(K):
+            out[k] += part[c, k]
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # log weights, ESS
 # --------------------------------------------------------------------------------------------
@@ -70,8 +88,7 @@ def _max_tempered(logw, ll, phi):
     nch = n_chunks(N)
     part = np.full(nch, -np.inf)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         m = -np.inf
         for i in range(lo, hi):
             a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
@@ -120,11 +137,9 @@ def _sum_exp(logw, ll, phi, m):
     """``(Σ e^{a−m}, Σ e^{2(a−m)})`` with ``a = logw + φ ll`` (chunked, ordered)."""
     N = logw.shape[0]
     nch = n_chunks(N)
-    p1 = np.zeros(nch)
-    p2 = np.zeros(nch)
+    part = np.zeros((nch, 2))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         s1 = 0.0
         s2 = 0.0
         for i in range(lo, hi):
@@ -133,14 +148,10 @@ def _sum_exp(logw, ll, phi, m):
                 e = math.exp(a - m)
                 s1 += e
                 s2 += e * e
-        p1[c] = s1
-        p2[c] = s2
-    s1 = 0.0
-    s2 = 0.0
-    for c in range(nch):
-        s1 += p1[c]
-        s2 += p2[c]
-    return s1, s2
+        part[c, 0] = s1
+        part[c, 1] = s2
+    tot = chunk_sums(part)
+    return tot[0], tot[1]
 
 
 @nb.njit(cache=True)
@@ -193,40 +204,32 @@ def _add_scaled_exp(logw, ll, phi, mx, w):
     """``logw += φ ll`` is done by the caller; here ``w = exp(logw − mx)`` and its chunk sums."""
     N = logw.shape[0]
     nch = n_chunks(N)
-    part = np.zeros(nch)
+    part = np.zeros((nch, 1))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         s = 0.0
         for i in range(lo, hi):
             e = math.exp(logw[i] - mx)
             w[i] = e
             s += e
-        part[c] = s
-    s = 0.0
-    for c in range(nch):
-        s += part[c]
-    return s
+        part[c, 0] = s
+    return chunk_sums(part)[0]
 
 
 @nb.njit(cache=True, parallel=True)
 def _finish_normalize(logw, w, lse, s):
     N = logw.shape[0]
     nch = n_chunks(N)
-    part = np.zeros(nch)
+    part = np.zeros((nch, 1))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         s2 = 0.0
         for i in range(lo, hi):
             logw[i] -= lse
             w[i] /= s
             s2 += w[i] * w[i]
-        part[c] = s2
-    s2 = 0.0
-    for c in range(nch):
-        s2 += part[c]
-    return s2
+        part[c, 0] = s2
+    return chunk_sums(part)[0]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -273,11 +276,9 @@ def normalize_log_weights_nb(logw, w):
 def _innov_pass1(logw, mpred, y, sig, ll, mx):
     N = logw.shape[0]
     nch = n_chunks(N)
-    p0 = np.zeros(nch)
-    p1 = np.zeros(nch)
+    part = np.zeros((nch, 2))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         s0 = 0.0
         s1 = 0.0
         for i in range(lo, hi):
@@ -290,35 +291,27 @@ def _innov_pass1(logw, mpred, y, sig, ll, mx):
                 ll[i] = -0.5 * r * r
             else:
                 ll[i] = -np.inf
-        p0[c] = s0
-        p1[c] = s1
-    s0 = 0.0
-    s1 = 0.0
-    for c in range(nch):
-        s0 += p0[c]
-        s1 += p1[c]
-    return s0, s1
+        part[c, 0] = s0
+        part[c, 1] = s1
+    tot = chunk_sums(part)
+    return tot[0], tot[1]
 
 
 @nb.njit(cache=True, parallel=True)
 def _innov_pass2(logw, mpred, mean, mx):
     N = logw.shape[0]
     nch = n_chunks(N)
-    p2 = np.zeros(nch)
+    part = np.zeros((nch, 1))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         s2 = 0.0
         for i in range(lo, hi):
             m = mpred[i]
             if np.isfinite(m):
                 e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
                 s2 += e * (m - mean) * (m - mean)
-        p2[c] = s2
-    s2 = 0.0
-    for c in range(nch):
-        s2 += p2[c]
-    return s2
+        part[c, 0] = s2
+    return chunk_sums(part)[0]
 
 
 @nb.njit(cache=True)
@@ -385,8 +378,7 @@ def _merge_sorted(C, total, last, u0, u, systematic, idx):
     n = idx.shape[0]
     nch = n_chunks(n)
     for c in nb.prange(nch):
-        lo = c * n // nch
-        hi = (c + 1) * n // nch
+        lo, hi = chunk_bounds(c, n, nch)
         if lo >= hi:
             continue
         p = (u0 + lo) / n * total if systematic else u[lo] * total
@@ -449,8 +441,7 @@ def column_ranges(X, E):
     mn = np.full((nch, D), np.inf)
     mxs = np.full((nch, D), -np.inf)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         for i in range(lo, hi):
             for d in range(D):
                 v = X[i, d]
@@ -485,8 +476,7 @@ def _mean_cov_partials(X, w, use_w, mean, P):
     N, D = X.shape
     nch = P.shape[0]
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         x = np.empty(D)
         for i in range(lo, hi):
             wi = w[i] if use_w else 1.0
@@ -503,8 +493,7 @@ def _mean_partials(X, w, use_w, M):
     N, D = X.shape
     nch = M.shape[0]
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         for i in range(lo, hi):
             wi = w[i] if use_w else 1.0
             for d in range(D):
@@ -517,10 +506,7 @@ def _mean_cov(X, w, use_w):
     nch = n_chunks(N)
     M = np.zeros((nch, D))
     _mean_partials(X, w, use_w, M)
-    mean = np.zeros(D)
-    for c in range(nch):
-        for d in range(D):
-            mean[d] += M[c, d]
+    mean = chunk_sums(M)
     if not use_w:
         for d in range(D):
             mean[d] /= N

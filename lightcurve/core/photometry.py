@@ -47,7 +47,7 @@ from .rotations import qrot_xyz_nb
 __all__ = [
     "LAMBERT", "COOK_TORRANCE", "PHONG", "ASHIKHMIN_SHIRLEY", "COOK_TORRANCE_THESIS",
     "ANALYTIC_IDS", "PARAM_COLUMNS", "fresnel_xyz", "beckmann_xyz", "cook_torrance_xyz",
-    "cook_torrance_fresnel_xyz", "facet_sum_xyz",
+    "cook_torrance_fresnel_xyz", "facet_sum_xyz", "facet_sum_fresnel_xyz",
     "brdf_product_nb", "brdf_value_kernel", "brightness_kernel", "facet_products_kernel",
     "facet_flux_nb", "mag_kernel_nb", "flux_partials_nb", "partials_many_nb",
     "magnitude_partials_q_nb", "nchunks_nb",
@@ -278,10 +278,19 @@ def brdf_value_kernel(model_ids, params, n, s, o):
     return out
 
 
+_NO_FRESNEL = np.empty(0)
+
+
 @nb.njit(cache=True, inline="always")
-def facet_sum_xyz(sx, sy, sz, ox, oy, oz, normals, areas, ids, params):
+def facet_sum_fresnel_xyz(sx, sy, sz, ox, oy, oz, hx, hy, hz, c, Fr, normals, areas, ids, params):
     """``Φ = Σ_i A_i (n̂_i·ŝ)⁺(n̂_i·ô)⁺ f_r,i`` (m² sr⁻¹; Bernard eq. 5.4–5.6) for body-frame
-    ŝ, ô; facets with a model id < 0 are skipped."""
+    ŝ, ô; facets with a model id < 0 are skipped.
+
+    ``Fr`` (F,): the Cook–Torrance facets' Fresnel factors precomputed for the epoch (rotation
+    invariant, :func:`cook_torrance_fresnel_xyz`) with the body-frame half vector ``ĥ`` and
+    ``c = ô·ĥ``; those facets then go through :func:`cook_torrance_fresnel_xyz`. An empty
+    ``Fr`` (:func:`facet_sum_xyz`): every facet through :func:`brdf_product_nb`."""
+    pre = Fr.shape[0] > 0
     acc = 0.0
     for f in range(normals.shape[0]):
         mid = ids[f]
@@ -290,10 +299,30 @@ def facet_sum_xyz(sx, sy, sz, ox, oy, oz, normals, areas, ids, params):
         nx = normals[f, 0]
         ny = normals[f, 1]
         nz = normals[f, 2]
-        if nx * sx + ny * sy + nz * sz <= 0.0 or nx * ox + ny * oy + nz * oz <= 0.0:
+        ns = nx * sx + ny * sy + nz * sz
+        if ns <= 0.0:
             continue
-        acc += areas[f] * brdf_product_nb(mid, params[f], nx, ny, nz, sx, sy, sz, ox, oy, oz)
+        no = nx * ox + ny * oy + nz * oz
+        if no <= 0.0:
+            continue
+        if pre and (mid == COOK_TORRANCE or mid == COOK_TORRANCE_THESIS):
+            nh = nx * hx + ny * hy + nz * hz
+            p = params[f]
+            acc += areas[f] * cook_torrance_fresnel_xyz(
+                ns, no, nh, c, Fr[f], 0.0, 0.0, p[0], p[1], p[2],
+                mid == COOK_TORRANCE_THESIS)[0]
+        else:
+            acc += areas[f] * brdf_product_nb(mid, params[f], nx, ny, nz, sx, sy, sz, ox, oy, oz)
     return acc
+
+
+@nb.njit(cache=True, inline="always")
+def facet_sum_xyz(sx, sy, sz, ox, oy, oz, normals, areas, ids, params):
+    """``Φ = Σ_i A_i (n̂_i·ŝ)⁺(n̂_i·ô)⁺ f_r,i`` (m² sr⁻¹; Bernard eq. 5.4–5.6) for body-frame
+    ŝ, ô; facets with a model id < 0 are skipped (:func:`facet_sum_fresnel_xyz` without
+    precomputed Fresnel factors)."""
+    return facet_sum_fresnel_xyz(sx, sy, sz, ox, oy, oz, 0.0, 0.0, 0.0, 0.0, _NO_FRESNEL,
+                                 normals, areas, ids, params)
 
 
 @nb.njit(cache=True, parallel=True)

@@ -54,7 +54,7 @@ from ..rotations import quat_to_mrp
 
 __all__ = [
     "mv3_nb", "mtv3_nb", "mrp_propagate_nb", "mrp_switch_cov_nb", "star_tracker_update_nb",
-    "vector_update_nb",
+    "vector_update_nb", "mrp_apply_correction_nb",
     "MRPEKFParams", "run_mrp_ekf",
 ]
 
@@ -95,12 +95,9 @@ def mrp_switch_cov_nb(x, P):
 
 
 @numba.njit(cache=True)
-def _left_right_nb(P, T, m):
-    """P ← T P Tᵀ in place where T acts on the first m rows/columns only (identity
-    elsewhere): rows first, then columns; explicit loops."""
-    n = P.shape[0]
-    tmp = np.empty(m)
-    for j in range(n):
+def _left_nb(P, T, m, tmp):
+    """P[:m, :] ← T P[:m, :] in place (T (m, m); ``tmp`` (m,) work), column by column."""
+    for j in range(P.shape[1]):
         for i in range(m):
             acc = 0.0
             for l in range(m):
@@ -108,14 +105,39 @@ def _left_right_nb(P, T, m):
             tmp[i] = acc
         for i in range(m):
             P[i, j] = tmp[i]
+
+
+@numba.njit(cache=True)
+def _left_right_nb(P, T, m):
+    """P ← T P Tᵀ in place where T acts on the first m rows/columns only (identity
+    elsewhere): the rows (T P), then the columns as the rows of the transposed view
+    ((T (T P)ᵀ)ᵀ = T P Tᵀ)."""
+    tmp = np.empty(m)
+    _left_nb(P, T, m, tmp)
+    _left_nb(P.T, T, m, tmp)
+
+
+@numba.njit(cache=True)
+def mrp_apply_correction_nb(x, P, xn, Pn):
+    """In place ``x += δx``, ``P ← P⁺`` (a Kalman update's result), then the MRP shadow-set
+    switch (O'Keefe eq. 4.2)."""
+    n = x.shape[0]
     for i in range(n):
-        for j in range(m):
-            acc = 0.0
-            for l in range(m):
-                acc += P[i, l] * T[j, l]
-            tmp[j] = acc
-        for j in range(m):
-            P[i, j] = tmp[j]
+        x[i] += xn[i]
+        for j in range(n):
+            P[i, j] = Pn[i, j]
+    mrp_switch_cov_nb(x, P)
+
+
+@numba.njit(cache=True)
+def _mrp_update_nb(x, P, nu, H, R, consider):
+    """The measurement update of the MRP state in place: the core's Joseph update with
+    innovation ``nu``, ``H``, ``R`` (``consider`` as there), applied by
+    :func:`mrp_apply_correction_nb`. Returns (NIS, ok)."""
+    xn, Pn, nis, ok = joseph_update_nb(np.zeros(x.shape[0]), P, nu, H, R, consider)
+    if ok:
+        mrp_apply_correction_nb(x, P, xn, Pn)
+    return nis, ok
 
 
 @numba.njit(cache=True)
@@ -193,14 +215,7 @@ def star_tracker_update_nb(x, P, q_meas, sigma_rad, consider):
         for j in range(3):
             H[i, j] = 4.0 * B[j, i] / (1.0 + n2) ** 2
     R = np.eye(3) * sigma_rad * sigma_rad
-    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, H, R, consider)
-    if ok:
-        for i in range(n):
-            x[i] += xn[i]
-            for j in range(n):
-                P[i, j] = Pn[i, j]
-        mrp_switch_cov_nb(x, P)
-    return nis, ok
+    return _mrp_update_nb(x, P, nu, H, R, consider)
 
 
 @numba.njit(cache=True)
@@ -216,15 +231,7 @@ def vector_update_nb(x, P, z_b, r_n, sigma, consider):
         for j in range(3):
             H[i, j] = J[i, j]
     nu = z_b - h
-    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, H, np.eye(3) * sigma * sigma,
-                                       consider)
-    if ok:
-        for i in range(n):
-            x[i] += xn[i]
-            for j in range(n):
-                P[i, j] = Pn[i, j]
-        mrp_switch_cov_nb(x, P)
-    return nis, ok
+    return _mrp_update_nb(x, P, nu, H, np.eye(3) * sigma * sigma, consider)
 
 
 @dataclass(frozen=True)

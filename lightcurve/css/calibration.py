@@ -70,7 +70,7 @@ from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
 from .albedo import (AlbedoCells, AlbedoMap, albedo_coefficient_cov_nb, albedo_vectors_nb,
                      builtin_albedo_map, earth_rotation_angle)
-from .attitude_ekf import (mrp_propagate_nb, mrp_switch_cov_nb, mtv3_nb, mv3_nb,
+from .attitude_ekf import (mrp_apply_correction_nb, mrp_propagate_nb, mtv3_nb, mv3_nb,
                            star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
 
@@ -194,14 +194,18 @@ def _consider_mask(n, N):
 
 
 @numba.njit(cache=True)
-def _apply_correction(x, P, xn, Pn):
-    """In place ``x += δx``, ``P ← P⁺``, then the MRP shadow-set switch (O'Keefe eq. 4.2)."""
-    n = x.shape[0]
-    for i in range(n):
-        x[i] += xn[i]
-        for j in range(n):
-            P[i, j] = Pn[i, j]
-    mrp_switch_cov_nb(x, P)
+def _innovation_variance(P, Hrow, r):
+    """``Hrow P Hrowᵀ + r``: the prior variance of one sensor's innovation (zero entries of
+    the Jacobian row skipped)."""
+    n = P.shape[0]
+    v = r
+    for a in range(n):
+        if Hrow[a] != 0.0:
+            acc = 0.0
+            for b in range(n):
+                acc += P[a, b] * Hrow[b]
+            v += Hrow[a] * acc
+    return v
 
 
 @numba.njit(cache=True)
@@ -258,19 +262,12 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     # per-sensor prior innovation statistics (the fault detector of §5.1)
     for i in range(m):
         k = idx[i]
-        v = R[i, i]
-        for a in range(n):
-            if Hm[i, a] != 0.0:
-                acc = 0.0
-                for b in range(n):
-                    acc += P[a, b] * Hm[i, b]
-                v += Hm[i, a] * acc
         nu_out[k] = nu[i]
-        s_out[k] = v
+        s_out[k] = _innovation_variance(P, Hm[i], R[i, i])
     xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
     if not ok:
         return 0, np.nan, 1.0
-    _apply_correction(x, P, xn, Pn)
+    mrp_apply_correction_nb(x, P, xn, Pn)
     return m, nis, 1.0
 
 
@@ -338,13 +335,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         # the innovations of weakly lit sensors upwards; a clearly lit output (y > 3 thr)
         # is used as well, so that a badly predicted sensor cannot lock itself out
         if pred or (y[k] > 3.0 * thr and D[k] + A[k] > 0.0):
-            v = Rk[k]
-            for a in range(n):
-                if H[k, a] != 0.0:
-                    acc = 0.0
-                    for b in range(n):
-                        acc += P[a, b] * H[k, b]
-                    v += H[k, a] * acc
+            v = _innovation_variance(P, H[k], Rk[k])
             if pred:
                 nu_out[k] = y[k] - h[k]
                 s_out[k] = v
@@ -368,7 +359,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         xn, Pn, nis2, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R * infl, cons)
         if not ok:
             return 0, np.nan, 1.0
-    _apply_correction(x, P, xn, Pn)
+    mrp_apply_correction_nb(x, P, xn, Pn)
     return m, nis, infl
 
 
@@ -391,8 +382,14 @@ def _consider_propagate(x, P, N, dt, tau, sig_b):
 
 
 def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0, P0, prm,
-                         az0, el0, cos_fov, horizon_B, cells_args, cells_sig=None):
+                         az0, el0, cos_fov, horizon_B, cells_args, cells_sig=None, timings=None):
     """Whole-recording loop: propagate with the gyro, star-tracker update, CSS update.
+
+    ``timings``: a dict to receive per-call wall times in µs (O'Keefe table 4.4's
+    measurement): ``"propagation_us"`` one entry per gyro-rate propagation step (a sample's
+    steps and its consider-state propagation timed together and shared equally among its
+    steps) and ``"update_us"`` one per CSS measurement update (model, Jacobian and Joseph
+    update; the star-tracker update is not included).
 
     ``W`` holds one gyro sample per interval (K,3), or ``sub`` samples per interval
     ((K−1)·sub, 3: propagation at the gyro rate, e.g. 10 Hz for 2 Hz CSS samples, §2.4).
@@ -424,21 +421,35 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     sub = 1 if W.shape[0] == K else max(1, W.shape[0] // max(K - 1, 1))
     sig_cells = np.zeros(0) if cells_sig is None else np.ascontiguousarray(cells_sig)
     init = np.zeros(N) if prm.shape[0] > 17 and prm[17] > 0.5 else np.zeros(0)
+    timed = timings is not None
+    if timed:
+        from time import perf_counter
+
+        t_prop = np.zeros((K - 1) * sub) if K > 1 else np.zeros(0)
+        t_upd = np.zeros(K)
     for k in range(K):
         if k > 0:
+            if timed:
+                t0 = perf_counter()
             dt = t[k] - t[k - 1]
             for j in range(sub):
                 mrp_propagate_nb(x, P, W[(k - 1) * sub + j], dt / sub, arw, rrw, 0.0)
             if qp > 0.0:
                 P[iq, iq] += qp * dt
             _consider_propagate(x, P, N, dt, tau, sig_b)
+            if timed:
+                t_prop[(k - 1) * sub:k * sub] = (perf_counter() - t0) * 1e6 / sub
         if stvalid[k]:
             nis_st, ok = star_tracker_update_nb(x, P, QST[k], sig_st, cons)
             if ok:
                 NISST[k] = nis_st
+        if timed:
+            t0 = perf_counter()
         m, nis, infl = calibration_update_nb(x, P, Y[k], prm, az0, el0, cos_fov, horizon_B,
                                              sun_N[k], lit[k], theta[k], r_E[k], s_E[k],
                                              *cells_args, nu_k, s_k, u_k, sig_cells, init)
+        if timed:
+            t_upd[k] = (perf_counter() - t0) * 1e6
         M[k] = m
         NIS[k] = nis
         NU[k] = nu_k
@@ -446,6 +457,9 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
         UU[k] = u_k
         X[k] = x
         Pd[k] = np.diagonal(P)
+    if timed:
+        timings["propagation_us"] = t_prop
+        timings["update_us"] = t_upd
     return X, Pd, P, NIS, M, NU, SS, NISST, UU
 
 
@@ -616,7 +630,8 @@ class CalibrationResult:
 
 def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
                     params: CalibrationParams = CalibrationParams(), albedo="builtin",
-                    q_star=None, star_valid=None, q0=None, theta=None) -> CalibrationResult:
+                    q_star=None, star_valid=None, q0=None, theta=None,
+                    timings=None) -> CalibrationResult:
     """Run the full (``params.use_albedo``) or reduced calibration filter on a recording.
 
     css: nominal sensor set; t (K,) s; Y (K,N) outputs; gyro (K,3) rad/s; sun_N (K,3) unit
@@ -626,7 +641,8 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
     :class:`AlbedoMap` (the std enters R in the thesis variant); gyro (K,3), or (K−1)·sub
     samples for sub propagation steps per sample; q_star (K,4) star-tracker
     quaternions (inertial→body) with star_valid (K,) flags; q0 initial attitude (defaults to
-    the first star-tracker sample).
+    the first star-tracker sample); timings: a dict receiving per-call times
+    (:func:`run_calibration_loop`).
     """
     t = np.ascontiguousarray(t, dtype=float)
     K = t.size
@@ -679,7 +695,7 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
                                params.as_array(), np.ascontiguousarray(az0),
                                np.ascontiguousarray(el0), np.cos(css.fov_half_angle_rad),
                                np.ascontiguousarray(css.horizon_normals), cells.args(),
-                               sig_area)
+                               sig_area, timings)
     X, Pd, Pend, NIS, M, NU, SS, NISST, UU = out
     return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N), UU)
 
@@ -910,23 +926,30 @@ def simulate_thesis_calibration_case(rng, configuration="dual_pyramid", *, durat
                            {"spec": None, **r.info})
 
 
+def thesis_filter_setup(name: str, albedo_dir=None):
+    """Parameters and albedo input of one thesis-variant calibration filter of §4.4 (tables
+    4.1-4.4): ``name`` "1p25x1", "5x5" or "10x10" — the full filter with that TOMS grid
+    (mean and spread, §2.1.2.1) — or "reduced" (no albedo model); intermediate gyro (§4.4).
+    Returns ``(CalibrationParams, albedo)`` for :func:`run_calibration`."""
+    from .albedo import load_toms
+    from .gyro import gyro_grade
+
+    if name == "reduced":
+        prm, alb = CalibrationParams.thesis_reduced(), "builtin"
+    else:
+        prm, alb = CalibrationParams.thesis_full(name), load_toms(name, albedo_dir)
+    return prm.for_gyro(gyro_grade("intermediate")), alb
+
+
 def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "10x10", "reduced"),
                              *, albedo_dir=None) -> dict:
     """Tables 4.1-4.3 for one case: for each filter (the full filter with the TOMS grid named,
     or "reduced"), the largest and smallest final 3σ of the scale factor C and of the
     misalignments θ (azimuth) and φ (elevation) over the sensors that were initialised
     (an output above 0.4 once, §5.2), and the fraction of final errors inside 3σ."""
-    from .albedo import load_toms
-    from .gyro import gyro_grade
-
-    spec = gyro_grade("intermediate")
     out = {}
     for f in filters:
-        if f == "reduced":
-            prm, alb = CalibrationParams.thesis_reduced(), "builtin"
-        else:
-            prm, alb = CalibrationParams.thesis_full(f), load_toms(f, albedo_dir)
-        prm = prm.for_gyro(spec)
+        prm, alb = thesis_filter_setup(f, albedo_dir)
         res = run_calibration(case.css_nominal, case.t, case.Y, case.gyro, case.sun_N, case.lit,
                               case.r_I_m, case.epoch_utc, params=prm, albedo=alb,
                               q_star=case.q_star, star_valid=case.star_valid)

@@ -129,9 +129,34 @@ def cmd_vmm(args) -> int:
 
 
 def cmd_sun_models(args) -> int:
-    """Table 4.5: almanac (Vallado eq. 4.39) vs DE421 Sun directions."""
-    from .sun_models import compare_models
+    """Table 4.5: almanac (Vallado eq. 4.39) vs DE421 Sun directions; ``--table``: the whole
+    table measured (:func:`.sun_models.sun_model_table`) beside the thesis's numbers."""
+    from .sun_models import THESIS_TABLE_4_5, compare_models, sun_model_table
 
+    if args.table:
+        tab = sun_model_table()
+        thesis_row = {"DE421 (skyfield)": "SPICE", "Vallado": "Vallado",
+                      "Vallado +6 h": "Vallado +6 h", "ERFA epv00": "VSOP87B",
+                      "ERFA epv00 +6 h": "Meeus +6 h"}
+        print(f"Sun direction vs DE421, {tab['days']:g} days from {tab['start_utc']} every "
+              f"{tab['step_h']:g} h (thesis: O'Keefe table 4.5, vs SPICE)")
+        print(f"{'model':18s} {'time':>6s} {'mean deg':>10s} {'max deg':>10s}   thesis row: "
+              "time, mean, max")
+        for r in tab["rows"]:
+            th = thesis_row.get(r["model"])
+            tt = THESIS_TABLE_4_5.get(th) if th else None
+            f = (lambda v: "–" if v is None else f"{v:.2g}")
+            print(f"{r['model']:18s} {r['time_rel']:6.1f} {f(r['mean_deg']):>10s} "
+                  f"{f(r['max_deg']):>10s}   {th or '–'}: "
+                  + (", ".join(f(v) for v in tt) if tt else "–"))
+        if args.output:
+            _write_json(args.output, tab)
+        return 0
+    if args.output:
+        from ..errors import InputError
+
+        raise InputError("-o/--output needs --table (the per-date comparison prints only)",
+                         field="--output", value=str(args.output), allowed="with --table")
     rows = compare_models(args.dates)
     print("date (UTC)                 almanac-as-GCRS vs DE421 (deg)   "
           "almanac vs DE421 mean-of-date (deg)   range diff (km)")

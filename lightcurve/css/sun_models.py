@@ -1,7 +1,7 @@
 """Sun-direction reference models for on-board filters (O'Keefe 2015, eq. 4.39, table 4.5).
 
-Two models of the inertial Sun direction used as the reference ``ŝ_N`` of the calibration
-and attitude filters:
+Models of the inertial Sun direction used as the reference ``ŝ_N`` of the calibration and
+attitude filters:
 
 * ``"de421"`` — skyfield with the offline JPL DE421 ephemeris
   (:func:`lightcurve.geometry.time.sun_position_gcrs`), GCRS axes: the truth of this package;
@@ -11,7 +11,9 @@ and attitude filters:
 
       T = (JD_UT1 − 2451545.0)/36525                     (T_TDB ≈ T_UT1 is used for M and ε)
       λ_M = 280.460° + 36000.771° T                    mean longitude
-      M   = 357.5291092° + 35999.05034° T              mean anomaly
+      M   = 357.5277233° + 35999.05034° T              mean anomaly (O'Keefe eq. 4.39c;
+                                                       Vallado 2013 prints 357.5291092°,
+                                                       1e-4° apart in the direction)
       λ   = λ_M + 1.914666471° sin M + 0.019994643° sin 2M     ecliptic longitude
       r   = 1.000140612 − 0.016708617 cos M − 0.000139589 cos 2M   (AU)
       ε   = 23.439291° − 0.0130042° T                  obliquity of the ecliptic
@@ -20,7 +22,17 @@ and attitude filters:
   The formula's axes are the mean equator and equinox *of date*; used as if it were GCRS
   (what a flight computer with only this formula does) its direction differs from DE421 by
   the accumulated precession (≈ 50.3″/yr × years since J2000 along the ecliptic) plus the
-  formula's own error — :func:`compare_models` reports both parts (table 4.5's comparison).
+  formula's own error — :func:`compare_models` reports both parts (table 4.5's comparison);
+* ``"erfa"`` — the ERFA/SOFA routine ``epv00`` (pyerfa, installed with astropy): the Earth's
+  heliocentric position from a series fitted to the planetary theory VSOP2000/DE405, BCRS
+  (= GCRS) axes, quoted accuracy a few km (1900–2100). It stands where O'Keefe's table 4.5
+  has Meeus's abbreviated VSOP87 and the full VSOP87B (eq. 4.40–4.42): a periodic-series
+  model of the same class, from a maintained library, since the VSOP87 tables are not
+  shipped here.
+
+:func:`sun_model_table` measures table 4.5: each model's angle to DE421 (the SPICE truth
+of the thesis; geometric positions, GCRS axes) over a year, also with a 6 h clock error, and
+the time per call relative to the almanac formula.
 """
 
 from __future__ import annotations
@@ -29,9 +41,17 @@ import numpy as np
 
 from ..core.constants import AU_M
 
-__all__ = ["vallado_sun_eci", "sun_direction", "compare_models", "SUN_MODELS"]
+__all__ = ["vallado_sun_eci", "erfa_sun_eci", "sun_direction", "compare_models",
+           "sun_model_table", "SUN_MODELS", "THESIS_TABLE_4_5"]
 
-SUN_MODELS = ("de421", "vallado")
+SUN_MODELS = ("de421", "vallado", "erfa")
+
+#: O'Keefe (2015) table 4.5: normalised mean computation time and angular error vs SPICE,
+#: mean / max (deg); Meeus and VSOP87B are the thesis's series models.
+THESIS_TABLE_4_5 = {
+    "SPICE": (19.0, None, None), "Vallado": (1.0, 0.23, 0.24), "Vallado +6 h": (1.0, 0.47, 0.49),
+    "Meeus": (24.0, 5.2e-5, 1.2e-4), "Meeus +6 h": (24.0, 0.25, 0.25),
+    "VSOP87B": (360.0, 5.4e-6, 7.2e-6)}
 
 
 def vallado_sun_eci(jd_ut1, jd_tdb=None) -> np.ndarray:
@@ -42,12 +62,23 @@ def vallado_sun_eci(jd_ut1, jd_tdb=None) -> np.ndarray:
     T = (jd_ut1 - 2451545.0) / 36525.0
     Tt = T if jd_tdb is None else (np.asarray(jd_tdb, dtype=float) - 2451545.0) / 36525.0
     lam_m = np.radians(np.mod(280.460 + 36000.771 * T, 360.0))
-    M = np.radians(np.mod(357.5291092 + 35999.05034 * Tt, 360.0))
+    M = np.radians(np.mod(357.5277233 + 35999.05034 * Tt, 360.0))
     lam = lam_m + np.radians(1.914666471 * np.sin(M) + 0.019994643 * np.sin(2.0 * M))
     r = 1.000140612 - 0.016708617 * np.cos(M) - 0.000139589 * np.cos(2.0 * M)
     eps = np.radians(23.439291 - 0.0130042 * Tt)
     return AU_M * r[..., None] * np.stack([np.cos(lam), np.cos(eps) * np.sin(lam),
                                            np.sin(eps) * np.sin(lam)], axis=-1)
+
+
+def erfa_sun_eci(jd_tdb) -> np.ndarray:
+    """Geometric geocentric Sun position (m), BCRS/GCRS axes, from ERFA ``epv00`` (the negated
+    heliocentric Earth position) at TDB Julian date(s) ``jd_tdb``. Returns (..., 3)."""
+    import erfa
+
+    jd = np.asarray(jd_tdb, dtype=float)
+    whole = np.floor(jd)
+    pvh, _ = erfa.epv00(whole, jd - whole)
+    return -AU_M * np.asarray(pvh["p"], dtype=float)
 
 
 def _times(epoch_utc, t_s):
@@ -66,6 +97,8 @@ def sun_direction(model: str, epoch_utc, t_s) -> np.ndarray:
     elif model == "vallado":
         ts = _times(epoch_utc, t_s)
         r = vallado_sun_eci(ts.ut1, ts.tdb)
+    elif model == "erfa":
+        r = erfa_sun_eci(_times(epoch_utc, t_s).tdb)
     else:
         raise ValueError(f"unknown Sun model {model!r}; allowed: {', '.join(SUN_MODELS)}")
     return r / np.linalg.norm(r, axis=-1, keepdims=True)
@@ -102,3 +135,57 @@ def compare_models(dates_utc) -> list[dict]:
                      "vs_mean_of_date_deg": float(_angle_deg(r_v, r_de_mod)),
                      "range_diff_km": float((np.linalg.norm(r_v) - np.linalg.norm(r_de)) / 1e3)})
     return rows
+
+
+def sun_model_table(start_utc="2015-06-01T00:00:00Z", days=365.25, step_h=1.0,
+                    clock_error_h=6.0, timing_calls=2000) -> dict:
+    """O'Keefe (2015) table 4.5 measured: for each model the angle (deg) between its Sun
+    direction and DE421's (geometric, GCRS) sampled every ``step_h`` hours over ``days``
+    from ``start_utc`` (default: the §2.4 epoch and one year, the errors' half-year period
+    twice), as mean and max; the same with the model evaluated ``clock_error_h`` late (the
+    thesis's "+6 h" rows); and the time per single-date call (``timing_calls`` calls,
+    median of 5 repeats) relative to the almanac formula. The almanac's mean-of-date axes
+    are taken as GCRS, as the thesis's comparison with SPICE does (its 0.23° is the
+    precession since J2000 plus the formula's error).
+
+    Returns ``{"rows": [{model, time_rel, mean_deg, max_deg}...], "start_utc", "days",
+    "step_h", "us_per_call": {...}}``; the thesis's numbers are :data:`THESIS_TABLE_4_5`.
+    The times are of Python calls (numpy scalars, pyerfa, skyfield), not of the thesis's C.
+    """
+    import time
+
+    from ..geometry.time import sun_position_gcrs
+
+    t = np.arange(0.0, days * 86400.0 + 1.0, step_h * 3600.0)
+    truth = sun_position_gcrs(start_utc, t, light_time=False)
+    ts = _times(start_utc, t)
+    late = _times(start_utc, t + clock_error_h * 3600.0)
+    cand = {"Vallado": vallado_sun_eci(ts.ut1, ts.tdb),
+            f"Vallado +{clock_error_h:g} h": vallado_sun_eci(late.ut1, late.tdb),
+            "ERFA epv00": erfa_sun_eci(ts.tdb),
+            f"ERFA epv00 +{clock_error_h:g} h": erfa_sun_eci(late.tdb)}
+    one = _times(start_utc, np.array([0.0]))
+    jd_u, jd_t = float(one.ut1[0]), float(one.tdb[0])
+    calls = {"Vallado": lambda: vallado_sun_eci(jd_u, jd_t),
+             "ERFA epv00": lambda: erfa_sun_eci(jd_t),
+             "DE421 (skyfield)": lambda: sun_position_gcrs(start_utc, 0.0, light_time=False)}
+    us = {}
+    for name, f in calls.items():
+        f()
+        n = timing_calls if name != "DE421 (skyfield)" else max(timing_calls // 20, 10)
+        reps = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for _ in range(n):
+                f()
+            reps.append((time.perf_counter() - t0) / n * 1e6)
+        us[name] = float(np.median(reps))
+    rows = [{"model": "DE421 (skyfield)", "time_rel": us["DE421 (skyfield)"] / us["Vallado"],
+             "mean_deg": None, "max_deg": None}]
+    for name, r in cand.items():
+        err = _angle_deg(r, truth)
+        base = name.split(" +")[0]
+        rows.append({"model": name, "time_rel": us[base] / us["Vallado"],
+                     "mean_deg": float(np.mean(err)), "max_deg": float(np.max(err))})
+    return {"rows": rows, "start_utc": str(start_utc), "days": float(days),
+            "step_h": float(step_h), "us_per_call": us}

@@ -44,6 +44,13 @@ def finite_scalar(x, name: str, *, positive: bool = False, nonneg: bool = False)
     return f
 
 
+def one_of(value, name: str, allowed):
+    """``value`` if it is one of ``allowed`` (ValueError naming ``name`` and the choices)."""
+    if value not in allowed:
+        raise ValueError(f"{name}: expected {' or '.join(map(repr, allowed))}, got {value!r}")
+    return value
+
+
 def facets(areas_m2, normals_body, centers_body_m):
     """Validate facet arrays: areas (F,) >= 0, unit normals (F,3), centres of pressure (F,3)."""
     A = np.atleast_1d(np.asarray(areas_m2, dtype=float))

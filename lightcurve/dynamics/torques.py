@@ -192,6 +192,15 @@ def srp_torque(q, sun_dir_eci, areas_m2, normals_body, centers_body_m, c_spec, c
     return np.sum(np.cross(c, Fi), axis=-2)
 
 
+@njit(cache=True, inline="always")
+def _add_moment(out, c, fx, fy, fz):
+    """``out += c × F`` (N m, body axes): the moment of a facet force ``F`` (N) applied at
+    the facet's centre of pressure ``c`` (3,) (m, from the centre of mass)."""
+    out[0] += c[1] * fz - c[2] * fy
+    out[1] += c[2] * fx - c[0] * fz
+    out[2] += c[0] * fy - c[1] * fx
+
+
 @njit(cache=True)
 def srp_torque_nb(q, s_eci, P, areas, normals, centers, c_spec, c_diff):
     """Numba kernel of :func:`srp_torque` for one state (1-D/2-D float64 arrays, no validation).
@@ -214,10 +223,7 @@ def srp_torque_nb(q, s_eci, P, areas, normals, centers, c_spec, c_diff):
         fx = a * (ks * sb[0] + kn * nx)
         fy = a * (ks * sb[1] + kn * ny)
         fz = a * (ks * sb[2] + kn * nz)
-        cx, cy, cz = centers[i, 0], centers[i, 1], centers[i, 2]
-        out[0] += cy * fz - cz * fy
-        out[1] += cz * fx - cx * fz
-        out[2] += cx * fy - cy * fx
+        _add_moment(out, centers[i], fx, fy, fz)
     return out
 
 
@@ -254,8 +260,7 @@ def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *
         Facet force along the flow (default) or along the facet normal (Bernard eq. 4.21 as
         written; module docstring).
     """
-    if form not in ("velocity", "normal"):
-        raise ValueError(f"form: expected 'velocity' or 'normal', got {form!r}")
+    ck.one_of(form, "form", ("velocity", "normal"))
     A, n, c = ck.facets(areas_m2, normals_body, centers_body_m)
     Cd = ck.finite_scalar(Cd, "Cd", nonneg=True)
     vrel = drag_relative_velocity(r_eci_m, v_eci_m_s, omega_earth)
@@ -292,10 +297,7 @@ def drag_torque_nb(q, vrel_eci, rho_cd, areas, normals, centers, along_normal):
             fx, fy, fz = k * vn * nx, k * vn * ny, k * vn * nz
         else:
             fx, fy, fz = k * vb[0], k * vb[1], k * vb[2]
-        cx, cy, cz = centers[i, 0], centers[i, 1], centers[i, 2]
-        out[0] += cy * fz - cz * fy
-        out[1] += cz * fx - cx * fz
-        out[2] += cx * fy - cy * fx
+        _add_moment(out, centers[i], fx, fy, fz)
     return out
 
 
@@ -500,9 +502,7 @@ class DragTorque:
 
     def __init__(self, areas_m2, normals_body, centers_body_m, position, velocity, Cd: float = 2.2,
                  density_fn=density_kg_m3, omega_earth: float = OMEGA_EARTH, form: str = "velocity"):
-        if form not in ("velocity", "normal"):
-            raise ValueError(f"form: expected 'velocity' or 'normal', got {form!r}")
-        self.form = form
+        self.form = ck.one_of(form, "form", ("velocity", "normal"))
         self.areas, self.normals, self.centers = ck.facets(areas_m2, normals_body, centers_body_m)
         self.position = as_time_function(position, "position")
         self.velocity = as_time_function(velocity, "velocity")

@@ -148,22 +148,39 @@ def _times(t_s, t0):
     return t, t0
 
 
-class ControlledTruth:
-    """Controlled truth attitude: constant body rate with ACS noise ζ at measurement times.
+class _TruthModel:
+    """What both truth models start from, checked in one place.
 
     Parameters
     ----------
     q0 : array (4,)
         Unit quaternion at ``t0_s`` (scalar first, inertial→body).
     omega0_rad_s : array (3,)
-        Commanded constant body rate, rad/s, body axes.
+        Body rate at ``t0_s``, rad/s, body axes (the controlled model's commanded rate).
+    rng : numpy.random.Generator or int seed
+        Source of the model's noise.
+    t0_s : float, optional
+        Epoch of ``q0`` (default: the first simulated time).
+    """
+
+    def __init__(self, q0, omega0_rad_s, rng, t0_s):
+        self.q0 = ck.single_quat(q0, "q0").copy()
+        self.omega0 = ck.single_vec(omega0_rad_s, "omega0_rad_s").copy()
+        self.rng = _rng(rng)
+        self.t0 = t0_s
+
+
+class ControlledTruth(_TruthModel):
+    """Controlled truth attitude: constant body rate with ACS noise ζ at measurement times.
+
+    Parameters
+    ----------
+    q0, omega0_rad_s, rng, t0_s
+        Initial attitude, commanded constant body rate, noise generator and epoch (as in
+        ``_TruthModel``). Noise is applied at every measurement time strictly after ``t0_s``.
     acs_sigma_rad : float
         Standard deviation of each component of the ACS rotation-vector noise ζ, rad.
         Repeated (simultaneous) measurement times share one draw and one attitude.
-    rng : numpy.random.Generator or int seed
-    t0_s : float, optional
-        Epoch of ``q0`` (default: the first simulated time). Noise is applied at every
-        measurement time strictly after ``t0_s``.
     mode : {"random_walk", "jitter"}
         Accumulating ACS noise (default) or jitter about the nominal constant-rate profile.
     rate_sigma_rad_s : float
@@ -172,15 +189,10 @@ class ControlledTruth:
 
     def __init__(self, q0, omega0_rad_s, acs_sigma_rad, rng=None, *, t0_s=None, mode="random_walk",
                  rate_sigma_rad_s: float = 0.0):
-        self.q0 = ck.single_quat(q0, "q0").copy()
-        self.omega0 = ck.single_vec(omega0_rad_s, "omega0_rad_s").copy()
+        super().__init__(q0, omega0_rad_s, rng, t0_s)
         self.acs_sigma = ck.finite_scalar(acs_sigma_rad, "acs_sigma_rad", nonneg=True)
         self.rate_sigma = ck.finite_scalar(rate_sigma_rad_s, "rate_sigma_rad_s", nonneg=True)
-        if mode not in ("random_walk", "jitter"):
-            raise ValueError(f"mode: expected 'random_walk' or 'jitter', got {mode!r}")
-        self.mode = mode
-        self.rng = _rng(rng)
-        self.t0 = t0_s
+        self.mode = ck.one_of(mode, "mode", ("random_walk", "jitter"))
 
     def simulate(self, t_s):
         """Attitudes and rates at the measurement times ``t_s`` (s): ``(q (N,4), ω (N,3))``."""
@@ -212,15 +224,14 @@ class ControlledTruth:
         return qs, ws
 
 
-class UncontrolledTruth:
+class UncontrolledTruth(_TruthModel):
     """Uncontrolled (tumbling) truth attitude: Euler's equations + torques + noise η.
 
     Parameters
     ----------
-    q0 : array (4,)
-        Unit quaternion at ``t0_s`` (scalar first, inertial→body).
-    omega0_rad_s : array (3,)
-        Initial body rate, rad/s, body axes.
+    q0, omega0_rad_s, rng, t0_s
+        Initial attitude, initial body rate, noise generator and epoch of the initial state
+        (as in ``_TruthModel``).
     J : array (3, 3)
         Inertia, kg m², body axes.
     torque_models : sequence
@@ -229,9 +240,6 @@ class UncontrolledTruth:
         their own orbit geometry (position, velocity, Sun direction as functions of time).
     eta_sigma_rad_s2 : float
         Angular-acceleration noise level (see the module docstring for the two meanings).
-    rng : numpy.random.Generator or int seed
-    t0_s : float, optional
-        Epoch of the initial state (default: the first simulated time).
     noise : {"continuous", "piecewise_constant"}
         Meaning of η (module docstring); default "continuous" (white noise, impulse per interval).
     rtol, atol : float
@@ -260,11 +268,8 @@ class UncontrolledTruth:
                  *, t0_s=None, noise: str = "continuous", rtol: float = 1e-12, atol: float = 1e-12,
                  torques=None, shape=None, orbit=None, epoch_utc=None, geometry_step_s: float = 20.0,
                  torque_forms: str = "physical"):
-        if torque_forms not in ("physical", "thesis"):
-            raise ValueError(f"torque_forms: expected 'physical' or 'thesis', got {torque_forms!r}")
-        self.torque_forms = torque_forms
-        self.q0 = ck.single_quat(q0, "q0").copy()
-        self.omega0 = ck.single_vec(omega0_rad_s, "omega0_rad_s").copy()
+        super().__init__(q0, omega0_rad_s, rng, t0_s)
+        self.torque_forms = ck.one_of(torque_forms, "torque_forms", ("physical", "thesis"))
         self.J = check_inertia(J)
         self.J_inv = np.linalg.inv(self.J)
         self.torque_fns = []
@@ -276,11 +281,7 @@ class UncontrolledTruth:
             else:
                 raise ValueError(f"torque_models: {m!r} is neither a torque model nor a callable")
         self.eta_sigma = ck.finite_scalar(eta_sigma_rad_s2, "eta_sigma_rad_s2", nonneg=True)
-        if noise not in ("piecewise_constant", "continuous"):
-            raise ValueError(f"noise: expected 'piecewise_constant' or 'continuous', got {noise!r}")
-        self.noise = noise
-        self.rng = _rng(rng)
-        self.t0 = t0_s
+        self.noise = ck.one_of(noise, "noise", ("piecewise_constant", "continuous"))
         self.rtol, self.atol = float(rtol), float(atol)
         self.named_torques = tuple(torques) if torques is not None else ()
         for name in self.named_torques:

@@ -3,8 +3,8 @@ when that backend runs (needs numba-cuda). Module-level kernels, so numba's CUDA
 (``NUMBA_ENABLE_CUDASIM=1``) can run them.
 
 Reductions: each block of :data:`TPB` threads accumulates a grid-stride share of the particles
-in registers, sums (or takes the extremum of) its rows in shared memory (:func:`_tree`), and
-writes one row of block partials; the host combines the partials in block order.
+in registers, sums (or takes the extremum of) its rows in shared memory and writes one row of
+block partials (:func:`_block_reduce`); the host combines the partials in block order.
 """
 
 from __future__ import annotations
@@ -40,31 +40,31 @@ roughen_chart_row = _dev(BK.roughen_chart_row)
 roughen_compose_row = _dev(BK.roughen_compose_row)
 liu_west_row = _dev(BK.liu_west_row)
 grp_of = _dev(BK._grp_of)
+chart_row = _dev(BK.chart_row)
+chart_moment_row = _dev(BK.chart_moment_row)
 ziggurat_normal = _dev(CP.ziggurat_normal)
 first_above = _dev(CP._first_above)
 
 
 @cuda.jit(device=True)
-def _tree(sh, t, K):
-    """Sum the rows of the shared array ``sh`` (TPB, K) into ``sh[0]``."""
+def _block_reduce(sh, t, K, sign, part):
+    """Reduce the rows of the shared array ``sh`` (TPB, K), once every thread of the block has
+    written its row ``t``, into ``sh[0]`` — their sums (``sign = 0``), maxima (``+1``) or
+    minima (``−1``) — and store that as the block's row ``part[block, :K]``."""
+    cuda.syncthreads()
     step = TPB // 2
     while step > 0:
         if t < step:
             for k in range(K):
-                sh[t, k] += sh[t + step, k]
-        cuda.syncthreads()
-        step //= 2
-
-@cuda.jit(device=True)
-def _tree_max(sh, t, K, sign):
-    step = TPB // 2
-    while step > 0:
-        if t < step:
-            for k in range(K):
-                if sign * sh[t + step, k] > sign * sh[t, k]:
+                if sign == 0.0:
+                    sh[t, k] += sh[t + step, k]
+                elif sign * sh[t + step, k] > sign * sh[t, k]:
                     sh[t, k] = sh[t + step, k]
         cuda.syncthreads()
         step //= 2
+    if t == 0:
+        for k in range(K):
+            part[cuda.blockIdx.x, k] = sh[0, k]
 
 @cuda.jit
 def k_predict(Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta, use_zeta,
@@ -93,9 +93,7 @@ def k_fill(a, v):
 def k_chart(Q, W, qref, a, f, X):
     i = cuda.grid(1)
     if i < Q.shape[0]:
-        grp_of(Q[i], qref, a, f, X[i, :3])
-        for j in range(3):
-            X[i, 3 + j] = W[i, j]
+        chart_row(i, Q, W, qref, a, f, X)
 
 @cuda.jit
 def k_scale2(a, v):
@@ -130,10 +128,7 @@ def k_max(a, b, phi, part):
             m = v
         i += cuda.gridsize(1)
     sh[t, 0] = m
-    cuda.syncthreads()
-    _tree_max(sh, t, 1, 1.0)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
+    _block_reduce(sh, t, 1, 1.0, part)
 
 @cuda.jit
 def k_sumexp(logw, ll, phi, m, part):
@@ -151,11 +146,7 @@ def k_sumexp(logw, ll, phi, m, part):
         i += cuda.gridsize(1)
     sh[t, 0] = s1
     sh[t, 1] = s2
-    cuda.syncthreads()
-    _tree(sh, t, 2)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
-        part[cuda.blockIdx.x, 1] = sh[0, 1]
+    _block_reduce(sh, t, 2, 0.0, part)
 
 @cuda.jit
 def k_expw(logw, mx, w, part):
@@ -169,10 +160,7 @@ def k_expw(logw, mx, w, part):
         s += e
         i += cuda.gridsize(1)
     sh[t, 0] = s
-    cuda.syncthreads()
-    _tree(sh, t, 1)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
+    _block_reduce(sh, t, 1, 0.0, part)
 
 @cuda.jit
 def k_normw(logw, w, lse, s, part):
@@ -186,10 +174,7 @@ def k_normw(logw, w, lse, s, part):
         s2 += w[i] * w[i]
         i += cuda.gridsize(1)
     sh[t, 0] = s2
-    cuda.syncthreads()
-    _tree(sh, t, 1)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
+    _block_reduce(sh, t, 1, 0.0, part)
 
 @cuda.jit
 def k_innov(logw, mpred, y, sig, ll, mx, mean, second, part):
@@ -216,11 +201,7 @@ def k_innov(logw, mpred, y, sig, ll, mx, mean, second, part):
         i += cuda.gridsize(1)
     sh[t, 0] = s0
     sh[t, 1] = s1
-    cuda.syncthreads()
-    _tree(sh, t, 2)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
-        part[cuda.blockIdx.x, 1] = sh[0, 1]
+    _block_reduce(sh, t, 2, 0.0, part)
 
 @cuda.jit
 def k_nearest(mpred, y, part):
@@ -236,10 +217,7 @@ def k_nearest(mpred, y, part):
                 b = v
         i += cuda.gridsize(1)
     sh[t, 0] = b
-    cuda.syncthreads()
-    _tree_max(sh, t, 1, -1.0)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
+    _block_reduce(sh, t, 1, -1.0, part)
 
 @cuda.jit
 def k_first_equal(w, v, part):
@@ -253,10 +231,7 @@ def k_first_equal(w, v, part):
             b = float(i)
         i += cuda.gridsize(1)
     sh[t, 0] = b
-    cuda.syncthreads()
-    _tree_max(sh, t, 1, -1.0)
-    if t == 0:
-        part[cuda.blockIdx.x, 0] = sh[0, 0]
+    _block_reduce(sh, t, 1, -1.0, part)
 
 @cuda.jit
 def k_grp_mean(Q, qref, w, a, f, part):
@@ -271,11 +246,7 @@ def k_grp_mean(Q, qref, w, a, f, part):
         for k in range(3):
             sh[t, k] += w[i] * g[k]
         i += cuda.gridsize(1)
-    cuda.syncthreads()
-    _tree(sh, t, 3)
-    if t == 0:
-        for k in range(3):
-            part[cuda.blockIdx.x, k] = sh[0, k]
+    _block_reduce(sh, t, 3, 0.0, part)
 
 @cuda.jit
 def k_chart_stats(Q, W, w, qref, a, f, w0, X, part):
@@ -287,11 +258,7 @@ def k_chart_stats(Q, W, w, qref, a, f, w0, X, part):
         sh[t, k] = 0.0
     i = cuda.grid(1)
     while i < Q.shape[0]:
-        grp_of(Q[i], qref, a, f, X[i, :3])
-        for j in range(3):
-            X[i, 3 + j] = W[i, j]
-            x[j] = X[i, j]
-            x[3 + j] = W[i, j] - w0[j]
+        chart_moment_row(i, Q, W, qref, a, f, w0, X, x)
         wi = w[i]
         kk = 6
         for d in range(6):
@@ -300,11 +267,7 @@ def k_chart_stats(Q, W, w, qref, a, f, w0, X, part):
                 sh[t, kk] += wi * x[d] * x[e]
                 kk += 1
         i += cuda.gridsize(1)
-    cuda.syncthreads()
-    _tree(sh, t, 27)
-    if t == 0:
-        for k in range(27):
-            part[cuda.blockIdx.x, k] = sh[0, k]
+    _block_reduce(sh, t, 27, 0.0, part)
 
 @cuda.jit
 def k_colsum(X, mean, second, part):
@@ -327,11 +290,7 @@ def k_colsum(X, mean, second, part):
             for d in range(D):
                 sh[t, d] += X[i, d]
         i += cuda.gridsize(1)
-    cuda.syncthreads()
-    _tree(sh, t, 21)
-    if t == 0:
-        for k in range(21):
-            part[cuda.blockIdx.x, k] = sh[0, k]
+    _block_reduce(sh, t, 21, 0.0, part)
 
 @cuda.jit
 def k_ranges(X, part):
@@ -350,11 +309,7 @@ def k_ranges(X, part):
             if -v < sh[t, 6 + d]:
                 sh[t, 6 + d] = -v
         i += cuda.gridsize(1)
-    cuda.syncthreads()
-    _tree_max(sh, t, 12, -1.0)
-    if t == 0:
-        for k in range(12):
-            part[cuda.blockIdx.x, k] = sh[0, k]
+    _block_reduce(sh, t, 12, -1.0, part)
 
 @cuda.jit
 def k_scan(w, C, part):

@@ -21,9 +21,9 @@ import numba as nb
 import numpy as np
 
 from ..core.dynamics import const_rate_xyz, mat9, rk4_step_xyz
-from ..core.particles import n_chunks
-from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, brdf_product_nb,
-                               cook_torrance_fresnel_xyz, facet_flux_nb, fresnel_xyz)
+from ..core.particles import chunk_bounds, chunk_sums, n_chunks
+from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, facet_flux_nb,
+                               facet_sum_fresnel_xyz, fresnel_xyz)
 from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 from .facet_states import fill_facet_arrays_nb, from_unbounded_xyz
 
@@ -63,30 +63,8 @@ def _flux_pre(q0, q1, q2, q3, s, o, h, c, Fr, normals, areas, ids, params):
     sx, sy, sz = qrot_xyz_nb(q0, q1, q2, q3, s[0], s[1], s[2])
     ox, oy, oz = qrot_xyz_nb(q0, q1, q2, q3, o[0], o[1], o[2])
     hx, hy, hz = qrot_xyz_nb(q0, q1, q2, q3, h[0], h[1], h[2])
-    acc = 0.0
-    for fct in range(normals.shape[0]):
-        mid = ids[fct]
-        if mid < 0:
-            continue
-        nx = normals[fct, 0]
-        ny = normals[fct, 1]
-        nz = normals[fct, 2]
-        ns = nx * sx + ny * sy + nz * sz
-        if ns <= 0.0:
-            continue
-        no = nx * ox + ny * oy + nz * oz
-        if no <= 0.0:
-            continue
-        if mid == COOK_TORRANCE or mid == COOK_TORRANCE_THESIS:
-            nh = nx * hx + ny * hy + nz * hz
-            p = params[fct]
-            acc += areas[fct] * cook_torrance_fresnel_xyz(
-                ns, no, nh, c, Fr[fct], 0.0, 0.0, p[0], p[1], p[2],
-                mid == COOK_TORRANCE_THESIS)[0]
-        else:
-            acc += areas[fct] * brdf_product_nb(mid, params[fct], nx, ny, nz, sx, sy, sz,
-                                                ox, oy, oz)
-    return acc
+    return facet_sum_fresnel_xyz(sx, sy, sz, ox, oy, oz, hx, hy, hz, c, Fr, normals, areas, ids,
+                                 params)
 
 
 @nb.njit(cache=True, inline="always")
@@ -198,8 +176,7 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
         hI, cI = flux_invariants(s, o, ids, params, Fr)
     nch = n_chunks(N)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         for i in range(lo, hi):
             predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
                         use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
@@ -214,8 +191,7 @@ def argmax_weights(w):
     best = np.full(nch, -np.inf)
     arg = np.zeros(nch, dtype=np.int64)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         b = -np.inf
         k = lo
         for i in range(lo, hi):
@@ -240,19 +216,33 @@ def grp_weighted_mean(Q, qref, w, a, f):
     nch = n_chunks(N)
     part = np.zeros((nch, 3))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         g = np.empty(3)
         for i in range(lo, hi):
             _grp_of(Q[i], qref, a, f, g)
             wi = w[i]
             for j in range(3):
                 part[c, j] += wi * g[j]
-    out = np.zeros(3)
-    for c in range(nch):
-        for j in range(3):
-            out[j] += part[c, j]
-    return out
+    return chunk_sums(part)
+
+
+@nb.njit(cache=True, inline="always")
+def chart_row(i, Q, W, qref, a, f, X):
+    """Row ``i`` of the chart of eq. 7.101: ``X[i, :3]`` = GRP of ``Q_i ⊗ qref⁻¹``,
+    ``X[i, 3:6] = W_i``."""
+    _grp_of(Q[i], qref, a, f, X[i, :3])
+    for j in range(3):
+        X[i, 3 + j] = W[i, j]
+
+
+@nb.njit(cache=True, inline="always")
+def chart_moment_row(i, Q, W, qref, a, f, w0, X, x):
+    """:func:`chart_row` ``i`` and the row shifted for the one-pass moments of
+    :func:`chart_stats`: ``x = [δp_i, ω_i − w0]`` (6,)."""
+    chart_row(i, Q, W, qref, a, f, X)
+    for j in range(3):
+        x[j] = X[i, j]
+        x[3 + j] = W[i, j] - w0[j]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -260,9 +250,7 @@ def chart_rows(Q, W, qref, a, f, X):
     """``X[i, :3]`` = GRP of ``Q_i ⊗ qref⁻¹``, ``X[i, 3:6] = W_i`` (the chart of eq. 7.101)."""
     N = Q.shape[0]
     for i in nb.prange(N):
-        _grp_of(Q[i], qref, a, f, X[i, :3])
-        for j in range(3):
-            X[i, 3 + j] = W[i, j]
+        chart_row(i, Q, W, qref, a, f, X)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -277,15 +265,10 @@ def chart_stats(Q, W, w, qref, a, f, w0, X):
     S1 = np.zeros((nch, 6))
     S2 = np.zeros((nch, 6, 6))
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         x = np.empty(6)
         for i in range(lo, hi):
-            _grp_of(Q[i], qref, a, f, X[i, :3])
-            for j in range(3):
-                X[i, 3 + j] = W[i, j]
-                x[j] = X[i, j]
-                x[3 + j] = W[i, j] - w0[j]
+            chart_moment_row(i, Q, W, qref, a, f, w0, X, x)
             wi = w[i]
             for d in range(6):
                 xd = wi * x[d]
@@ -387,8 +370,7 @@ def min_abs_residual(mpred, y):
     nch = n_chunks(N)
     part = np.full(nch, np.inf)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         b = np.inf
         for i in range(lo, hi):
             m = mpred[i]
@@ -431,8 +413,7 @@ def facet_mag_particles_nb(Q, zeta, Z, facet, kind_col, logit, s, o, normals, ar
     use_zeta = zeta.shape[0] == N
     nch = n_chunks(N)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         ar = np.empty(F)
         pr = np.empty((F, P))
         qm = np.empty(4)
@@ -458,30 +439,34 @@ def weighted_param_stats_nb(Z, w, logit):
     ``p = 1/(1+e^{−z})`` where ``logit[d]`` else ``e^{z}``; weights w (N,) sum to 1.
     Returns ``(z_mean, z_var, p_mean, p_var)``, each (D,).
     """
-    N, D = Z.shape
+    D = Z.shape[1]
     zm = np.zeros(D)
     pm = np.zeros(D)
     z2 = np.zeros(D)
     p2 = np.zeros(D)
-    for i in range(N):
-        wi = w[i]
-        if wi == 0.0:
-            continue
-        for d in range(D):
-            zz = Z[i, d]
-            pp = from_unbounded_xyz(zz, logit[d])
-            zm[d] += wi * zz
-            pm[d] += wi * pp
-    for i in range(N):
-        wi = w[i]
-        if wi == 0.0:
-            continue
-        for d in range(D):
-            zz = Z[i, d]
-            pp = from_unbounded_xyz(zz, logit[d])
-            z2[d] += wi * (zz - zm[d]) ** 2
-            p2[d] += wi * (pp - pm[d]) ** 2
+    _weighted_param_pass(Z, w, logit, False, zm, pm, zm, pm)
+    _weighted_param_pass(Z, w, logit, True, zm, pm, z2, p2)
     return zm, z2, pm, p2
+
+
+@nb.njit(cache=True, inline="always")
+def _weighted_param_pass(Z, w, logit, second, zm, pm, zs, ps):
+    """One pass of :func:`weighted_param_stats_nb` over the particles with non-zero weight:
+    adds ``Σ w z`` to ``zs`` and ``Σ w p`` to ``ps`` (``second`` False), or the centred
+    ``Σ w (z − zm)²`` and ``Σ w (p − pm)²`` (True)."""
+    for i in range(Z.shape[0]):
+        wi = w[i]
+        if wi == 0.0:
+            continue
+        for d in range(Z.shape[1]):
+            zz = Z[i, d]
+            pp = from_unbounded_xyz(zz, logit[d])
+            if second:
+                zs[d] += wi * (zz - zm[d]) ** 2
+                ps[d] += wi * (pp - pm[d]) ** 2
+            else:
+                zs[d] += wi * zz
+                ps[d] += wi * pp
 
 
 @nb.njit(cache=True, parallel=True)
@@ -501,8 +486,7 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
     P = params0.shape[1]
     nch = n_chunks(N)
     for c in nb.prange(nch):
-        lo = c * N // nch
-        hi = (c + 1) * N // nch
+        lo, hi = chunk_bounds(c, N, nch)
         ar = np.empty(F)
         pr = np.empty((F, P))
         for i in range(lo, hi):

@@ -72,7 +72,8 @@ class BRDF:
     name : str
         Registry name (set by :func:`register_brdf`).
     param_names : tuple of str
-        Material parameters in packing order.
+        Material parameters in packing order (default for a subclass: the keys of its
+        ``param_bounds``, in order).
     param_bounds : dict
         ``name -> (lo, hi, lo_open, hi_open)``; ``None`` for an unbounded side.
     defaults : dict
@@ -86,6 +87,11 @@ class BRDF:
     param_bounds: dict = {}
     defaults: dict = {}
     kernel_id: int | None = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "param_bounds" in vars(cls) and "param_names" not in vars(cls):
+            cls.param_names = tuple(cls.param_bounds)
 
     # -- evaluation ------------------------------------------------------------------------
     def evaluate(self, n, s, o, params: dict):

@@ -56,9 +56,7 @@ class _KernelBRDF(BRDF):
 class Lambert(_KernelBRDF):
     """Lambertian diffuse reflector: f_r = albedo/π [sr⁻¹], albedo ∈ [0, 1]."""
 
-    param_names = ("albedo",)
     param_bounds = {"albedo": (0.0, 1.0, False, False)}
-    defaults = {}
     kernel_id = K.LAMBERT
 
 
@@ -77,10 +75,8 @@ class CookTorrance(_KernelBRDF):
     :mod:`lightcurve.core.photometry`.
     """
 
-    param_names = ("xi", "a", "m")
     param_bounds = {"xi": (0.0, 1.0, False, False), "a": (0.0, 1.0, True, True),
                     "m": (0.0, 1.0, True, False)}
-    defaults = {}
     kernel_id = K.COOK_TORRANCE
 
 
@@ -109,10 +105,8 @@ class Phong(_KernelBRDF):
     Ks 0.25, n 0.26).
     """
 
-    param_names = ("Kd", "Ks", "n")
     param_bounds = {"Kd": (0.0, 1.0, False, False), "Ks": (0.0, 1.0, False, False),
                     "n": (0.0, 1e5, False, False)}
-    defaults = {}
     kernel_id = K.PHONG
 
 
@@ -131,10 +125,8 @@ class AshikhminShirley(_KernelBRDF):
     irrelevant when nu = nv).
     """
 
-    param_names = ("Rd", "Rs", "nu", "nv")
     param_bounds = {"Rd": (0.0, 1.0, False, False), "Rs": (0.0, 1.0, False, False),
                     "nu": (0.0, 1e5, True, False), "nv": (0.0, 1e5, True, False)}
-    defaults = {}
     kernel_id = K.ASHIKHMIN_SHIRLEY
 
     def evaluate(self, n, s, o, params: dict):

@@ -18,10 +18,11 @@ __all__ = ["Extinction"]
 
 @register_effect
 class Extinction(Effect):
+    """Atmospheric extinction: the air between the object and the telescope absorbs and scatters
+    light, so the object looks fainter by k magnitudes per air mass, most strongly near the
+    horizon."""
+
     name = "extinction"
-    description = ("Atmospheric extinction: the air between the object and the telescope "
-                   "absorbs and scatters light, so the object looks fainter by k magnitudes per "
-                   "air mass, most strongly near the horizon.")
     params = (ParamSpec("k_mag_per_airmass", "mag/airmass", 0.2, Prior("uniform", 0.1, 0.4),
                         min=0.0, max=3.0, per="site", null=0.0,
                         description="extinction coefficient of each site in the band"),)

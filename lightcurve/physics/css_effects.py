@@ -22,10 +22,11 @@ __all__ = ["CSSAlbedo", "CSSMisalignment", "CSSScaleFactor", "CSSFault"]
 
 @register_effect
 class CSSAlbedo(Effect):
+    """Earth albedo on the sun sensors: sunlight reflected by the Earth reaches sensors facing the
+    Earth and adds a bias that depends on the orbit position and attitude, pulling the sensed
+    Sun direction towards the Earth."""
+
     name = "css_albedo"
-    description = ("Earth albedo on the sun sensors: sunlight reflected by the Earth reaches "
-                   "sensors facing the Earth and adds a bias that depends on the orbit position "
-                   "and attitude, pulling the sensed Sun direction towards the Earth.")
     kind = "css"
     group = "reflection"
     params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0, null=0.0,
@@ -46,10 +47,10 @@ class CSSAlbedo(Effect):
 
 @register_effect
 class CSSMisalignment(Effect):
+    """Sun-sensor misalignment: a sensor is mounted slightly tilted from its nominal direction, so
+    its output is too high on one side and too low on the other as the Sun moves across it."""
+
     name = "css_misalignment"
-    description = ("Sun-sensor misalignment: a sensor is mounted slightly tilted from its "
-                   "nominal direction, so its output is too high on one side and too low on "
-                   "the other as the Sun moves across it.")
     kind = "css"
     group = "sensor"
     params = (ParamSpec("d_az_deg", "deg", 0.0, Prior("normal", 0.0, 2.0), min=-30.0, max=30.0,
@@ -65,9 +66,10 @@ class CSSMisalignment(Effect):
 
 @register_effect
 class CSSScaleFactor(Effect):
+    """Sun-sensor scale factors: degraded or mis-calibrated photodiodes report the Sun too weakly
+    or too strongly, scaling each sensor's output."""
+
     name = "css_scale_factor"
-    description = ("Sun-sensor scale factors: degraded or mis-calibrated photodiodes report the "
-                   "Sun too weakly or too strongly, scaling each sensor's output.")
     kind = "css"
     group = "illumination"
     # the outputs depend on C·C_k only: the diagnosis fits these products as the individual
@@ -88,9 +90,10 @@ class CSSScaleFactor(Effect):
 
 @register_effect
 class CSSFault(Effect):
+    """Sun-sensor fault: one sensor fails (stops responding or loses sensitivity) at some time, so
+    its output drops while the others stay consistent."""
+
     name = "css_fault"
-    description = ("Sun-sensor fault: one sensor fails (stops responding or loses sensitivity) "
-                   "at some time, so its output drops while the others stay consistent.")
     kind = "css"
     group = "sensor"
     params = (ParamSpec("sensor", "index", 0.0, Prior("int_uniform", 0.0, -1.0), min=0.0,

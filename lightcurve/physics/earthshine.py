@@ -69,10 +69,11 @@ def earthshine_cells(grid, r_obj_eci_m, sun_eci_m, theta_rad):
 
 @register_effect
 class Earthshine(Effect):
+    """Earthshine: sunlight reflected by the Earth's clouds, land and sea lights up the side of the
+    object facing the Earth, making it brighter than sunlight alone would, most of all when that
+    side faces the observer."""
+
     name = "earthshine"
-    description = ("Earthshine: sunlight reflected by the Earth's clouds, land and sea lights up "
-                   "the side of the object facing the Earth, making it brighter than sunlight "
-                   "alone would, most of all when that side faces the observer.")
     params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0, null=0.0,
                         description="multiplier of the albedo map"),)
     options = {"albedo": "builtin", "resolution_deg": 10.0}

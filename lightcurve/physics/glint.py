@@ -59,10 +59,10 @@ class _ExtraFacet(Effect):
 
 @register_effect
 class SpecularGlint(_ExtraFacet):
+    """Specular glint: a mirror-like surface the model does not have (a solar panel or antenna)
+    flashes brightly whenever it reflects the Sun towards the observer."""
+
     name = "specular_glint"
-    description = ("Specular glint: a mirror-like surface the model does not have (a solar "
-                   "panel or antenna) flashes brightly whenever it reflects the Sun towards "
-                   "the observer.")
     params = (ParamSpec("area_m2", "m^2", 0.2, Prior("log_uniform", 0.05, 2.0), min=0.0, max=1e3, null=0.0,
                         description="facet area times specular reflectance"),
               _AZ, _EL,
@@ -79,9 +79,10 @@ class SpecularGlint(_ExtraFacet):
 
 @register_effect
 class UnmodelledFacet(_ExtraFacet):
+    """Unmodelled surface: a flat diffuse surface missing from the shape model adds light whenever
+    it faces both the Sun and the observer."""
+
     name = "unmodelled_facet"
-    description = ("Unmodelled surface: a flat diffuse surface missing from the shape model adds "
-                   "light whenever it faces both the Sun and the observer.")
     params = (ParamSpec("area_m2", "m^2", 0.5, Prior("log_uniform", 0.1, 3.0), min=0.0, max=1e4, null=0.0,
                         description="facet area times Lambert albedo"),
               _AZ, _EL)

@@ -19,10 +19,10 @@ __all__ = ["ZeroPoint"]
 
 @register_effect
 class ZeroPoint(Effect):
+    """Photometric zero-point offset: a calibration error of one camera (or site) makes every
+    magnitude it reports brighter or fainter by the same constant amount."""
+
     name = "zero_point"
-    description = ("Photometric zero-point offset: a calibration error of one camera (or site) "
-                   "makes every magnitude it reports brighter or fainter by the same constant "
-                   "amount.")
     params = (ParamSpec("offset_mag", "mag", 0.0, Prior("signed_uniform", 0.1, 0.4),
                         min=-5.0, max=5.0, per="camera", null=0.0,
                         description="magnitude added to every measurement of the camera"),)

@@ -167,7 +167,8 @@ class ParamSpec:
 class Effect:
     """Base class of a physics effect (module docstring).
 
-    Subclasses set the class attributes and implement :meth:`transform` and/or
+    Subclasses set the class attributes (their docstring is the plain-language
+    ``description``, see :func:`register_effect`) and implement :meth:`transform` and/or
     :meth:`offset`; instances carry the validated ``options`` (constructor keywords).
     """
 
@@ -354,9 +355,14 @@ _REGISTRY: dict[str, type] = {}
 
 
 def register_effect(cls):
-    """Class decorator: add an :class:`Effect` subclass to the registry under ``cls.name``."""
+    """Class decorator: add an :class:`Effect` subclass to the registry under ``cls.name``.
+
+    The class docstring is the effect's plain-language ``description`` (whitespace folded to
+    single spaces) unless the class sets ``description`` itself."""
     if not (isinstance(cls, type) and issubclass(cls, Effect)):
         raise TypeError("register_effect decorates Effect subclasses")
+    if "description" not in vars(cls) and cls.__doc__:
+        cls.description = " ".join(cls.__doc__.split())
     if not cls.name or not cls.description:
         raise ValueError(f"{cls.__name__}: an effect needs a name and a description")
     if cls.group not in ORDER:

@@ -213,10 +213,11 @@ class _ShadowModel:
 
 @register_effect
 class SelfShadowing(Effect):
+    """Self-shadowing: parts of a non-convex object (wings, booms, a dish) cast shadows on other
+    parts or hide them from the observer, so it is fainter than the simple sum over its surfaces
+    at some attitudes."""
+
     name = "self_shadowing"
-    description = ("Self-shadowing: parts of a non-convex object (wings, booms, a dish) cast "
-                   "shadows on other parts or hide them from the observer, so it is fainter "
-                   "than the simple sum over its surfaces at some attitudes.")
     params = ()
     options = {"subdivisions": 16, "skip_convex": True}
     group = "occlusion"

@@ -21,10 +21,10 @@ __all__ = ["Penumbra"]
 
 @register_effect
 class Penumbra(Effect):
+    """Penumbra: near the edge of the Earth's shadow only part of the Sun's disc is visible from
+    the object, so it fades gradually instead of switching off at once."""
+
     name = "penumbra"
-    description = ("Penumbra: near the edge of the Earth's shadow only part of the Sun's disc "
-                   "is visible from the object, so it fades gradually instead of switching "
-                   "off at once.")
     params = (ParamSpec("shadow_height_m", "m", 0.0, Prior("uniform", 0.0, 50e3),
                         min=0.0, max=200e3, fixable=True,
                         description="height added to the Earth's radius for the shadow (atmosphere)"),)

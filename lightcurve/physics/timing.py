@@ -25,10 +25,11 @@ __all__ = ["LightTime", "ClockOffset", "ExposureSmearing"]
 
 @register_effect
 class LightTime(Effect):
+    """Light travel time: we see the object as it was a few milliseconds earlier, when it was
+    elsewhere on its orbit and turned to a slightly different attitude, which shifts fast
+    brightness changes in time."""
+
     name = "light_time"
-    description = ("Light travel time: we see the object as it was a few milliseconds earlier, "
-                   "when it was elsewhere on its orbit and turned to a slightly different "
-                   "attitude, which shifts fast brightness changes in time.")
     params = ()
     group = "timing"
 
@@ -57,10 +58,10 @@ def _dmdt(ctx, h=None):
 
 @register_effect
 class ClockOffset(Effect):
+    """Clock offset: the time stamps of a site are wrong by a constant amount, so the recorded
+    brightness changes appear early or late relative to the model."""
+
     name = "clock_offset"
-    description = ("Clock offset: the time stamps of a site are wrong by a constant amount, so "
-                   "the recorded brightness changes appear early or late relative to the "
-                   "model.")
     params = (ParamSpec("dt_s", "s", 0.0, Prior("signed_uniform", 0.2, 2.0), min=-120.0,
                         max=120.0, per="site", null=0.0,
                         description="true time minus recorded time (positive: stamps are late)"),)
@@ -79,10 +80,10 @@ class ClockOffset(Effect):
 
 @register_effect
 class ExposureSmearing(Effect):
+    """Exposure smearing: the camera averages the light over the exposure, so the fast flashes and
+    dips of a rotating object are smoothed out and peaks look fainter."""
+
     name = "exposure_smearing"
-    description = ("Exposure smearing: the camera averages the light over the exposure, so the "
-                   "fast flashes and dips of a rotating object are smoothed out and peaks look "
-                   "fainter.")
     params = (ParamSpec("exposure_s", "s", 1.0, Prior("uniform", 1.0, 10.0), min=0.0, max=600.0,
                         per="site", null=0.0, description="exposure time centred on the time stamp"),)
     options = {"n_nodes": 12}

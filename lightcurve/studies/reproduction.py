@@ -173,11 +173,77 @@ def _json_line(path):
         return None
     from ..io.safe_open import read_text
 
-    for line in reversed(read_text(path, max_bytes=64 * 1024 * 1024,
-                                   what="benchmark output").splitlines()):
+    text = read_text(path, max_bytes=64 * 1024 * 1024, what="benchmark output")
+    try:                     # a whole JSON document (e.g. css sun-models --table -o)
+        return json.loads(text)
+    except ValueError:       # a benchmark's log: its last JSON line
+        pass
+    for line in reversed(text.splitlines()):
         if line.strip().startswith("{"):
             return json.loads(line)
     return None
+
+
+def _table44_section(b) -> list[str]:
+    """Table 4.4 from ``python benchmarks/css_table_4_4.py`` (or nothing)."""
+    out = ["### Table 4.4 — calibration filters, time per call (µs)", ""]
+    if b is None:
+        return out + ["Not run (`python benchmarks/css_table_4_4.py > table44.json`).", ""]
+    labels = {"1p25x1": "full, 1°×1.25°", "5x5": "full, 5°×5°", "10x10": "full, 10°×10°",
+              "reduced": "reduced"}
+    out += [f"`benchmarks/css_table_4_4.py`: one §4.4 case (seed {b['seed']}, "
+            f"{b['duration_s']:g} s), per-call wall time of our Python calls into numba kernels "
+            f"(the thesis: C, 2.5 GHz i7); albedo model on in the full filters, off in the "
+            f"reduced one; {b['cpu_count']} cores, load {b['load_avg_1min']:.1f} (standard "
+            f"deviations include the machine's other work). Thesis / ours (mean ± sd, median).",
+            "", "| filter | calls prop. / upd. | propagation | measurement update | update ÷ "
+            "reduced, thesis / ours |", "|---|---|---|---|---|"]
+    for k, f in b["filters"].items():
+        th, pr, up = f["thesis"], f["propagation"], f["update"]
+        out.append(
+            f"| {labels.get(k, k)} | {pr['calls']} / {up['calls']} | "
+            f"{th['propagation_mean_us']:g} ± {th['propagation_sd_us']:g} / "
+            f"{pr['mean_us']:.1f} ± {pr['sd_us']:.1f} ({pr['median_us']:.1f}) | "
+            f"{th['update_mean_us']:g} ± {th['update_sd_us']:g} / {up['mean_us']:.0f} ± "
+            f"{up['sd_us']:.0f} ({up['median_us']:.0f}) | {f['thesis_update_vs_reduced']:.2f} / "
+            f"{f['update_vs_reduced']:.2f} |")
+    out.append("")
+    return out
+
+
+def _sun_models_section(tab) -> list[str]:
+    """Table 4.5 from ``lightcurve css sun-models --table -o FILE`` (or nothing)."""
+    from ..css.sun_models import THESIS_TABLE_4_5
+
+    out = ["### Table 4.5 — Sun-direction models vs the ephemeris", ""]
+    if tab is None:
+        return out + ["Not run (`lightcurve css sun-models --table -o sun_models.json`).", ""]
+    pair = {"DE421 (skyfield)": "SPICE", "Vallado": "Vallado", "Vallado +6 h": "Vallado +6 h",
+            "ERFA epv00": "VSOP87B", "ERFA epv00 +6 h": "Meeus +6 h"}
+    out += [f"`lightcurve css sun-models --table`: angle to DE421 (geometric, GCRS; the thesis: "
+            f"SPICE) sampled every {tab['step_h']:g} h over {tab['days']:g} days from "
+            f"{tab['start_utc']}; time per call relative to the almanac formula (Python calls "
+            "here, C in the thesis). ERFA's `epv00` series stands where the thesis has Meeus's "
+            "abbreviated VSOP87 and VSOP87B (same class of periodic-series model; the VSOP87 "
+            "tables are not shipped).", "",
+            "| ours: model | time | mean (deg) | max (deg) | thesis: model | time | mean (deg) "
+            "| max (deg) |", "|---|---|---|---|---|---|---|---|"]
+
+    def g(v):
+        return "–" if v is None else f"{v:.2g}"
+
+    for r in tab["rows"]:
+        th = pair.get(r["model"])
+        t = THESIS_TABLE_4_5.get(th, (None, None, None))
+        out.append(f"| {r['model']} | {r['time_rel']:.1f} | {g(r['mean_deg'])} | "
+                   f"{g(r['max_deg'])} | {th or '–'} | {g(t[0])} | {g(t[1])} | {g(t[2])} |")
+    v = next((r for r in tab["rows"] if r["model"] == "Vallado"), None)
+    if v is not None:
+        out += ["", f"The almanac's error ({v['mean_deg']:.2f}° mean here, "
+                f"{THESIS_TABLE_4_5['Vallado'][1]:.2f}° in the thesis) is mostly the precession "
+                "since J2000 of its mean-of-date axes taken as inertial; a 6 h clock error adds "
+                "the Sun's apparent motion (≈ 0.25°), as in the thesis's +6 h rows.", ""]
+    return out
 
 
 def _timing_section(b) -> list[str]:
@@ -240,14 +306,19 @@ def _tables4_section(b) -> list[str]:
     return out
 
 
-def css_section(study_dirs, *, timing=None, tables4=None) -> str:
+def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
+                table44=None) -> str:
     """The O'Keefe (2015) / DiGregorio section, from the output folders of ``lightcurve css
     study`` (each with ``summary.json``) and the JSON lines of ``benchmarks/css.py``
-    (``timing``, Table 3.1) and ``benchmarks/css_tables_4.py`` (``tables4``): paths or None.
+    (``timing``, Table 3.1) and ``benchmarks/css_tables_4.py`` (``tables4``), and the JSON of
+    ``lightcurve css sun-models --table -o`` (``sun_models``, Table 4.5) and of
+    ``benchmarks/css_table_4_4.py`` (``table44``): paths or None.
     Experiments without a folder are listed as not run."""
     studies = _load(study_dirs)
     timing = _json_line(timing)
     tables4 = _json_line(tables4)
+    sun_models = _json_line(sun_models)
+    table44 = _json_line(table44)
     lines = ["## Coarse sun sensors — O'Keefe (2015), DiGregorio", "",
              "Generated by `python -m lightcurve.studies.reproduction` from the study outputs "
              "(`lightcurve css study pipelines/css/okeefe2015/<experiment>.toml`). \"p99 level\": "
@@ -278,10 +349,11 @@ def css_section(study_dirs, *, timing=None, tables4=None) -> str:
             lines.append("")
     lines += _timing_section(timing)
     lines += _tables4_section(tables4)
-    lines += ["### Tables 4.4, 4.5, 5.1–5.2 and fig. 5.5", "",
+    lines += _table44_section(table44)
+    lines += _sun_models_section(sun_models)
+    lines += ["### Tables 5.1–5.2 and fig. 5.5", "",
               "Not generated: the fault-detection study on the thesis-variant calibration filter "
-              "(ch. 5), the Table 4.4 timings and the Table 4.5 Sun models (Meeus and VSOP87 "
-              "are not implemented; `lightcurve css sun-models` compares Vallado with DE421).",
+              "(ch. 5).",
               "", "### The thesis's qualitative claims", ""]
     lines += _claims(studies)
     lines.append("")
@@ -409,6 +481,15 @@ def _ukf_rss(s, **key):
     return None if c is None else c.get("rss_att_deg_median")
 
 
+def _ukf_rss_ratios(fast, slow, key, a, b):
+    """Median final UKF RSS with ``key = b`` over that with ``key = a`` (the rest controlled,
+    one site, :func:`_ukf_rss`) in the ``fast`` and in the ``slow`` study: ``(fast ratio, slow
+    ratio)``, or None when a cell is missing."""
+    base = dict(dynamics="controlled", sites=1)
+    v = [_ukf_rss(st, **{**base, key: x}) for st in (fast, slow) for x in (a, b)]
+    return None if None in v else (v[1] / v[0], v[3] / v[2])
+
+
 def _bernard_claims(sums):
     """The seven conclusions of §9.4 (bullets in the order of the text)."""
     rows = []
@@ -478,26 +559,20 @@ def _bernard_claims(sums):
     # 5. second site: big gain slow, not fast
     claim = ("a second observatory improves the slow-spinning cases significantly, not the "
              "fast-spinning ones")
-    f1, f2 = (_ukf_rss(f94, dynamics="controlled", sites=1),
-              _ukf_rss(f94, dynamics="controlled", sites=2))
-    s1, s2 = (_ukf_rss(nadir, dynamics="controlled", sites=1),
-              _ukf_rss(nadir, dynamics="controlled", sites=2))
-    if None in (f1, f2, s1, s2):
+    ratios = _ukf_rss_ratios(f94, nadir, "sites", 1, 2)
+    if ratios is None:
         rows.append((claim, "–", "not testable (Fig. 9.4 and `thesis-claims-leo-nadir` needed)"))
     else:
-        rf, rs = f2 / f1, s2 / s1
+        rf, rs = ratios
         rows.append((claim, f"median RSS two sites / one site: fast {_fmt(rf)}, nadir "
                      f"{_fmt(rs)}", _verdict(rs < SIGNIFICANT and rf > SIGNIFICANT)))
     # 6. dynamics matter only for fast spin
     claim = "controlled vs uncontrolled dynamics differ only for the fast-spinning spacecraft"
-    fc, fu = (_ukf_rss(f94, dynamics="controlled", sites=1),
-              _ukf_rss(f94, dynamics="uncontrolled", sites=1))
-    nc, nu = (_ukf_rss(nadir, dynamics="controlled", sites=1),
-              _ukf_rss(nadir, dynamics="uncontrolled", sites=1))
-    if None in (fc, fu, nc, nu):
+    ratios = _ukf_rss_ratios(f94, nadir, "dynamics", "controlled", "uncontrolled")
+    if ratios is None:
         rows.append((claim, "–", "not testable (Fig. 9.4 and `thesis-claims-leo-nadir` needed)"))
     else:
-        rf, rn = fu / fc, nu / nc
+        rf, rn = ratios
         sig = (lambda r: r < SIGNIFICANT or r > 1 / SIGNIFICANT)
         rows.append((claim, f"median RSS uncontrolled / controlled: fast {_fmt(rf)}, nadir "
                      f"{_fmt(rn)}", _verdict(sig(rf) and not sig(rn))))
@@ -644,13 +719,17 @@ def main(argv=None) -> int:
     p.add_argument("--css", nargs="+", default=[], help="output folders of 'lightcurve css study'")
     p.add_argument("--css-timing", help="output of python benchmarks/css.py (Table 3.1)")
     p.add_argument("--css-tables4", help="output of python benchmarks/css_tables_4.py")
+    p.add_argument("--css-sun-models",
+                   help="JSON of 'lightcurve css sun-models --table -o FILE' (Table 4.5)")
+    p.add_argument("--css-table44", help="output of python benchmarks/css_table_4_4.py")
     p.add_argument("--study", nargs="+", default=[],
                    help="output folders of 'lightcurve compare' (the Bernard studies)")
     p.add_argument("--reflection-kf", default=None,
                    help="the JSON line printed by benchmarks/reflection_kf.py")
     a = p.parse_args(argv)
     sections = [bernard_section(a.study, reflection_kf_json=a.reflection_kf),
-                css_section(a.css, timing=a.css_timing, tables4=a.css_tables4)]
+                css_section(a.css, timing=a.css_timing, tables4=a.css_tables4,
+                            sun_models=a.css_sun_models, table44=a.css_table44)]
     write_reproduction(a.output, sections)
     print(f"wrote {a.output}")
     return 0

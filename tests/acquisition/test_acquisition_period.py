@@ -183,3 +183,24 @@ def test_truth_spin_period_is_the_precession_period_of_a_symmetric_body():
         2 * math.pi / math.hypot(0.1, 0.2), rel=1e-12)
     assert truth_spin_period_s(c) == pytest.approx(2 * math.pi / math.hypot(0.1, 0.2))
     assert truth_spin_period_s(SimpleNamespace(truth_omega_rad_s=None)) is None
+
+
+def test_period_cli_quiet_prints_one_line_with_the_period(tmp_path, capsys):
+    """``lightcurve period -q`` prints one line holding the period of a fixed-geometry
+    three-harmonic signal (P = 47.3 s, the generator above), its 99 % interval containing P and
+    the verdict; the full report prints several lines."""
+    from lightcurve.cli import main
+
+    rng = np.random.default_rng(11)
+    P = 47.3
+    t = np.arange(0.0, 600.0, 1.0)
+    path = tmp_path / "sig.h5"
+    fixed_geometry_curve(harmonic_signal(t, P, rng, 0.02), t, 0.02).write(path)
+    assert main(["period", str(path), "-q"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 1 and "significant" in lines[0] and "NOT" not in lines[0]
+    words = lines[0].replace(",", " ").replace("(", " ").split()
+    lo, hi = float(words[words.index("to") - 1]), float(words[words.index("to") + 1])
+    assert lo <= P <= hi
+    assert main(["period", str(path)]) == 0
+    assert len(capsys.readouterr().out.strip().splitlines()) > 3

@@ -15,6 +15,25 @@ def test_cli_sun_models_prints_table_4_5_row(capsys):
     assert abs(float(row.split()[1]) - 0.209) < 0.005
 
 
+
+def test_cli_sun_models_table_feeds_the_reproduction_generator(tmp_path, capsys):
+    """``css sun-models --table -o F`` writes O'Keefe table 4.5 measured (almanac 0.23° mean
+    in the thesis) and ``lightcurve reproduction --css-sun-models F`` prints it beside the
+    thesis's numbers; ``-o`` without ``--table`` is a usage error (exit 2)."""
+    import json
+
+    f = tmp_path / "sun.json"
+    assert main(["css", "sun-models", "--table", "-o", str(f)]) == 0
+    tab = json.loads(f.read_text())
+    v = [r for r in tab["rows"] if r["model"] == "Vallado"][0]
+    assert abs(v["mean_deg"] - 0.23) < 0.03
+    md = tmp_path / "r.md"
+    assert main(["reproduction", "--css-sun-models", str(f), "-o", str(md)]) == 0
+    text = md.read_text()
+    assert "### Table 4.5" in text and "| Vallado | 1.0 |" in text and "VSOP87B" in text
+    assert main(["css", "sun-models", "-o", str(tmp_path / "x.json")]) == 2
+    assert not (tmp_path / "x.json").exists()
+
 def test_cli_calibrate_short_run_writes_json(tmp_path, capsys):
     out = tmp_path / "cal.json"
     assert main(["css", "calibrate", "--filter", "full", "--duration-s", "600",
