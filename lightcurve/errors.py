@@ -41,7 +41,8 @@ class InputError(ValueError):
         prefix = ": ".join(parts)
         text = f"{prefix}: {message}" if prefix else message
         if value is not None:
-            v = repr(value)
+            shown = value.item() if getattr(value, "ndim", None) == 0 else value  # NumPy scalar
+            v = repr(shown)
             if len(v) > 80:
                 v = v[:77] + "..."
             text += f" (got {v})"

@@ -59,11 +59,20 @@ def handle_termination():
     The first signal raises; later ones are ignored while the program unwinds (its clean-up
     is bounded: :func:`stop_pool` kills workers after a short grace period). Previous
     handlers are restored on exit. Outside the main thread this does nothing.
+
+    Python runs a signal handler between any two bytecodes — also inside a finaliser or a
+    weakref callback (Dask's client drops many weakrefs), where the exception it raises is
+    only printed ("Exception ignored in ...") and the program goes on. Such a lost
+    :class:`Terminated` (or Ctrl-C's ``KeyboardInterrupt``) reaches ``sys.unraisablehook``;
+    the block's hook then delivers the signal again 50 ms later, from ordinary code, so a
+    SIGTERM is never silently dropped (it used to be: ``compare --dask-local`` then ran to
+    the end and exited 0). A re-delivery still pending when the block ends raises there.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     fired = []
+    pending = []  # (timer, signum) of a re-delivery not yet run
 
     def on_signal(signum, frame):
         if fired:
@@ -71,16 +80,44 @@ def handle_termination():
         fired.append(signum)
         raise Terminated(signum)
 
+    def redeliver(signum):
+        if pending:
+            pending.clear()
+            os.kill(os.getpid(), signum)
+
+    old_hook = sys.unraisablehook
+
+    def on_unraisable(unraisable):
+        exc = unraisable.exc_value
+        if isinstance(exc, KeyboardInterrupt):  # Terminated, or Ctrl-C's KeyboardInterrupt
+            signum = exc.signum if isinstance(exc, Terminated) else int(signal.SIGINT)
+            fired.clear()
+            timer = threading.Timer(0.05, redeliver, (signum,))
+            timer.daemon = True
+            pending[:] = [(timer, signum)]
+            timer.start()
+            return
+        old_hook(unraisable)
+
     old = {}
     for s in _HANDLED:
         with contextlib.suppress(OSError, ValueError):
             old[s] = signal.signal(s, on_signal)
+    sys.unraisablehook = on_unraisable
     try:
         yield
     finally:
+        late = list(pending)
+        pending.clear()
+        for timer, _ in late:
+            timer.cancel()
+        sys.unraisablehook = old_hook
         for s, h in old.items():
             with contextlib.suppress(OSError, ValueError, TypeError):
                 signal.signal(s, h)
+        if late and sys.exc_info()[0] is None:  # the block ended before the re-delivery
+            signum = late[0][1]
+            raise (Terminated(signum) if signum != signal.SIGINT else KeyboardInterrupt())
 
 
 # ----------------------------------------------------------------------------------------
@@ -172,6 +209,10 @@ def stop_pool(executor, grace_s: float = 2.0) -> None:
     its workers, SIGKILL those still alive after ``grace_s``, reap them, and fail the tasks
     they were running (``BrokenProcessPool``)."""
     procs = list((getattr(executor, "_processes", None) or {}).values())
+    # the executor forgets its manager thread on the first shutdown call: keep it, so that it
+    # is joined before the tasks are failed here (else both set the same future's exception
+    # and the thread dies with InvalidStateError, a traceback on stderr)
+    manager = getattr(executor, "_executor_manager_thread", None)
     with contextlib.suppress(Exception):
         executor.shutdown(wait=False, cancel_futures=True)
     for p in procs:
@@ -188,6 +229,8 @@ def stop_pool(executor, grace_s: float = 2.0) -> None:
                 p.join(1.0)
     with contextlib.suppress(Exception):  # reap the executor's threads and queues now
         executor.shutdown(wait=True)
+    if manager is not None and manager is not threading.current_thread():
+        manager.join(5.0)
     # a task whose worker was killed is failed at once (the executor's own thread does this
     # asynchronously, and not at all when it had already left on the shutdown request)
     from concurrent.futures.process import BrokenProcessPool

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["number", "SEED", "csv_list", "csv_ints", "output_not_input", "naming_file",
-           "csv_floats", "initial_q", "initial_omega_rad_s", "SHARED_OPTIONS", "add_output",
+           "output_path", "csv_floats", "initial_q", "initial_omega_rad_s", "SHARED_OPTIONS", "add_output",
            "add_library", "add_sites", "add_shape", "add_model_options", "add_seed",
            "add_executors", "add_workers", "add_quiet", "add_plot", "add_variant", "add_device",
            "given", "refuse_inapplicable", "progress_bar", "add_command", "add_group",
@@ -172,14 +172,43 @@ SHARED_OPTIONS = {
 }
 
 
+def output_path(what="folder"):
+    """argparse ``type=`` of ``-o/--output``: a path that can become the output ``what``
+    ("folder" or "file"), checked before any work (usage error, exit 2): a folder output may
+    not be an existing non-folder, a file output may not be an existing folder, and the
+    nearest existing parent must be a folder (``-o report.txt/x.h5`` would fail only when the
+    result is written, after the whole run)."""
+    import os
+
+    def conv(text):
+        path = os.path.abspath(text)
+        if what == "folder" and os.path.exists(path) and not os.path.isdir(path):
+            raise argparse.ArgumentTypeError(f"{text!r} exists and is not a folder; allowed: "
+                                             "an existing folder or a new path")
+        if what == "file" and os.path.isdir(path):
+            raise argparse.ArgumentTypeError(f"{text!r} is a folder; allowed: a file path "
+                                             "(existing files are replaced)")
+        parent = os.path.dirname(path)
+        while parent and not os.path.lexists(parent) and os.path.dirname(parent) != parent:
+            parent = os.path.dirname(parent)
+        if os.path.lexists(parent) and not os.path.isdir(parent):
+            raise argparse.ArgumentTypeError(f"{text!r}: {parent!r} is not a folder; allowed: "
+                                             "a path whose parents are folders")
+        return text
+
+    conv.__name__ = f"output {what}"
+    return conv
+
+
 def add_output(p, *, what="folder", required=False, default=None, help=None):
-    """``-o/--output`` (``what`` = "folder" or "file"); ``help`` describes what goes there."""
+    """``-o/--output`` (``what`` = "folder" or "file"); ``help`` describes what goes there.
+    The path is checked at parse time (:func:`output_path`)."""
     meta = "DIR" if what == "folder" else "FILE"
     text = help or ("output folder" if what == "folder" else "output file")
     if default is not None and "default" not in text:
         text += f" (default: {default})"
     return p.add_argument("-o", "--output", metavar=meta, required=required, default=default,
-                          help=text)
+                          type=output_path(what), help=text)
 
 
 def add_library(p):

@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 
 from ._args import (add_command, add_executors, add_group, add_output, add_plot, add_quiet,
-                    add_seed, add_workers, number, output_not_input, report_written)
+                    add_seed, add_workers, number, output_not_input, output_path, report_written)
 
 __all__ = ["register"]
 
@@ -170,7 +170,8 @@ def _cmd_css_study(args) -> int:
 def _output(q, text) -> None:
     """``-o/--output FILE`` plus the deprecated hidden alias ``--out``."""
     add_output(q, what="file", help=text)
-    q.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
+    q.add_argument("--out", dest="output", type=output_path("file"),
+                   help=argparse.SUPPRESS)  # deprecated alias
 
 
 def register(sub) -> None:
@@ -235,7 +236,8 @@ def register(sub) -> None:
     st.add_argument("--runs", type=number(1, 100000, integer=True), help="override the number of runs")
     add_output(st, what="folder", help="output folder; finished runs are kept there and "
                "skipped on restart (default <study name>-report)")
-    st.add_argument("--out", dest="output", help=argparse.SUPPRESS)  # deprecated alias
+    st.add_argument("--out", dest="output", type=output_path("folder"),
+                    help=argparse.SUPPRESS)  # deprecated alias
     add_executors(st)
     st.add_argument("--force", action="store_true",
                     help="discard stored runs of a different study in the output folder")

@@ -109,6 +109,7 @@ def read_shape(h5group, file=None, *, prefix: str = "shape"):
 
     from ..photometry.facets import Shape
     from ..photometry.materials import Material
+    from ..photometry.shapes_io import check_inertia_magnitude
 
     g = h5group
 
@@ -146,6 +147,7 @@ def read_shape(h5group, file=None, *, prefix: str = "shape"):
         raise err("areas_m2", "facet areas must be >= 0", allowed=">= 0 m^2")
     if not np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-6):
         raise err("normals_body", "normals must be unit vectors (to 1e-6)")
+    check_inertia_magnitude(inertia, file, f"{prefix}/inertia_kg_m2")  # 1e308: eigvalsh fails
     if not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(0.5 * (inertia + inertia.T)) <= 0):
         raise err("inertia_kg_m2", "inertia must be symmetric positive definite")
     try:

@@ -409,6 +409,10 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
             try:
                 site = known[sid] if sid in known else get_site(sid, dirs=site_dirs)
             except InputError as exc:  # name the scenario file and the [[sites]] entry
+                if exc.file and exc.file != str(file):  # the fault is in the site's own file
+                    raise InputError(f"{exc.bare_message} (site {sid!r} of {file}, "
+                                     f"{s.name})", file=exc.file, field=exc.field,
+                                     value=exc.value, allowed=exc.allowed) from None
                 allowed = exc.allowed
                 if known:
                     allowed = ", ".join(sorted(known)) + ", " + (allowed or "")

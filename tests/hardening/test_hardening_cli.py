@@ -116,11 +116,25 @@ def test_shapes_validate_problems_exit_2(files, capsys):
 # ----------------------------------------------------------------------------------------
 # run-time failure: exit 1, one line; success: exit 0
 # ----------------------------------------------------------------------------------------
-def test_runtime_failure_exit_1_one_line(files, capsys, tmp_path):
-    blocker = tmp_path / "not_a_dir"
-    blocker.write_text("a file where a folder is needed")
-    code, _, err = run(["plot", str(files["good"]), "-o", str(blocker / "x.png")], capsys)
+def test_runtime_failure_exit_1_one_line(files, capsys, tmp_path, monkeypatch):
+    """A write that fails at run time (here: the disk is full when the PNG is stored) is
+    exit 1 with one line. (An output path of the wrong kind is caught at parse time, exit 2.)"""
+    import contextlib
+    import errno
+
+    import lightcurve.report.plot_any as plot_any
+    import lightcurve.report.plots as plots
+
+    @contextlib.contextmanager
+    def disk_full(path, suffix=None):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        yield  # pragma: no cover
+
+    monkeypatch.setattr(plot_any, "atomic_path", disk_full)
+    monkeypatch.setattr(plots, "atomic_path", disk_full)
+    code, _, err = run(["plot", str(files["good"]), "-o", str(tmp_path / "x.png")], capsys)
     assert code == 1
+    assert "No space left on device" in err
     line = one_error_line(err, kind="failed")
     assert "--debug" in line
 

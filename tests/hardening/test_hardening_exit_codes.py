@@ -291,3 +291,86 @@ def test_errors_name_the_file(tmp_path, capsys):
     assert code == 2
     bad = [ln for ln in err.splitlines() if "no_such_shape" in ln]
     assert bad and str(q) in bad[0], err
+
+
+def test_site_file_fault_names_the_site_file(tmp_path, capsys):
+    """A fault inside a site catalog file reached through a scenario's `[[sites]] name` (a
+    latitude of 1000°, a FIFO in the `--sites` folder) is reported on the site file, its key
+    and value — it used to be reported as `s.toml: field 'sites[0].name' ... (got 'socorro')`,
+    naming neither the faulty file nor the faulty value."""
+    import os
+
+    scen = _scenario(tmp_path, DEFAULT)
+    sites = tmp_path / "sites"
+    sites.mkdir()
+    text = (data_dir("observatories") / "socorro.toml").read_text()
+    bad = tmp_path / "sites" / "socorro.toml"
+    bad.write_text("\n".join("lat_deg = 1000.0" if ln.startswith("lat_deg") else ln
+                             for ln in text.splitlines()) + "\n")
+    assert "lat_deg = 1000.0" in bad.read_text()
+    code, err = run_cli(["simulate", scen, "-o", tmp_path / "o.h5", "--sites", sites], capsys)
+    line = one_line(err)
+    assert code == 2 and str(bad) in line and "lat_deg" in line and "1000" in line, line
+    assert "'socorro'" in line and str(scen) in line  # where it was asked for
+    bad.unlink()
+    os.mkfifo(tmp_path / "sites" / "pipe.toml")
+    code, err = run_cli(["simulate", scen, "-o", tmp_path / "o.h5", "--sites", sites], capsys)
+    line = one_line(err)
+    assert code == 2 and str(tmp_path / "sites" / "pipe.toml") in line and "FIFO" in line, line
+    assert not (tmp_path / "o.h5").exists()
+
+
+def test_embedded_shape_inertia_too_large_names_the_dataset(tmp_path, capsys):
+    """A received lightcurve whose stored shape has inertia 1e308: exit 2 naming
+    `shape/inertia_kg_m2`, the value and the limit, as for a shape TOML (it used to end in
+    "corrupted or unexpected HDF5 content: Eigenvalues did not converge")."""
+    import h5py
+
+    from lightcurve.photometry import load_shape
+
+    lc = small_curve()
+    lc.shape = load_shape("cube_1u")
+    p = tmp_path / "heavy.h5"
+    lc.write(p)
+    with h5py.File(p, "r+") as h:
+        h["shape/inertia_kg_m2"][...] = np.eye(3) * 1e308
+    code, err = run_cli(["invert", p, "-o", tmp_path / "inv", "--workers", "1", "-q"], capsys)
+    lines = [ln for ln in err.splitlines() if ln.startswith("lightcurve: error:")]
+    assert code == 2 and len(lines) == 1, err
+    line = lines[0]
+    assert str(p) in line and "shape/inertia_kg_m2" in line, line
+    assert "1e+308" in line and "1e+12" in line, line
+
+
+def test_numpy_values_shown_as_plain_numbers(tmp_path, capsys):
+    """`omega_deg_s = [1e308, ...]` is reported as `(got 1e+308)`, not `(got
+    np.float64(1e+308))` (NumPy 2's repr of its scalars leaked into the one-line message)."""
+    text = DEFAULT.replace("omega_deg_s = [2.0, 1.0, 3.6]", "omega_deg_s = [1e308, 1.0, 3.6]")
+    assert text != DEFAULT
+    p = _scenario(tmp_path, text)
+    code, err = run_cli(["simulate", p, "-o", tmp_path / "o.h5"], capsys)
+    line = one_line(err)
+    assert code == 2 and "attitude.omega_deg_s" in line and "(got 1e+308)" in line, line
+    assert str(InputError("x", value=np.float64(0.5))) == "x (got 0.5)"
+    assert str(InputError("x", value=np.int64(3))) == "x (got 3)"
+
+
+def test_dask_local_success_is_silent_on_stderr(tmp_path):
+    """A successful `invert --dask-local 1 -q` (a real subprocess: the scheduler, nanny and
+    worker log through `logging`, which capsys does not see) prints nothing on stderr — no
+    Dask nanny or scheduler chatter."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    p = tmp_path / "a.h5"
+    small_curve().write(p)
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, "-m", "lightcurve", "invert", str(p), "-o",
+                           str(tmp_path / "inv"), "--dask-local", "1", "-q"], env=env,
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "", proc.stderr
+    assert (tmp_path / "inv" / "a.ukf.h5").is_file()

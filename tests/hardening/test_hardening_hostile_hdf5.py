@@ -171,3 +171,28 @@ def test_declared_rows_checked_against_memory_limit(tmp_path, monkeypatch):
         read_lightcurve(p)
     monkeypatch.setenv("LIGHTCURVE_MEMORY_LIMIT", "1G")
     assert len(read_lightcurve(p)) == N
+
+
+def test_link_count_and_file_size_caps(good, tmp_path, capsys):
+    """The audit's own limits: a file with more than 10,000 links (here 10,001 empty groups
+    beside a valid lightcurve) and a file over 16 GiB (sparse: the size is there, the bytes
+    are not) are refused with one line before any dataset is read."""
+    import h5py
+
+    from lightcurve.io import safe_open as so
+
+    many = _copy(good, tmp_path, "many.h5")
+    with h5py.File(many, "r+") as h:
+        g = h.create_group("junk")
+        for k in range(so.HDF5_MAX_LINKS + 1):
+            g.create_group(str(k))
+    from lightcurve.io.lightcurve_h5 import read_lightcurve
+
+    with deadline(), pytest.raises(InputError, match="more than 10000 objects"):
+        read_lightcurve(many)  # every reader opens through the same open_hdf5
+    big = _copy(good, tmp_path, "big.h5")
+    with open(big, "r+b") as fh:
+        fh.truncate(so.HDF5_MAX_BYTES + 1)
+    _refused_by_all(big, "file too large")
+    code, err = run_cli(["plot", big, "-o", tmp_path / "x.png"], capsys)
+    assert code == 2 and "file too large" in err, err

@@ -50,6 +50,62 @@ def test_output_same_as_input_exit_2(tmp_path, capsys):
     assert code == 2 and "overwrite an input" in err and rec.read_bytes() == rb
 
 
+@pytest.mark.parametrize("argv, frag", [
+    (["invert", "{leo}", "-o", "{file}", "--workers", "1", "-q"], "is not a folder"),
+    (["period", "{leo}", "-o", "{file}"], "is not a folder"),
+    (["diagnose", "{leo}", "-o", "{file}"], "is not a folder"),
+    (["compare", "{scen}", "-o", "{file}", "--workers", "1"], "is not a folder"),
+    (["css", "study", "{scen}", "--out", "{file}"], "is not a folder"),
+    (["invert", "{leo}", "-o", "{file}/sub", "--workers", "1", "-q"], "is not a folder"),
+    (["simulate", "{scen}", "-o", "{folder}"], "is a folder"),
+    (["plot", "{leo}", "-o", "{folder}"], "is a folder"),
+    (["plot", "{leo}", "-o", "{file}/sub/x.png"], "is not a folder"),
+    (["css", "estimate", "{rec}", "--out", "{folder}"], "is a folder"),
+])
+def test_output_path_of_the_wrong_kind_exit_2_before_work(argv, frag, tmp_path, capsys):
+    """`-o DIR` naming an existing file, `-o FILE` naming an existing folder, or an output
+    below a regular file: a usage error at parse time (exit 2, one argparse line naming the
+    option and the path), before any work. These used to fail with exit 1 (FileExistsError,
+    IsADirectoryError, NotADirectoryError) — `simulate` and `plot` only after all the work."""
+    leo = tmp_path / "leo.h5"
+    _curve(leo)
+    rec = tmp_path / "rec.h5"
+    _css_recording(rec)
+    file = tmp_path / "notes.txt"
+    file.write_text("keep me\n")
+    folder = tmp_path / "results"
+    folder.mkdir()
+    scen = data_dir("pipelines") / "default.toml"
+    fmt = {"leo": leo, "rec": rec, "file": file, "folder": folder, "scen": scen}
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    code, err = run_cli([a.format(**fmt) for a in argv], capsys)
+    assert code == 2, err
+    last = err.strip().splitlines()[-1]
+    assert "argument -o/--output" in last or "argument --out" in last, last
+    assert frag in last, last
+    assert file.read_text() == "keep me\n"
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_output_path_of_the_right_kind_is_accepted(tmp_path):
+    """The parse-time output check accepts existing folders, new paths below new folders, and
+    existing files for file outputs (replaced atomically later)."""
+    import argparse
+
+    from lightcurve.cli._args import output_path
+
+    (tmp_path / "d").mkdir()
+    (tmp_path / "f.h5").write_text("x")
+    assert output_path("folder")(str(tmp_path / "d")) == str(tmp_path / "d")
+    assert output_path("folder")(str(tmp_path / "new" / "deeper"))
+    assert output_path("file")(str(tmp_path / "f.h5"))
+    assert output_path("file")(str(tmp_path / "new" / "x.png"))
+    for what, p in (("folder", tmp_path / "f.h5"), ("file", tmp_path / "d"),
+                    ("file", tmp_path / "f.h5" / "x.png")):
+        with pytest.raises(argparse.ArgumentTypeError):
+            output_path(what)(str(p))
+
+
 def _css_recording(path):
     """A minimal CSS recording (six axis-aligned sensors, 10 samples, docs/formats.md)."""
     import h5py
@@ -82,6 +138,31 @@ def test_batch_write_failure_recorded_and_batch_goes_on(tmp_path, capsys):
     assert summary["b2"]["error_kind"] == "output" and "b2.ukf.h5" in summary["b2"]["error"]
     for k in ("b1", "b3"):
         assert Path(summary[k]["result"]).is_file() and "error" not in summary[k]
+
+
+def test_interrupted_batch_still_writes_the_summary(tmp_path, monkeypatch):
+    """A batch interrupted (Ctrl-C, SIGTERM) after its first file writes summary.json listing
+    the file finished, then lets the interruption through."""
+    import lightcurve.studies.batch as batch
+
+    files = []
+    for k in (1, 2, 3):
+        _curve(tmp_path / f"b{k}.h5")
+        files.append(tmp_path / f"b{k}.h5")
+    real_store, calls = batch._store, []
+
+    def store_then_interrupt(*a, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_store(*a, **kw)
+
+    monkeypatch.setattr(batch, "_store", store_then_interrupt)
+    out = tmp_path / "r"
+    with pytest.raises(KeyboardInterrupt):
+        batch.invert_files([str(f) for f in files], "ukf", out, workers=1, progress=False)
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary) == ["b1"] and (out / "b1.ukf.h5").is_file(), summary
 
 
 def test_batch_plot_write_failure_recorded(tmp_path, capsys):
