@@ -594,7 +594,9 @@ def _bernard_claims(sums):
 
 
 def _bpf_rows(sums):
+    """The particle-filter claims, thesis variant (the verdict) with the robust twin beside."""
     s = sums.get("thesis-bpf-leo")
+    robust = sums.get("thesis-bpf-leo-robust")
     claims = (("Fig. 9.5c–e: BPF converges from σθ = 60° (σω 0.02°/s)", 60.0, 0.02, True),
               ("§9.4.1: BPF robust up to σθ = 20° with σω 0.2°/s", 20.0, 0.2, True),
               ("Fig. 9.7: BPF fails at σθ = 30° with σω 0.2°/s", 30.0, 0.2, False))
@@ -607,8 +609,14 @@ def _bpf_rows(sums):
             continue
         share = c["below_5deg"]
         ok = share >= 0.5 if conv else share < 0.5
-        rows.append((text, f"{c['runs']} runs: {100 * share:.0f} % end below 5° (median RSS "
-                     f"{_fmt(c['rss_att_deg_median'])}°)", _verdict(ok)))
+        ours = (f"{c['runs']} runs: {100 * share:.0f} % end below 5° (median RSS "
+                f"{_fmt(c['rss_att_deg_median'])}°)")
+        r = _cell(robust, filter="bpf", sigma_theta_deg=st, sigma_omega_deg_s=so,
+                  r_percent=1.0, sites=1, dynamics="controlled") if robust else None
+        if r is not None and r["runs"]:
+            ours += (f"; robust twin {100 * r['below_5deg']:.0f} % (median "
+                     f"{_fmt(r['rss_att_deg_median'])}°)")
+        rows.append((text, ours, _verdict(ok)))
     return rows
 
 
