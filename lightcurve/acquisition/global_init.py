@@ -15,7 +15,9 @@ Prior
 q₀ uniform over SO(3) (Haar measure: normalised 4-D Gaussian vectors, Muller 1959 /
 Marsaglia 1972); the rate direction uniform on the sphere; the rate magnitude from the spin
 period analysis (:mod:`.period`): a mixture over the best period and its aliases (weights from
-their BIC differences) with the synodic bound and the statistical 1σ as its width, plus a broad
+their BIC differences) and the integer multiples 2–4 of the best period (``RATE_PRIOR_MULTIPLES``:
+the brightness may repeat several times per turn), with the synodic bound and the statistical
+1σ as its width, plus a broad
 log-uniform component (weight ``broad_weight``) over the periods the sampling allows, so a wrong
 period analysis can be outvoted by the data. Without a significant period the broad component
 alone.
@@ -58,7 +60,7 @@ accept are reported; when some were rejected the accepted ones are weighed by th
 prediction-error likelihood (Σ −½(νₖ²/Sₖ + ln 2πSₖ), the filter's evidence for the whole
 lightcurve; Bar-Shalom, Li & Kirubarajan 2001 §5.4 for the innovation statistics), and more than
 one accepted mode with weight ≥ ``report_weight`` is stated as an ambiguity. When no start is
-accepted, the search restarts with twice the particles (``restarts``), and a result that the
+accepted, the search restarts with a fresh sampler of twice the particles (``restarts``), and a result that the
 data still reject is flagged as such.
 """
 
@@ -75,6 +77,12 @@ from ..errors import InputError
 from ..estimation.particles import systematic_resample
 from .period import PeriodResult, analyse_period
 from .symmetry import fold_to_reference, symmetry_quaternions
+
+#: multiples k of the brightness period taken as spin-period candidates of the rate prior, each
+#: at a quarter of the best period's weight (:meth:`.period.PeriodResult.rate_candidates`): a
+#: faceted body's brightness may repeat 2, 3 or 4 times per turn (:mod:`.period`, step 3), and a
+#: fit of the brightness alone prefers the shorter period when turns do not repeat exactly
+RATE_PRIOR_MULTIPLES = (2, 3, 4)
 
 __all__ = ["GlobalInitConfig", "GlobalMode", "GlobalResult", "global_initialise",
            "uniform_quaternions", "axis_group_quaternions"]
@@ -132,7 +140,7 @@ class GlobalInitConfig:
         and the 23 axis-group images of the heaviest mode (the near-symmetric attitudes of
         box-like shapes, as for ``jumps``); the consistent ones are kept.
     restarts : int — when no started filter is consistent with the data, the search is
-        repeated with twice the particles, at most this many times; the attempt with consistent
+        repeated (a fresh sampler with twice the particles), at most this many times; the attempt with consistent
         modes (else the one whose best mode explains the window best) is kept.
     min_sigma_theta_deg, min_sigma_omega_deg_s : floors of the hand-over 1σ.
     inflate : float ≥ 1 — factor on the modes' 1σ spread for the hand-over covariance.
@@ -152,7 +160,7 @@ class GlobalInitConfig:
     min_mode_weight: float = 0.01
     report_weight: float = 0.05
     max_modes: int = 6
-    restarts: int = 1
+    restarts: int = 2
     refine_modes: int = 4
     min_sigma_theta_deg: float = 2.0
     min_sigma_omega_deg_s: float = 0.05
@@ -343,7 +351,7 @@ def _rate_prior(period, span_s, dt_med, broad_weight):
     hi = 2.0 * math.pi / (2.0 * max(dt_med, 1e-6))      # Nyquist of the cadence
     comps = []
     if period is not None and period.significant:
-        for c in period.rate_candidates():
+        for c in period.rate_candidates(multiples=RATE_PRIOR_MULTIPLES):
             sd = math.sqrt(c["sigma_rad_s"] ** 2 + c["halfwidth_rad_s"] ** 2 / 3.0)
             comps.append((c["omega_rad_s"], max(sd, 1e-3 * c["omega_rad_s"]), c["weight"]))
     return _RatePrior(comps, lo, hi, broad_weight if comps else 1.0)
@@ -665,7 +673,7 @@ def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period
 
     attempts = []
     for attempt in range(int(cfg.restarts) + 1):
-        N = int(cfg.particles) * 2 ** attempt
+        N = int(cfg.particles) * (2 if attempt else 1)
         Q, W, ll, stages, converged, beta, acc_hist = _smc(win, prior, N, cfg, rng, progress)
         modes, heavy = _modes(Q, W, ll, cfg, gq)
         _hand_over(modes, cfg, run_filter)
