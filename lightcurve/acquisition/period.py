@@ -50,7 +50,11 @@ Validity: a period between ``min_period_s`` (default 2.5 × the median cadence) 
 ``max_period_s`` (default the span / 1.5); several turns in the window make the estimate
 reliable. A body whose brightness repeats more than once per turn (symmetric shapes) shows
 its brightness period; the alias list names the multiples, and aliases that fit about as well
-as the best (ΔBIC ≤ 6) are reported as candidates: the data cannot tell them apart.
+as the best (ΔBIC ≤ 6) are reported as candidates: the data cannot tell them apart. The stated
+spin periods (``spin_candidates``) are those candidates plus the multiples 2–4 × best with
+their ΔBIC: when the brightness does not repeat exactly from turn to turn (glints, a sweeping
+phase-angle bisector) the fit prefers a fraction of the turn, and only the shape can say how
+many times per turn the brightness repeats.
 """
 
 from __future__ import annotations

@@ -115,7 +115,7 @@ def test_a_symmetric_body_is_reported_unique_only_up_to_its_symmetries(symmetric
 
     lc, shape = symmetric_curve
     est = lightcurve.invert(lc, "ukf", shape=shape, initial="global",
-                            global_config=GlobalInitConfig(particles=4000, moves=2))
+                            global_config=GlobalInitConfig(particles=6000, moves=2))
     gi = est.meta["global_init"]
     assert gi["symmetries"] == 24
     assert "unique up to the shape's 24 rotation symmetries" in gi["statement"]
