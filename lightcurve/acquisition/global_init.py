@@ -15,7 +15,9 @@ Prior
 q₀ uniform over SO(3) (Haar measure: normalised 4-D Gaussian vectors, Muller 1959 /
 Marsaglia 1972); the rate direction uniform on the sphere; the rate magnitude from the spin
 period analysis (:mod:`.period`): a mixture over the best period and its aliases (weights from
-their BIC differences) with the synodic bound and the statistical 1σ as its width, plus a broad
+their BIC differences) and the integer multiples 2–4 of the best period (``RATE_PRIOR_MULTIPLES``:
+the brightness may repeat several times per turn), with the synodic bound and the statistical
+1σ as its width, plus a broad
 log-uniform component (weight ``broad_weight``) over the periods the sampling allows, so a wrong
 period analysis can be outvoted by the data. Without a significant period the broad component
 alone.
@@ -43,6 +45,23 @@ with its spread, inflated, as the initial covariance; the filter runs over the w
 Mode weights are the particle fractions. When at least ``report_weight`` of the posterior lies
 outside the heaviest mode, the result says so and lists the modes (up to ``max_modes``, each
 with the filter run from it): an ambiguity is stated, never resolved by fiat.
+
+Exact symmetry: before grouping, every particle is replaced by its equivalent under the shape's
+exact rotation symmetries (:mod:`.symmetry`) nearest the most likely particle, so the copies of
+one answer are one mode, stated "unique up to the shape's K rotation symmetries".
+
+Rejected modes: each started filter is tested against the data (NIS and posterior residuals,
+:meth:`lightcurve.filters.result.Estimate.consistency`). When the heaviest mode's filter fails,
+the filter is also started from the next ``refine_modes`` candidates (the cloud's lighter
+particle groups and the axis-group images of the heaviest mode, by window likelihood): the
+sampler's window is thinned and its likelihood very narrow near specular glints, so its
+heaviest mode is not always the one the whole lightcurve supports. Only the starts the data
+accept are reported; when some were rejected the accepted ones are weighed by their filters'
+prediction-error likelihood (Σ −½(νₖ²/Sₖ + ln 2πSₖ), the filter's evidence for the whole
+lightcurve; Bar-Shalom, Li & Kirubarajan 2001 §5.4 for the innovation statistics), and more than
+one accepted mode with weight ≥ ``report_weight`` is stated as an ambiguity. When no start is
+accepted, the search restarts with a fresh sampler of twice the particles (``restarts``), and a result that the
+data still reject is flagged as such.
 """
 
 from __future__ import annotations
@@ -57,6 +76,13 @@ from .. import rotations as rot
 from ..errors import InputError
 from ..estimation.particles import systematic_resample
 from .period import PeriodResult, analyse_period
+from .symmetry import fold_to_reference, symmetry_quaternions
+
+#: multiples k of the brightness period taken as spin-period candidates of the rate prior, each
+#: at a quarter of the best period's weight (:meth:`.period.PeriodResult.rate_candidates`): a
+#: faceted body's brightness may repeat 2, 3 or 4 times per turn (:mod:`.period`, step 3), and a
+#: fit of the brightness alone prefers the shorter period when turns do not repeat exactly
+RATE_PRIOR_MULTIPLES = (2, 3, 4)
 
 __all__ = ["GlobalInitConfig", "GlobalMode", "GlobalResult", "global_initialise",
            "uniform_quaternions", "axis_group_quaternions"]
@@ -107,10 +133,15 @@ class GlobalInitConfig:
     report_weight : float — the result is stated as ambiguous when at least this much posterior
         mass lies outside the heaviest mode (in other modes).
     max_modes : int — most modes listed and handed to the filter (heaviest first).
-    restarts : int — when the filter from the best mode is inconsistent with the data (NIS or
-        residual test of :meth:`lightcurve.filters.result.Estimate.consistency`), the search is
-        repeated with twice the particles, at most this many times; the attempt whose best
-        mode explains the window best is kept.
+    refine_modes : int — K: when the filter from the heaviest mode is inconsistent with the
+        data (NIS or residual test of :meth:`lightcurve.filters.result.Estimate.consistency`),
+        the filter is also started from the K next candidates, best window likelihood first:
+        the cloud's other particle groups (below ``min_mode_weight`` or beyond ``max_modes``)
+        and the 23 axis-group images of the heaviest mode (the near-symmetric attitudes of
+        box-like shapes, as for ``jumps``); the consistent ones are kept.
+    restarts : int — when no started filter is consistent with the data, the search is
+        repeated (a fresh sampler with twice the particles), at most this many times; the attempt with consistent
+        modes (else the one whose best mode explains the window best) is kept.
     min_sigma_theta_deg, min_sigma_omega_deg_s : floors of the hand-over 1σ.
     inflate : float ≥ 1 — factor on the modes' 1σ spread for the hand-over covariance.
     """
@@ -129,7 +160,8 @@ class GlobalInitConfig:
     min_mode_weight: float = 0.01
     report_weight: float = 0.05
     max_modes: int = 6
-    restarts: int = 1
+    restarts: int = 2
+    refine_modes: int = 4
     min_sigma_theta_deg: float = 2.0
     min_sigma_omega_deg_s: float = 0.05
     inflate: float = 2.0
@@ -139,7 +171,8 @@ class GlobalInitConfig:
                ("jumps", self.jumps, 0, 100),
                ("max_stages", self.max_stages, 1, 100_000),
                ("window_epochs", self.window_epochs, 5, 1_000_000),
-               ("max_modes", self.max_modes, 1, 100), ("restarts", self.restarts, 0, 5)]
+               ("max_modes", self.max_modes, 1, 100), ("restarts", self.restarts, 0, 5),
+               ("refine_modes", self.refine_modes, 0, 100)]
         for name, v, lo, hi in chk:
             if int(v) != v or not lo <= v <= hi:
                 raise InputError("out of range", field=f"global.{name}", value=v,
@@ -171,6 +204,15 @@ class GlobalMode:
     best_loglik : window log-likelihood of the mode's best particle.
     estimate : the filter's Estimate from this mode (None if the mode started no filter).
     separation_deg : attitude angle between this mode's mean and the best mode's mean at t₀.
+    source : "sampler" (a mode of the sampler's cloud), "cloud" (a lighter particle group,
+        refined because the heaviest mode was rejected) or "image" (an axis-group image of
+        the heaviest mode, likewise).
+    sampler_weight : the particle fraction of the mode (0 for an image).
+    consistent : the filter from this mode passed the NIS and residual tests (None: not run).
+    filter_loglik : the filter's prediction-error log-likelihood of the whole lightcurve,
+        Σ −½(νₖ²/Sₖ + ln 2πSₖ) over its updates (the evidence that weighs consistent modes).
+    symmetries : number of exact rotation symmetries of the shape (the mode stands for that
+        many attitudes, :mod:`.symmetry`).
     """
 
     weight: float
@@ -181,9 +223,19 @@ class GlobalMode:
     best_loglik: float
     separation_deg: float = 0.0
     estimate: object = None
+    source: str = "sampler"
+    sampler_weight: float | None = None
+    consistent: bool | None = None
+    filter_loglik: float | None = None
+    symmetries: int = 1
 
     def summary(self) -> dict:
         d = {"weight": float(self.weight), "q0": [float(x) for x in self.q0],
+             "source": self.source,
+             "sampler_weight": float(self.weight if self.sampler_weight is None
+                                     else self.sampler_weight),
+             "consistent": self.consistent, "filter_loglik": self.filter_loglik,
+             "symmetries": int(self.symmetries),
              "omega0_deg_s": [float(x) for x in np.degrees(self.omega0_rad_s)],
              "spin_period_s": float(2 * math.pi / max(np.linalg.norm(self.omega0_rad_s), 1e-300)),
              "att_sigma_deg": [float(x) for x in self.att_sigma_deg],
@@ -213,6 +265,11 @@ class GlobalResult:
     period : the PeriodResult that seeded the rate prior (or None).
     stages, particles, runtime_s, window_rows : sampler facts of the kept attempt; ``converged``
     False when β did not reach 1 within ``max_stages``; ``attempts`` = 1 + restarts made.
+    symmetries : exact rotation symmetries of the shape (1: none but the identity); each mode
+        stands for that many attitudes giving the same lightcurve.
+    n_rejected : started filters that the data reject (inconsistent), left out of ``modes``
+        whenever at least one started filter is consistent.
+    n_refined : extra candidates refined because the heaviest mode was rejected.
     """
 
     modes: list
@@ -228,10 +285,15 @@ class GlobalResult:
     acceptance: list = field(default_factory=list, repr=False)
     attempts: int = 1
     n_modes_total: int = 1
+    symmetries: int = 1
+    n_rejected: int = 0
+    n_refined: int = 0
 
     def summary(self) -> dict:
         return {"ambiguous": bool(self.ambiguous), "statement": self.statement,
                 "n_modes": len(self.modes), "n_modes_total": int(self.n_modes_total),
+                "symmetries": int(self.symmetries), "n_rejected": int(self.n_rejected),
+                "n_refined": int(self.n_refined),
                 "modes": [m.summary() for m in self.modes],
                 "stages": int(self.stages), "particles": int(self.particles),
                 "converged": bool(self.converged), "attempts": int(self.attempts),
@@ -289,7 +351,7 @@ def _rate_prior(period, span_s, dt_med, broad_weight):
     hi = 2.0 * math.pi / (2.0 * max(dt_med, 1e-6))      # Nyquist of the cadence
     comps = []
     if period is not None and period.significant:
-        for c in period.rate_candidates():
+        for c in period.rate_candidates(multiples=RATE_PRIOR_MULTIPLES):
             sd = math.sqrt(c["sigma_rad_s"] ** 2 + c["halfwidth_rad_s"] ** 2 / 3.0)
             comps.append((c["omega_rad_s"], max(sd, 1e-3 * c["omega_rad_s"]), c["weight"]))
     return _RatePrior(comps, lo, hi, broad_weight if comps else 1.0)
@@ -461,10 +523,16 @@ def _smc(win, prior, N, cfg, rng, progress):
     return Q, W, ll, stages, converged, beta, acc_hist
 
 
-def _modes(Q, W, ll, cfg):
+def _modes(Q, W, ll, cfg, gq=None):
     """Group the final cloud into modes → (list of GlobalMode (heaviest first, at most
-    ``max_modes``), every group holding ≥ ``min_mode_weight``)."""
+    ``max_modes``), every group holding ≥ ``min_mode_weight``).
+
+    ``gq`` (K, 4): the shape's exact rotation symmetries (:mod:`.symmetry`); every particle is
+    first replaced by its symmetric equivalent nearest the most likely particle, so the K copies
+    of a mode become one mode holding their summed weight."""
     N = Q.shape[0]
+    if gq is not None and len(gq) > 1:
+        Q, W, _ = fold_to_reference(Q, W, Q[int(np.argmax(ll))], gq)
     groups = _cluster(Q, W, ll, cfg)
     heavy = [g for g in groups if g.size / N >= cfg.min_mode_weight] or groups[:1]
     modes = []
@@ -485,12 +553,71 @@ def _modes(Q, W, ll, cfg):
 
 
 def _hand_over(modes, cfg, run_filter):
-    """Run the user's filter from every mode's mean with its inflated spread as 1σ."""
+    """Run the user's filter from every mode's mean with its inflated spread as 1σ; record
+    whether the data accept it (no ``nis_high`` / ``residuals_high``) and its evidence."""
     for m in modes:
         st = max(cfg.inflate * float(m.att_sigma_deg.max()), cfg.min_sigma_theta_deg)
         sw_ = max(cfg.inflate * float(m.omega_sigma_deg_s.max()), cfg.min_sigma_omega_deg_s)
         m.estimate = run_filter(m.q0, m.omega0_rad_s, min(st, 90.0), sw_)
         m.estimate.meta["initial"] = "global"
+        flags = m.estimate.consistency()["flags"]
+        m.consistent = "nis_high" not in flags and "residuals_high" not in flags
+        nu = np.asarray(m.estimate.innovations, float)
+        S = np.asarray(m.estimate.innovation_var, float)
+        ok = np.isfinite(nu) & np.isfinite(S) & (S > 0)
+        m.filter_loglik = float(-0.5 * np.sum(nu[ok] ** 2 / S[ok] + np.log(2 * math.pi * S[ok])))
+
+
+def _candidates(Q, W, ll, heavy, modes, win, cfg):
+    """The next K starts when the heaviest mode is rejected (``refine_modes``): the cloud's
+    particle groups not yet handed over (their best particle, their spread) and the axis-group
+    images of the heaviest mode's best particle (that mode's spread), each at least
+    ``mode_radius_deg`` from every start so far, best window likelihood first."""
+    K = int(cfg.refine_modes)
+    if K <= 0:
+        return []
+    groups = _cluster(Q, W, ll, cfg)
+    cand = []
+    for g in groups:
+        i = g[int(np.argmax(ll[g]))]
+        sa = np.degrees(rot.attitude_error_rotvec(
+            Q[g], np.broadcast_to(Q[i], Q[g].shape)).std(axis=0)) if g.size > 1 else np.zeros(3)
+        sw = np.degrees(W[g].std(axis=0)) if g.size > 1 else np.zeros(3)
+        cand.append((float(ll[i]), Q[i], W[i], sa, sw, g.size / Q.shape[0], "cloud"))
+    b = modes[0]
+    G = axis_group_quaternions()[1:]
+    RG = rot.quat_to_dcm(G)
+    ib = int(np.argmax(ll))
+    Qi = rot.quat_mult(G, np.broadcast_to(Q[ib], G.shape))
+    Qi /= np.linalg.norm(Qi, axis=1, keepdims=True)
+    Wi = np.einsum("nij,j->ni", RG, W[ib])
+    lli = win.loglik(Qi, Wi)
+    for k in range(G.shape[0]):
+        cand.append((float(lli[k]), Qi[k], Wi[k], b.att_sigma_deg, b.omega_sigma_deg_s, 0.0,
+                     "image"))
+    cand.sort(key=lambda c: -c[0])
+    cos_r = math.cos(math.radians(cfg.mode_radius_deg) / 2.0)
+    taken = [m.q0 for m in modes]
+    out = []
+    for c in cand:
+        if len(out) >= K:
+            break
+        if any(abs(float(c[1] @ q)) >= cos_r for q in taken):
+            continue
+        taken.append(c[1])
+        out.append(GlobalMode(weight=0.0, q0=np.array(c[1]), omega0_rad_s=np.array(c[2]),
+                              att_sigma_deg=np.asarray(c[3]), omega_sigma_deg_s=np.asarray(c[4]),
+                              best_loglik=c[0], source=c[6], sampler_weight=c[5],
+                              separation_deg=float(np.degrees(2 * math.acos(
+                                  min(1.0, abs(float(c[1] @ b.q0))))))))
+    return out
+
+
+def _evidence_weights(modes):
+    """Weights ∝ exp(filter_loglik) over ``modes`` (equal prior odds for each start)."""
+    L = np.array([m.filter_loglik for m in modes], float)
+    w = np.exp(L - L.max())
+    return w / w.sum()
 
 
 def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period=None,
@@ -540,36 +667,66 @@ def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period
     prior = _rate_prior(period, span, dt_med, cfg.broad_weight)
     win = _Window(problem, rows, cfg.nu)
 
+    shape = getattr(problem.model, "shape", None)
+    gq = symmetry_quaternions(shape) if shape is not None else np.array([[1.0, 0, 0, 0]])
+    n_sym = int(gq.shape[0])
+
     attempts = []
     for attempt in range(int(cfg.restarts) + 1):
-        N = int(cfg.particles) * 2 ** attempt
+        N = int(cfg.particles) * (2 if attempt else 1)
         Q, W, ll, stages, converged, beta, acc_hist = _smc(win, prior, N, cfg, rng, progress)
-        modes, heavy = _modes(Q, W, ll, cfg)
+        modes, heavy = _modes(Q, W, ll, cfg, gq)
         _hand_over(modes, cfg, run_filter)
-        attempts.append((modes, heavy, N, stages, converged, beta, acc_hist))
-        cons = modes[0].estimate.consistency()
-        if "nis_high" not in cons["flags"] and "residuals_high" not in cons["flags"]:
+        refined = []
+        if not modes[0].consistent:
+            refined = _candidates(Q, W, ll, heavy, modes, win, cfg)
+            if progress is not None and refined:
+                progress(f"the heaviest mode's filter is inconsistent with the data: starting "
+                         f"it from {len(refined)} more candidates")
+            _hand_over(refined, cfg, run_filter)
+        started = modes + refined
+        attempts.append((started, modes, heavy, N, stages, converged, beta, acc_hist,
+                         len(refined)))
+        if any(m.consistent for m in started):
             break
-        if progress is not None:
-            progress(f"the best mode's filter is inconsistent with the data (NIS mean "
-                     f"{cons['nis_mean']:.3g} > {cons['nis_band'][1]:.3g}): restarting with "
+        if progress is not None and attempt < int(cfg.restarts):
+            progress(f"no started filter is consistent with the data: restarting with "
                      f"{2 * N} particles")
-    # the attempt whose best mode explains the window best (a failed search finds a worse one)
-    modes, heavy, N, stages, converged, beta, acc_hist = max(
-        attempts, key=lambda a: a[0][0].best_loglik)
+    # the attempt with consistent modes, else the one whose best mode explains the window best
+    started, modes, heavy, N, stages, converged, beta, acc_hist, n_ref = max(
+        attempts, key=lambda a: (any(m.consistent for m in a[0]), a[1][0].best_loglik))
+    for m in started:
+        m.symmetries = n_sym
+        m.sampler_weight = m.weight if m.sampler_weight is None else m.sampler_weight
+    good = [m for m in started if m.consistent]
+    n_rejected = len(started) - len(good) if good else 0
+    sym_txt = (f"; unique up to the shape's {n_sym} rotation symmetries (each mode stands for "
+               f"{n_sym} attitudes that give the same lightcurve)" if n_sym > 1 else "")
+    if good and (n_ref or n_rejected):
+        # the data reject some starts: weigh the consistent ones by their filters' evidence
+        for m, w in zip(good, _evidence_weights(good)):
+            m.weight = float(w)
+        good.sort(key=lambda m: -m.weight)
+    if good:
+        modes = good
     best = modes[0]
+    for m in modes:
+        m.separation_deg = float(np.degrees(2 * math.acos(min(1.0, abs(float(m.q0 @ best.q0))))))
     elsewhere = 1.0 - best.weight
     ambiguous = elsewhere >= cfg.report_weight and len(modes) > 1
+    rej = (f"; {n_rejected} other start(s) rejected by the data (inconsistent fits)"
+           if n_rejected else "")
     if ambiguous:
-        more = len(heavy) - len(modes)
+        more = len(heavy) - len(modes) if not n_ref and not n_rejected else 0
         parts = ", ".join(f"{m.weight:.0%} ({m.separation_deg:.0f} deg from the first)"
                           for m in modes)
-        statement = (f"ambiguous: the lightcurve allows {len(heavy)} attitude modes holding "
-                     f"at least {cfg.min_mode_weight:.0%} of the posterior each; the data cannot "
-                     f"pick one. Listed: {parts}" + (f" (+{more} more not listed)" if more else ""))
+        statement = (f"ambiguous: the lightcurve allows {len(modes)} attitude modes; the data "
+                     f"cannot pick one. Listed: {parts}" + (f" (+{more} more not listed)"
+                                                            if more > 0 else ""))
     else:
         statement = (f"one attitude mode ({best.weight:.0%} of the posterior); spin period "
                      f"{2 * math.pi / max(np.linalg.norm(best.omega0_rad_s), 1e-300):.4g} s")
+    statement += sym_txt + rej
     if not converged:
         statement += f"; WARNING: the sampler stopped at beta {beta:.3g} < 1 (max_stages)"
     cons = best.estimate.consistency()
@@ -580,6 +737,7 @@ def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period
                        statement=statement, period=period, stages=stages, particles=N,
                        runtime_s=time.perf_counter() - t0, window_rows=rows,
                        converged=converged, acceptance=acc_hist, attempts=len(attempts),
-                       n_modes_total=len(heavy))
+                       n_modes_total=len(heavy), symmetries=n_sym, n_rejected=n_rejected,
+                       n_refined=n_ref)
     best.estimate.meta["global_init"] = res.summary()
     return res

@@ -50,7 +50,11 @@ Validity: a period between ``min_period_s`` (default 2.5 × the median cadence) 
 ``max_period_s`` (default the span / 1.5); several turns in the window make the estimate
 reliable. A body whose brightness repeats more than once per turn (symmetric shapes) shows
 its brightness period; the alias list names the multiples, and aliases that fit about as well
-as the best (ΔBIC ≤ 6) are reported as candidates: the data cannot tell them apart.
+as the best (ΔBIC ≤ 6) are reported as candidates: the data cannot tell them apart. The stated
+spin periods (``spin_candidates``) are those candidates plus the multiples 2–4 × best with
+their ΔBIC: when the brightness does not repeat exactly from turn to turn (glints, a sweeping
+phase-angle bisector) the fit prefers a fraction of the turn, and only the shape can say how
+many times per turn the brightness repeats.
 """
 
 from __future__ import annotations
@@ -73,6 +77,8 @@ Z99 = 2.5758293035489004
 #: aliases within this BIC difference of the best are reported as indistinguishable (a BIC
 #: difference above 6 is "strong" evidence, Kass & Raftery 1995, JASA 90, 773, §3.2)
 INDISTINGUISHABLE_DBIC = 6.0
+#: relations of the integer multiples of the best period that are always scored and listed
+SPIN_MULTIPLE_RELATIONS = ("2x best", "3x best", "4x best")
 #: most trial frequencies of one analysis (memory and time stay bounded: a multi-month
 #: recording asks for ~10⁹; analyse its passes one at a time)
 MAX_FREQUENCIES = 500_000
@@ -240,14 +246,29 @@ class PeriodResult:
         return [best] + [a for a in self.aliases if a["delta_bic"] <= INDISTINGUISHABLE_DBIC]
 
     @property
+    def spin_candidates(self) -> list:
+        """The spin periods this analysis states: :attr:`candidates` plus the listed integer
+        multiples 2, 3 and 4 × the best period, whatever their ΔBIC (each with its 99 %
+        interval). A faceted body's brightness may repeat k times per turn; a fit of the
+        brightness cannot tell k when the brightness does not repeat exactly from turn to turn
+        (the phase-angle bisector moves over the pass), so the lightcurve alone does not rule
+        them out; their ΔBIC says how much the data prefer the shorter period."""
+        out = list(self.candidates)
+        for a in self.aliases:
+            if a["relation"] in SPIN_MULTIPLE_RELATIONS and a not in out:
+                out.append(a)
+        return out
+
+    @property
     def ambiguous(self) -> bool:
         """True when another period cannot be ruled out (ΔBIC ≤ :data:`INDISTINGUISHABLE_DBIC`)."""
         return len(self.candidates) > 1
 
-    def contains(self, period_s) -> bool:
-        """True when ``period_s`` lies in the 99 % interval of one of the candidates."""
-        return any(c["interval_99_s"][0] <= period_s <= c["interval_99_s"][1]
-                   for c in self.candidates)
+    def contains(self, period_s, multiples: bool = False) -> bool:
+        """True when ``period_s`` lies in the 99 % interval of one of the :attr:`candidates`
+        (``multiples``: of one of the :attr:`spin_candidates`)."""
+        cands = self.spin_candidates if multiples else self.candidates
+        return any(c["interval_99_s"][0] <= period_s <= c["interval_99_s"][1] for c in cands)
 
     @property
     def significant(self) -> bool:
@@ -270,6 +291,8 @@ class PeriodResult:
                 "ambiguous": self.ambiguous,
                 "candidates": [dict(c, interval_99_s=list(c["interval_99_s"]))
                                for c in self.candidates],
+                "spin_candidates": [dict(c, interval_99_s=list(c["interval_99_s"]))
+                                    for c in self.spin_candidates],
                 "ls_period_s": self.ls_period_s, "pdm_period_s": self.pdm_period_s,
                 "pab_rate_deg_s": math.degrees(self.pab_rate_rad_s),
                 "n_points": self.n_points, "span_s": self.span_s, "n_clipped": self.n_clipped,
@@ -574,8 +597,10 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
                             "delta_bic": float(r[0] - b0), "n_harmonics": int(r[2]),
                             "interval_99_s": interval(P)})
     for k in (2, 3, 4):
+        # always scored and listed (step 3), also beside a fitted alias in the same resolution
+        # element: the integer multiples are the candidates a faceted body's turn implies
         P = k * P_best
-        if P <= pmax * 1.5 and distinct(P):
+        if P <= pmax * 1.5 and not any(a["relation"] == f"{k}x best" for a in aliases):
             f = 1.0 / P
             best = min((bic_at(f, H) + (H,) for H in range(1, hmax(f) + 1)), key=lambda x: x[0])
             seen.append(P)
@@ -583,7 +608,10 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
                             "delta_bic": float(best[0] - b0), "n_harmonics": int(best[2]),
                             "interval_99_s": interval(P)})
     aliases.sort(key=lambda a: a["delta_bic"])
-    aliases = aliases[:8]
+    # at most 8 listed, the integer multiples 2–4 always among them (step 3)
+    mult = [a for a in aliases if a["relation"] in SPIN_MULTIPLE_RELATIONS]
+    rest = [a for a in aliases if a["relation"] not in SPIN_MULTIPLE_RELATIONS]
+    aliases = sorted(mult + rest[:max(0, 8 - len(mult))], key=lambda a: a["delta_bic"])
 
     # folded data and model for the plot
     Xb = np.column_stack([T, _harmonic_columns(t, f_best, H0)])

@@ -276,7 +276,8 @@ class Estimate(EstimateViews):
         gi = (self.meta or {}).get("global_init")
         if gi:   # global initialisation (lightcurve.acquisition.global_init): the modes
             out["global_init"] = {k: gi[k] for k in ("ambiguous", "statement", "n_modes",
-                                                     "n_modes_total", "modes") if k in gi}
+                                                     "n_modes_total", "symmetries",
+                                                     "n_rejected", "modes") if k in gi}
         if self.bias is not None and self.bias_sigma is not None:
             out["final_bias_mag"] = [float(x) for x in self.bias[-1]]
             out["final_bias_sigma_mag"] = [float(x) for x in self.bias_sigma[-1]]

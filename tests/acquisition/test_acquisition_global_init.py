@@ -15,27 +15,6 @@ from lightcurve import rotations as rot
 from lightcurve.acquisition.global_init import (GlobalInitConfig, axis_group_quaternions,
                                                 uniform_quaternions)
 
-SYMMETRIC_CUBE = """
-[shape]
-name = "sym_cube"
-description = "1U cube, one material on all six faces (octahedral symmetry)"
-mass_kg = 1.33
-inertia_diag_kg_m2 = [0.0022166666666666667, 0.0022166666666666667, 0.0022166666666666667]
-
-[materials.all]
-brdf = "cook_torrance"
-xi = 0.3
-a = 0.8
-m = 0.2
-""" + "".join(f"""
-[[facets]]
-normal = {n}
-area_m2 = 0.01
-center_m = {[0.05 * x for x in n]}
-material = "all"
-""" for n in ([1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0],
-              [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]))
-
 SCENARIO = """
 [scenario]
 name = "sym-cube-fast-spin"
@@ -113,13 +92,12 @@ def test_quat_average_of_symmetric_perturbations_is_the_centre():
 
 
 @pytest.fixture(scope="module")
-def symmetric_curve(tmp_path_factory):
+def symmetric_curve(sym_cube_library):
     import lightcurve
     from lightcurve.photometry import load_shape
     from lightcurve.studies.scenario import parse_scenario
 
-    d = tmp_path_factory.mktemp("symcube")
-    (d / "sym_cube.toml").write_text(SYMMETRIC_CUBE)
+    d = sym_cube_library
     scen = parse_scenario(SCENARIO, library_dirs=[str(d)])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -127,28 +105,106 @@ def symmetric_curve(tmp_path_factory):
     return lc, load_shape("sym_cube", library_dirs=[str(d)])
 
 
-def test_a_symmetric_body_is_reported_ambiguous(symmetric_curve):
+def test_a_symmetric_body_is_reported_unique_only_up_to_its_symmetries(symmetric_curve):
     """All six faces alike: the 24 attitudes related by the cube's rotations give the same
-    lightcurve. The result must say it is ambiguous and list several modes, and its best mode
-    must be the truth up to one of those rotations (within 5°) — never one confident answer."""
+    lightcurve. The result must say so ("unique up to the shape's 24 rotation symmetries"),
+    merge those copies into one mode instead of listing them as rival answers, and its best
+    mode must be the truth up to one of those rotations (within 5°) — as must every listed
+    mode."""
     import lightcurve
 
     lc, shape = symmetric_curve
     est = lightcurve.invert(lc, "ukf", shape=shape, initial="global",
-                            global_config=GlobalInitConfig(particles=4000, moves=2))
+                            global_config=GlobalInitConfig(particles=6000, moves=2))
     gi = est.meta["global_init"]
-    assert gi["ambiguous"] and len(gi["modes"]) >= 2
-    assert "ambiguous" in gi["statement"]
+    assert gi["symmetries"] == 24
+    assert "unique up to the shape's 24 rotation symmetries" in gi["statement"]
     G = axis_group_quaternions()
     q_true = lc.truth_q[-1]
     err = min(float(np.degrees(rot.attitude_error_angle(rot.quat_mult(g, q_true), est.q[-1])))
               for g in G)
     assert err < 5.0
     s = est.summary()
-    assert s["global_init"]["ambiguous"] and s["global_init"]["n_modes_total"] >= 2
+    assert s["global_init"]["symmetries"] == 24
+    # no two listed modes are copies of each other under the cube's rotations
+    q0s = [np.asarray(m["q0"]) for m in gi["modes"]]
+    for a in range(len(q0s)):
+        for b in range(a + 1, len(q0s)):
+            d = min(float(np.degrees(rot.attitude_error_angle(rot.quat_mult(g, q0s[a]), q0s[b])))
+                    for g in G)
+            assert d > 10.0
     # every listed mode ends at the truth up to a rotation of the cube (all equally good)
     for m in gi["modes"]:
         e = min(float(np.degrees(rot.attitude_error_angle(rot.quat_mult(g, q_true),
                                                            np.asarray(m["final_q"]))))
                 for g in G)
         assert e < 5.0
+
+
+class _FakeEstimate:
+    """What global_initialise reads from a filter run: a constant attitude, the innovations
+    (zero) with a chosen variance (which sets the evidence), and the consistency verdict."""
+
+    def __init__(self, q0, w0, consistent, var):
+        n = 10
+        self.q = np.tile(q0, (n, 1))
+        self.omega_rad_s = np.tile(w0, (n, 1))
+        self.att_sigma_deg = np.ones((n, 3))
+        self.diverged = False
+        self.att_error_deg = None
+        self.innovations = np.zeros(n)
+        self.innovation_var = np.full(n, var)
+        self.meta = {}
+        self._flags = [] if consistent else ["nis_high"]
+
+    def consistency(self):
+        return {"flags": list(self._flags), "consistent": not self._flags}
+
+
+def test_rejected_heaviest_mode_is_replaced_by_the_consistent_candidates(sym_cube_library):
+    """The filter from the heaviest mode is rejected (stub): the result must start the filter
+    from ``refine_modes`` more candidates, report only the accepted ones, weigh them by the
+    filters' evidence Σ −½(ν²/S + ln 2πS) (here 10 updates, ν = 0: the weight ratio of two
+    accepted starts with S = 1 and S = e is e^{10/2}), and state the ambiguity only when a second
+    accepted mode holds ≥ ``report_weight``."""
+    import lightcurve
+    from lightcurve.acquisition.global_init import global_initialise
+    from lightcurve.filters.config import ProblemConfig
+    from lightcurve.filters.invert import build_problem
+    from lightcurve.studies.scenario import parse_scenario
+
+    scen = parse_scenario(SCENARIO.replace('name = "sym_cube"', 'name = "cube_1u"'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lc = lightcurve.simulate(scen, seed=3)
+    prob = build_problem(lc, ProblemConfig(initial="given", initial_q=(1.0, 0, 0, 0),
+                                           initial_omega=(0.0, 0, 0)))
+    cfg = GlobalInitConfig(particles=600, moves=1, window_epochs=20, refine_modes=3,
+                           restarts=0)
+
+    def make(variances):
+        calls = []
+
+        def run_filter(q0, w0, st, sw):
+            k = len(calls)
+            calls.append(np.array(q0))
+            # the first start (the heaviest mode) is rejected; the others accepted
+            return _FakeEstimate(q0, w0, k > 0, variances[min(k, len(variances) - 1)])
+        return run_filter, calls
+
+    run, calls = make([1.0, 1.0, math.e, math.e ** 3])
+    res = global_initialise(lc, prob, run, seed=1, config=cfg, period="none")
+    assert res.n_refined == 3 and res.n_rejected == 1 and len(res.modes) == len(calls) - 1
+    assert {m.source for m in res.modes} <= {"sampler", "cloud", "image"}
+    assert all(m.consistent for m in res.modes)
+    assert not any(abs(float(m.q0 @ calls[0])) > 1 - 1e-12 for m in res.modes)
+    w = np.array([m.weight for m in res.modes])
+    assert w.sum() == pytest.approx(1.0)
+    assert w[0] / w[1] == pytest.approx(math.exp(5.0), rel=1e-9)
+    assert res.ambiguous is False            # e^{-5}/(1 + …) < 5 %: one answer
+    assert "rejected by the data" in res.statement
+    # two equally good accepted starts: an ambiguity is stated
+    run, calls = make([1.0, 1.0, 1.0, math.e ** 3])
+    res = global_initialise(lc, prob, run, seed=1, config=cfg, period="none")
+    assert res.ambiguous and "ambiguous" in res.statement
+    assert res.modes[0].weight == pytest.approx(res.modes[1].weight)
