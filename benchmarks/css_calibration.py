@@ -31,7 +31,10 @@ from lightcurve.css.sensors import normal_to_azel
 from lightcurve.core.rotations import euler321_to_dcm_nb
 from lightcurve.rotations import quat_rotate_inv
 
-THESIS_TABLE_4_4_US = {1: 6141.0, 5: 506.0, 10: 180.0}
+from lightcurve.css.okeefe2015 import THESIS_RESULTS
+
+THESIS_TABLE_4_4_US = {res: THESIS_RESULTS["table4_4"][g][1][0]    # update means, µs
+                       for res, g in ((1, "1p25x1"), (5, "5x5"), (10, "10x10"))}
 
 
 def _map(res):

@@ -38,12 +38,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from reflection_bpf import print_with_machine  # noqa: E402  (shared JSON footer)
 
-THESIS_TABLE_4_4 = {   # O'Keefe (2015) table 4.4: (propagation mean, sd), (update mean, sd) µs
-    "1p25x1": ((15.4, 2.7), (6141.0, 1470.0)),
-    "5x5": ((15.1, 2.9), (506.0, 101.0)),
-    "10x10": ((15.0, 2.9), (180.0, 19.7)),
-    "reduced": ((18.3, 3.8), (183.0, 24.5)),
-}
+from lightcurve.css.okeefe2015 import THESIS_RESULTS  # noqa: E402
+
+THESIS_TABLE_4_4 = THESIS_RESULTS["table4_4"]  # ((propagation mean, sd), (update mean, sd)) µs
 
 
 def _stats(x):

@@ -131,19 +131,16 @@ def cmd_vmm(args) -> int:
 def cmd_sun_models(args) -> int:
     """Table 4.5: almanac (Vallado eq. 4.39) vs DE421 Sun directions; ``--table``: the whole
     table measured (:func:`.sun_models.sun_model_table`) beside the thesis's numbers."""
-    from .sun_models import THESIS_TABLE_4_5, compare_models, sun_model_table
+    from .sun_models import THESIS_ROW, THESIS_TABLE_4_5, compare_models, sun_model_table
 
     if args.table:
         tab = sun_model_table()
-        thesis_row = {"DE421 (skyfield)": "SPICE", "Vallado": "Vallado",
-                      "Vallado +6 h": "Vallado +6 h", "ERFA epv00": "VSOP87B",
-                      "ERFA epv00 +6 h": "Meeus +6 h"}
         print(f"Sun direction vs DE421, {tab['days']:g} days from {tab['start_utc']} every "
               f"{tab['step_h']:g} h (thesis: O'Keefe table 4.5, vs SPICE)")
         print(f"{'model':18s} {'time':>6s} {'mean deg':>10s} {'max deg':>10s}   thesis row: "
               "time, mean, max")
         for r in tab["rows"]:
-            th = thesis_row.get(r["model"])
+            th = THESIS_ROW.get(r["model"])
             tt = THESIS_TABLE_4_5.get(th) if th else None
             f = (lambda v: "–" if v is None else f"{v:.2g}")
             print(f"{r['model']:18s} {r['time_rel']:6.1f} {f(r['mean_deg']):>10s} "

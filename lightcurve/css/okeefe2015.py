@@ -227,13 +227,13 @@ THESIS_RESULTS = {
                  "10x10": {"c": (0.11, 0.029), "theta_deg": (2.8, 2.6), "phi_deg": (3.0, 2.4)},
                  "reduced": {"c": (0.61, 0.21), "theta_deg": (2.9, 2.7),
                              "phi_deg": (3.0, 2.6)}},
-    # Table 4.4 (µs).
-    "table4_4": {"1p25x1": (15.4, 6141.0), "5x5": (15.1, 506.0), "10x10": (15.0, 180.0),
-                 "reduced": (18.3, 183.0)},
-    # Table 4.5: angular error vs SPICE, mean/max deg.
-    "table4_5": {"vallado": (0.23, 0.24), "vallado+6h": (0.47, 0.49),
-                 "meeus": (5.2e-5, 1.2e-4), "meeus+6h": (0.25, 0.25),
-                 "vsop87b": (5.4e-6, 7.2e-6)},
+    # Table 4.4 (µs): ((propagation mean, sd), (measurement update mean, sd)).
+    "table4_4": {"1p25x1": ((15.4, 2.7), (6141.0, 1470.0)), "5x5": ((15.1, 2.9), (506.0, 101.0)),
+                 "10x10": ((15.0, 2.9), (180.0, 19.7)), "reduced": ((18.3, 3.8), (183.0, 24.5))},
+    # Table 4.5: normalised mean computation time, angular error vs SPICE mean / max (deg).
+    "table4_5": {"SPICE": (19.0, None, None), "Vallado": (1.0, 0.23, 0.24),
+                 "Vallado +6 h": (1.0, 0.47, 0.49), "Meeus": (24.0, 5.2e-5, 1.2e-4),
+                 "Meeus +6 h": (24.0, 0.25, 0.25), "VSOP87B": (360.0, 5.4e-6, 7.2e-6)},
     # Tables 5.1 (uncontrolled) and 5.2 (controlled): (false, false_total, correct, total).
     "table5_1": {"1p25x1": {"off": (6, 3686, 428, 428), "random": (6, 3687, 428, 428),
                             "stuck": (6, 3686, 428, 428)},

@@ -40,18 +40,20 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.constants import AU_M
+from .okeefe2015 import THESIS_RESULTS
 
 __all__ = ["vallado_sun_eci", "erfa_sun_eci", "sun_direction", "compare_models",
-           "sun_model_table", "SUN_MODELS", "THESIS_TABLE_4_5"]
+           "sun_model_table", "SUN_MODELS", "THESIS_TABLE_4_5", "THESIS_ROW"]
 
 SUN_MODELS = ("de421", "vallado", "erfa")
 
-#: O'Keefe (2015) table 4.5: normalised mean computation time and angular error vs SPICE,
-#: mean / max (deg); Meeus and VSOP87B are the thesis's series models.
-THESIS_TABLE_4_5 = {
-    "SPICE": (19.0, None, None), "Vallado": (1.0, 0.23, 0.24), "Vallado +6 h": (1.0, 0.47, 0.49),
-    "Meeus": (24.0, 5.2e-5, 1.2e-4), "Meeus +6 h": (24.0, 0.25, 0.25),
-    "VSOP87B": (360.0, 5.4e-6, 7.2e-6)}
+#: O'Keefe (2015) table 4.5 (``okeefe2015.THESIS_RESULTS["table4_5"]``): normalised mean
+#: computation time and angular error vs SPICE, mean / max (deg); Meeus and VSOP87B are the
+#: thesis's series models.
+THESIS_TABLE_4_5 = THESIS_RESULTS["table4_5"]
+#: the thesis row each row of :func:`sun_model_table` is compared with
+THESIS_ROW = {"DE421 (skyfield)": "SPICE", "Vallado": "Vallado", "Vallado +6 h": "Vallado +6 h",
+              "ERFA epv00": "VSOP87B", "ERFA epv00 +6 h": "Meeus +6 h"}
 
 
 def vallado_sun_eci(jd_ut1, jd_tdb=None) -> np.ndarray:

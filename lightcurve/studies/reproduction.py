@@ -213,13 +213,11 @@ def _table44_section(b) -> list[str]:
 
 def _sun_models_section(tab) -> list[str]:
     """Table 4.5 from ``lightcurve css sun-models --table -o FILE`` (or nothing)."""
-    from ..css.sun_models import THESIS_TABLE_4_5
+    from ..css.sun_models import THESIS_ROW, THESIS_TABLE_4_5
 
     out = ["### Table 4.5 — Sun-direction models vs the ephemeris", ""]
     if tab is None:
         return out + ["Not run (`lightcurve css sun-models --table -o sun_models.json`).", ""]
-    pair = {"DE421 (skyfield)": "SPICE", "Vallado": "Vallado", "Vallado +6 h": "Vallado +6 h",
-            "ERFA epv00": "VSOP87B", "ERFA epv00 +6 h": "Meeus +6 h"}
     out += [f"`lightcurve css sun-models --table`: angle to DE421 (geometric, GCRS; the thesis: "
             f"SPICE) sampled every {tab['step_h']:g} h over {tab['days']:g} days from "
             f"{tab['start_utc']}; time per call relative to the almanac formula (Python calls "
@@ -233,7 +231,7 @@ def _sun_models_section(tab) -> list[str]:
         return "–" if v is None else f"{v:.2g}"
 
     for r in tab["rows"]:
-        th = pair.get(r["model"])
+        th = THESIS_ROW.get(r["model"])
         t = THESIS_TABLE_4_5.get(th, (None, None, None))
         out.append(f"| {r['model']} | {r['time_rel']:.1f} | {g(r['mean_deg'])} | "
                    f"{g(r['max_deg'])} | {th or '–'} | {g(t[0])} | {g(t[1])} | {g(t[2])} |")
