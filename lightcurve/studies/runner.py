@@ -23,6 +23,7 @@ its absence is a clear error naming the ``distributed`` extra.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import json
@@ -416,10 +417,15 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
         import logging
 
         nt = threads_per_worker(int(n_workers))
-        cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
-                                           processes=True, dashboard_address=None,
-                                           silence_logs=logging.ERROR,
-                                           env={"NUMBA_NUM_THREADS": str(nt)})
+        # The worker processes read their logging level from the environment when they import
+        # distributed; silence_logs covers a worker only while it runs, not its teardown, whose
+        # INFO/heartbeat lines would reach the user's stderr after a successful run. A level the
+        # user set (DASK_LOGGING__DISTRIBUTED) is kept.
+        with _environ_default(DASK_LOGGING__DISTRIBUTED="critical"):
+            cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
+                                               processes=True, dashboard_address=None,
+                                               silence_logs=logging.ERROR,
+                                               env={"NUMBA_NUM_THREADS": str(nt)})
         client = distributed.Client(cluster)
     else:
         try:
@@ -453,10 +459,57 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
             if nxt is not None:
                 ac.add(client.submit(fn, nxt, key=key(nxt), pure=False))
             yield res
-    finally:
-        client.close()
+    except BaseException:  # interrupted, consumer gone or a task failed: close at once
         if cluster is not None:
+            _close_local_cluster(client, cluster, graceful=False)
+        else:
+            client.close()
+        raise
+    if cluster is not None:
+        _close_local_cluster(client, cluster, graceful=True)
+    else:
+        client.close()
+
+
+@contextlib.contextmanager
+def _environ_default(**values):
+    """Set environment variables that are not set yet, for the duration of the block (child
+    processes started inside it inherit them); restore the environment afterwards."""
+    added = [k for k in values if k not in os.environ]
+    for k in added:
+        os.environ[k] = values[k]
+    try:
+        yield
+    finally:
+        for k in added:
+            os.environ.pop(k, None)
+
+
+def _close_local_cluster(client, cluster, *, graceful: bool) -> None:
+    """Shut our own LocalCluster down: after a complete run (``graceful``) the workers first,
+    then the scheduler; after an interruption or a failure, everything at once.
+
+    Closing the cluster directly stops the scheduler while its workers may still be sending a
+    heartbeat; the worker then logs "Failed to communicate with scheduler during heartbeat" (an
+    ERROR with a traceback on stderr) although every task succeeded. Retiring the workers while
+    the scheduler still answers closes them cleanly; whatever fails here is teardown only."""
+    import logging
+
+    log = logging.getLogger("distributed")
+    level = log.level
+    log.setLevel(logging.CRITICAL)  # the closing connections' INFO lines are not news either
+    try:
+        try:
+            if graceful:
+                client.retire_workers(close_workers=True)
+        except Exception:  # noqa: BLE001 - teardown after the results are in: never an error
+            pass
+        try:
+            client.close()
+        finally:
             cluster.close()
+    finally:
+        log.setLevel(level)
 
 
 
