@@ -400,14 +400,18 @@ def _figures(d):
     if recs and d.folds is not None:
         fig, ax = plt.subplots(figsize=figsize(10, 0.35 * len(recs) + 1.2), dpi=100)
         g = np.array([r["gain"] for r in recs])
-        col = ["C2" if str(r.get("decision", "")).startswith("added") else ("C1" if not r.get("identified") else "0.6")
-               for r in recs]
+        # green: named in the final model (at this step, a later one or in a joint pair), so
+        # the colours agree with the verdict; orange: fits but unidentifiable; grey: the rest
+        chosen = set(d.chosen)
+        col = ["C2" if (r["name"] in chosen or str(r.get("decision", "")).startswith("added"))
+               else ("C1" if not r.get("identified") else "0.6") for r in recs]
         yy = np.arange(len(recs))[::-1]
         ax.barh(yy, np.sign(g) * np.log10(1 + np.abs(g)), color=col)
         ax.set_yticks(yy, [r["name"] for r in recs])
         ax.axvline(np.log10(11.0), color="k", lw=0.6, ls="--")
         ax.set_xlabel("held-out gain G (sign · log10(1 + |G|)); dashed: G = 10")
-        ax.set_title("first step: green added, orange unidentifiable, grey not enough", fontsize=9)
+        ax.set_title("first step: green named in the final model, orange unidentifiable, "
+                     "grey not enough", fontsize=9)
         fig.tight_layout()
         figs.append(("Held-out gain of each candidate (first step)", _png(fig)))
     return figs

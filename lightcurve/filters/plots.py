@@ -282,6 +282,14 @@ def estimate_figure(est, curve=None, title=None):
     if np.any(okn & ~inside):
         a.plot(x[okn & ~inside], nu[okn & ~inside], "x", color="C3", ms=5, label="outside ±3√S")
     a.axhline(0, color="0.4", lw=0.6)
+    # y range from every innovation and the band after its first epochs: a prior band of tens
+    # of magnitudes at the first epoch would flatten the rest (it runs off the panel instead)
+    scale = np.concatenate([np.abs(nu[okn]), band[okb][min(3, okb.sum() - 1):] if okb.any()
+                            else np.zeros(0)])
+    if scale.size and np.isfinite(scale).any():
+        top = 1.15 * float(np.nanmax(scale))
+        if top > 0:
+            a.set_ylim(-top, top)
     a.set_ylabel("innovation [mag]")
     a.legend(fontsize=7, loc="upper right", ncol=3)
     frac_in = inside.sum() / max(1, (okn & okb).sum())

@@ -34,12 +34,13 @@ def _spans(t, flag):
     return spans
 
 
-def _with_gaps(t, y):
-    """Insert NaN where the time step exceeds 1.5 median steps, so lines break at gaps."""
+def _with_gaps(t, y, min_gap_s: float = 0.0):
+    """Insert NaN where the time step exceeds 1.5 median steps (and ``min_gap_s``), so lines
+    break at gaps."""
     if len(t) < 3:
         return t, y
     step = np.median(np.diff(t))
-    cut = np.nonzero(np.diff(t) > 1.5 * step)[0] + 1
+    cut = np.nonzero(np.diff(t) > max(1.5 * step, min_gap_s))[0] + 1
     return np.insert(t.astype(float), cut, np.nan), np.insert(y.astype(float), cut, np.nan)
 
 
@@ -86,7 +87,9 @@ def plot_lightcurve(lc, path=None, title: str | None = None):
         handles, labels = ax.get_legend_handles_labels()
         if lc.elevation_rad is not None and np.any(m):
             ax2 = ax.twinx()
-            xe, ye = _with_gaps(lc.t[m], np.degrees(lc.elevation_rad[m]))
+            # the elevation is smooth through epochs without a magnitude (no lit facet facing
+            # the observer, dropped samples): the line breaks only between passes
+            xe, ye = _with_gaps(lc.t[m], np.degrees(lc.elevation_rad[m]), min_gap_s=600.0)
             xe = utc_times(lc.epoch_utc, xe) if is_utc else xe
             ln, = ax2.plot(xe, ye, ":", color="0.5", lw=0.9, label="elevation (right axis)")
             ax2.set_ylabel("elevation (deg)", color="0.5")

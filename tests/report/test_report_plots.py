@@ -164,3 +164,43 @@ def test_estimate_figure_reflection_states(default_pass):
     titles = " ".join(a.get_title(loc="left") for a in fig.axes)
     assert "reflection bias states" in titles and "errors against the truth" in titles
     plt.close(fig)
+
+
+def test_lightcurve_elevation_line_spans_dropped_epochs(default_pass):
+    """The default pass drops epochs with no lit facet facing the observer (tens of seconds
+    at a 5 s step); the object's elevation is a smooth function of time through them, so its
+    line is one piece over the pass, while the noise-free truth still breaks at the gaps."""
+    import matplotlib.pyplot as plt
+
+    from lightcurve.report.plots import plot_lightcurve
+
+    lc, _ = default_pass
+    dt = np.diff(lc.t)
+    assert np.any(dt > 1.5 * np.median(dt))  # the pass has gaps (else the test proves nothing)
+    fig = plot_lightcurve(lc)
+    lines = {ln.get_label(): ln for ax in fig.axes for ln in ax.lines}
+    elev = np.asarray(lines["elevation (right axis)"].get_ydata(), float)
+    truth = np.asarray(lines["noise-free truth"].get_ydata(), float)
+    assert np.all(np.isfinite(elev)) and elev.size == lc.t.size
+    assert np.any(np.isnan(truth))
+    plt.close(fig)
+
+
+def test_innovation_panel_scaled_to_the_innovations_not_the_prior_band(default_pass):
+    """The innovation panel's y range covers every innovation and the ±3√S band after the
+    first epochs, not a first-epoch prior band of many magnitudes."""
+    import matplotlib.pyplot as plt
+
+    from lightcurve.filters.plots import estimate_figure
+
+    lc, est = default_pass
+    fig = estimate_figure(est, curve=lc)
+    ax = next(a for a in fig.axes if a.get_ylabel() == "innovation [mag]")
+    lo, hi = ax.get_ylim()
+    nu = np.asarray(est.innovations, float)
+    nu = np.abs(nu[np.isfinite(nu)])
+    band = 3 * np.sqrt(np.asarray(est.innovation_var, float))
+    band = band[np.isfinite(band)]
+    assert hi == -lo and hi >= nu.max()
+    assert hi >= band[3:].max() and hi <= 1.2 * max(nu.max(), band[3:].max())
+    plt.close(fig)
