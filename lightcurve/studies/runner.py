@@ -423,7 +423,7 @@ def _iter_dask(tasks, *, address=None, n_workers=None, fn=None, key=None):
         # user set (DASK_LOGGING__DISTRIBUTED) is kept.
         with _environ_default(DASK_LOGGING__DISTRIBUTED="critical"):
             cluster = distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1,
-                                               processes=True, dashboard_address=None,
+                                               processes=True, dashboard_address=":0",
                                                silence_logs=logging.ERROR,
                                                env={"NUMBA_NUM_THREADS": str(nt)})
         client = distributed.Client(cluster)
