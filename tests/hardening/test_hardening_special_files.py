@@ -97,7 +97,7 @@ def test_every_reader_refuses_special_files(kind, special):
 
 def test_mesh_and_materials_special_files_refused(special, tmp_path):
     """A shape whose mesh is a FIFO, whose BRDF table is /dev/zero, or a scenario whose
-    materials file is /dev/zero: refused, never read."""
+    materials file is /dev/zero or a FIFO: refused, never read (nor blocked on)."""
     from lightcurve.photometry import load_shape
 
     src = (data_dir("shapes") / "box_wing_mesh.toml").read_text()
@@ -125,6 +125,13 @@ def test_mesh_and_materials_special_files_refused(special, tmp_path):
 
     with deadline(), pytest.raises(InputError, match="/dev/zero"):
         load_scenario(p)
+    # ... and a FIFO as its materials file (opening it for reading used to block for ever)
+    mat_fifo = tmp_path / "materials.toml"
+    os.mkfifo(mat_fifo)
+    p.write_text(_mesh_scenario(str(mat_fifo)))
+    with deadline(), pytest.raises(InputError, match="FIFO") as ei:
+        load_scenario(p)
+    assert str(mat_fifo) in str(ei.value)
 
 
 def _mesh_scenario(materials: str) -> str:
