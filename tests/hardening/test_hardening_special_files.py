@@ -208,3 +208,61 @@ def test_embedded_scenario_cannot_name_files(tmp_path, capsys):
     lc2.write(g)
     code, err = run_cli(["invert", g, "-o", tmp_path / "inv", "--workers", "1", "-q"], capsys)
     assert code == 2 and "not a shape library name" in err, err
+
+
+def _cap_readers():
+    """(reader name, call on a path, its cap in bytes, file suffix) for every size-capped
+    reader of the size table in docs/robustness.md not tested on its own elsewhere."""
+    import lightcurve.io.safe_open as so
+    from lightcurve.earth.albedo import load_albedo_map
+    from lightcurve.geometry.tle import MAX_BYTES as TLE_MAX_BYTES
+    from lightcurve.geometry.tle import load_element_sets
+    from lightcurve.photometry import load_shape
+    from lightcurve.photometry.tabulated import load_brdf_table
+
+    def mesh_shape(path):  # a shape TOML whose mesh is the big file
+        src = (data_dir("shapes") / "box_wing_mesh.toml").read_text()
+        shp = path.with_name("shape.toml")
+        shp.write_text(src.replace('mesh = "box_wing_mesh.obj"', f'mesh = "{path}"'))
+        return load_shape(shp)
+
+    return [("mesh (OBJ)", mesh_shape, so.MESH_MAX_BYTES, ".obj"),
+            ("BRDF table", load_brdf_table, so.BRDF_MAX_BYTES, ".csv"),
+            ("albedo map", load_albedo_map, so.ALBEDO_MAX_BYTES, ".csv"),
+            ("JSON", so.read_json, so.JSON_MAX_BYTES, ".json"),
+            ("element-set file", load_element_sets, TLE_MAX_BYTES, ".tle")]
+
+
+@pytest.mark.parametrize("kind", ["mesh (OBJ)", "BRDF table", "albedo map", "JSON",
+                                  "element-set file"])
+def test_size_caps_of_the_other_readers(kind, tmp_path):
+    """Mesh 200 MiB, BRDF table 64 MiB, albedo map 16 MiB, JSON 256 MiB, element sets
+    64 MiB: a (sparse) file one byte over the cap is refused from its size, nothing read; a
+    file at the cap passes the size check (it fails later, as the zeros it holds are no valid
+    content, but not for its size)."""
+    name, reader, cap, suffix = next(r for r in _cap_readers() if r[0] == kind)
+    p = tmp_path / f"big{suffix}"
+    with open(p, "wb") as fh:  # sparse: the size is there, the bytes are not
+        fh.truncate(cap + 1)
+    with deadline(), pytest.raises(InputError, match="too large") as ei:
+        reader(p)
+    assert str(p) in str(ei.value) and f"<= {cap} bytes" in str(ei.value), (name, ei.value)
+    if cap <= 16 * 1024 * 1024:  # reading the zeros at the cap is cheap only for small caps
+        os.truncate(p, cap)
+        with deadline(), pytest.raises(InputError) as ei:
+            reader(p)
+        assert "too large" not in str(ei.value), (name, ei.value)
+
+
+def test_a_file_larger_than_its_stat_size_is_cut_at_the_cap():
+    """Whole-file reads stop at the cap + 1 byte whatever fstat said: /proc/self/maps is a
+    regular file whose size reads as 0 (like a file that grows while it is read)."""
+    from lightcurve.io.safe_open import read_bytes
+
+    maps = Path("/proc/self/maps")
+    if not maps.is_file() or maps.stat().st_size != 0:
+        pytest.skip("needs Linux /proc (a regular file whose stat size is 0)")
+    with deadline(), pytest.raises(InputError, match="grew past the limit") as ei:
+        read_bytes(maps, max_bytes=64, track=False)
+    assert str(maps) in str(ei.value)
+    assert len(read_bytes(maps, max_bytes=1 << 24, track=False)) > 64
