@@ -210,6 +210,37 @@ def test_embedded_scenario_cannot_name_files(tmp_path, capsys):
     assert code == 2 and "not a shape library name" in err, err
 
 
+def test_embedded_scenario_cannot_name_an_albedo_map(tmp_path, capsys, monkeypatch):
+    """A stored scenario's `[effects.earthshine] albedo = "<path>"` made `invert` look the
+    path up (exit 0, or "file not found": an oracle of which files exist, and a file the
+    scenario would read when simulated); refused before the path is touched. The same
+    table in a scenario given as a file still works."""
+    import lightcurve.physics.earthshine as es
+
+    touched = []
+    real = es.Path
+    monkeypatch.setattr(es, "Path", lambda p: touched.append(str(p)) or real(p))
+    from lightcurve.studies.scenario import load_scenario
+
+    lc = small_curve()
+    base = (data_dir("pipelines") / "thesis" /
+            "leo-ic1-fast-spin-controlled-1site.toml").read_text()
+    ok = tmp_path / "map.csv"
+    ok.write_text("0.3\n")
+    for target in ("/etc/passwd", str(ok)):
+        lc.scenario_toml = base + f'\n[effects.earthshine]\nalbedo = "{target}"\n'
+        f = tmp_path / "received.h5"
+        lc.write(f)
+        code, err = run_cli(["invert", f, "-o", tmp_path / "inv", "--workers", "1", "-q"],
+                            capsys)
+        assert code == 2 and "field 'effects.earthshine.albedo'" in err, err
+        assert "may not name files" in err and not touched, (err, touched)
+    # a scenario file of the user's own may name its map
+    p = tmp_path / "own.toml"
+    p.write_text(lc.scenario_toml)
+    assert load_scenario(p).name and touched == [str(ok)]
+
+
 def _cap_readers():
     """(reader name, call on a path, its cap in bytes, file suffix) for every size-capped
     reader of the size table in docs/robustness.md not tested on its own elsewhere."""
