@@ -233,7 +233,7 @@ def test_embedded_scenario_cannot_name_an_albedo_map(tmp_path, capsys, monkeypat
         lc.write(f)
         code, err = run_cli(["invert", f, "-o", tmp_path / "inv", "--workers", "1", "-q"],
                             capsys)
-        assert code == 2 and "field 'effects.earthshine.albedo'" in err, err
+        assert code == 2 and f"{f}:scenario: field 'effects.earthshine.albedo'" in err, err
         assert "may not name files" in err and not touched, (err, touched)
     # a scenario file of the user's own may name its map
     p = tmp_path / "own.toml"
