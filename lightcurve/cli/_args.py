@@ -239,7 +239,10 @@ def add_executors(p, *, workers_help=None):
                     help=workers_help or "local process-pool size (default: one per CPU; 1 "
                     "runs in this process)")
     ex.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+                    help="address of an existing Dask scheduler, e.g. tcp://10.0.0.5:8786. "
+                    "Dask sends tasks and results as pickles: whoever controls the scheduler "
+                    "or a worker can run code in this process. Use only a cluster you control "
+                    "(docs/robustness.md)")
     ex.add_argument("--dask-local", type=number(1, 4096, integer=True), default=None,
                     metavar="W", help="start a Dask LocalCluster with W worker processes")
     return ex

@@ -21,7 +21,7 @@ and solar radiation pressure of O'Keefe (2015) §2.4 in :mod:`lightcurve.css.tru
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -550,6 +550,10 @@ class Orbit:
     v0_m_s: np.ndarray | None = None
     line1: str | None = None
     line2: str | None = None
+    #: where the orbit was read (file, and the TOML field of the TLE lines): an SGP4 failure
+    #: found only while propagating (a TLE that decays during the scenario) names them
+    source_file: str | None = field(default=None, repr=False, compare=False)
+    source_field: str | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_elements(cls, a_m, e, i_rad, raan_rad, argp_rad, nu_rad, gravity="J4",
@@ -562,7 +566,14 @@ class Orbit:
     def positions(self, epoch_utc, t_s):
         """GCRS position (m) and velocity (m/s), each ``(N, 3)``, at ``epoch_utc + t_s``."""
         if self.kind == "tle":
-            return tle_positions(self.line1, self.line2, epoch_utc, t_s)
+            try:
+                return tle_positions(self.line1, self.line2, epoch_utc, t_s)
+            except InputError as exc:
+                if exc.file is not None or self.source_file is None:
+                    raise
+                raise InputError(exc.bare_message, file=self.source_file,
+                                 field=self.source_field or exc.field, value=exc.value,
+                                 allowed=exc.allowed) from None
         from .frames import earth_pole_gcrs
 
         pole = earth_pole_gcrs(epoch_utc, 0.0)[0]
@@ -637,4 +648,6 @@ def orbit_from_section(section) -> Orbit:
     except InputError as exc:
         raise InputError(exc.bare_message, file=sec.file, field=f(exc.field or "line1"),
                          value=exc.value) from None
-    return Orbit("tle", gravity, line1=line1, line2=line2)
+    return Orbit("tle", gravity, line1=line1, line2=line2,
+                 source_file=None if sec.file is None else str(sec.file),
+                 source_field=f("line1") + "/line2")

@@ -18,9 +18,9 @@ file through this module, so that one set of rules holds everywhere:
   virtual datasets (VDS: data from other files, or a silent fill value when a source is
   missing), filters other than deflate, shuffle, Fletcher-32 and LZF (HDF5 would load a plugin
   library for an unknown filter id) and datasets that declare more bytes than the file stores
-  for them (a never-written dataset of 10⁸ rows reads as fill values from a 15 KB file) are
-  refused, naming the object. :func:`read_dataset` checks a dataset's declared size against
-  the caller's limit and against :func:`lightcurve.memory.check_allocation` before reading it.
+  for them (a never-written dataset of 10⁸ rows reads as fill values from a 15 KB file), or
+  chunked datasets with any chunk missing, are refused, naming the object.
+  :func:`read_dataset` checks a dataset's declared size against the caller's limit and against :func:`lightcurve.memory.check_allocation` before reading it.
 
 All refusals are :class:`~lightcurve.errors.InputError` naming the file, the field (HDF5
 object) and the limit, so the command line exits 2 (docs/robustness.md).
@@ -265,6 +265,22 @@ def _audit_dataset(ds, name, path):
     layout = plist.get_layout()
     if layout == h5py.h5d.COMPACT:
         return  # data in the object header (< 64 KiB)
+    if layout == h5py.h5d.CHUNKED:
+        # every chunk must be in the file: a chunk never written reads as fill values, and a
+        # compressed file could otherwise hide up to 1100x its size of them
+        chunks = plist.get_chunk()
+        expected = 1
+        for dim, c in zip(ds.shape, chunks):
+            expected *= -(-int(dim) // max(int(c), 1))
+        try:
+            present = int(ds.id.get_num_chunks())
+        except (AttributeError, RuntimeError, ValueError):  # HDF5 < 1.10.5: the byte bound only
+            present = expected
+        if present < expected:
+            raise InputError(f"dataset declares {expected} chunks but the file stores {present} "
+                             "(never written or truncated: the rest would read as fill values)",
+                             file=path, field=name, value=tuple(int(x) for x in ds.shape),
+                             allowed="datasets whose data is in the file")
     limit = _MAX_FILTER_RATIO * stored + _RATIO_SLACK_BYTES if filtered else stored
     if declared > limit:
         raise InputError(f"dataset declares {declared} bytes but the file stores {stored} for "

@@ -77,6 +77,7 @@ class Earthshine(Effect):
     params = (ParamSpec("albedo_scale", "1", 1.0, Prior("uniform", 0.7, 1.3), min=0.0, max=5.0, null=0.0,
                         description="multiplier of the albedo map"),)
     options = {"albedo": "builtin", "resolution_deg": 10.0}
+    file_options = ("albedo",)  # a CERES/TOMS map path
     group = "reflection"
 
     def parse_options(self, sec):

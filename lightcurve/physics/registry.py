@@ -178,6 +178,9 @@ class Effect:
     options: dict = {}
     kind: str = "magnitude"
     group: str = "illumination"
+    #: options whose value (other than the default in :attr:`options`) names a file to read;
+    #: a scenario stored inside a data file may not set them (:func:`parse_effects`)
+    file_options: tuple = ()
     #: parameters the diagnosis never fits separately, with the reason (only a combination
     #: with other parameters is identifiable; they stay at their default)
     diagnosis_hold: dict = {}
@@ -480,13 +483,16 @@ def _param_value(sec, spec: ParamSpec, site_names, n_sensors, effect_name, camer
 
 
 def parse_effects(raw, file=None, site_names=(), n_sensors=None, kind: str | None = "magnitude",
-                  camera_names=None):
+                  camera_names=None, embedded: bool = False):
     """Validate a scenario's ``[effects]`` table into a list of :class:`ConfiguredEffect`.
 
     ``raw``: the parsed table ``{effect_name: {key: value}}``; ``site_names``: the scenario's
     site ids (for per-site values ``{site_id = value}``); ``camera_names``: camera ids for
     per-camera values (default: one camera per site, named after it); ``n_sensors``: for
     per-sensor CSS parameters. A table may set ``enabled = false`` to keep its settings but switch it off.
+    ``embedded``: the table comes from a scenario stored inside a data file; an option that
+    names a file (:attr:`Effect.file_options`) may then only keep its default, so a received
+    file cannot make the program open a file of its choosing.
     Raises :class:`InputError` for an unknown effect (listing the available ones), an effect
     of the wrong kind, an unknown key, or a value outside its range (naming
     ``effects.<name>.<param>``).
@@ -509,6 +515,13 @@ def parse_effects(raw, file=None, site_names=(), n_sensors=None, kind: str | Non
                              field=f"effects.{name}", value=body)
         sec = Section(body, file=file, name=f"effects.{name}")
         cls = effect_class(name)
+        if embedded:
+            for key in cls.file_options:
+                if key in body and body[key] != cls.options.get(key):
+                    raise InputError("a scenario stored in a data file may not name files",
+                                     file=file, field=f"effects.{name}.{key}", value=body[key],
+                                     allowed=f"{cls.options.get(key)!r} (the default); give the "
+                                     "model scenario as a file instead")
         proto = cls()
         opts = proto.parse_options(sec)
         enabled = sec.bool("enabled", True)

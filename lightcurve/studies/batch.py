@@ -100,6 +100,9 @@ def execute_invert_task(task: InvertTask) -> dict:
            "traceback": "", "estimate": None}
     try:
         curve = read_lightcurve(task.file)
+        # messages about the scenario stored in the file name this file (a stored "file"
+        # attribute is the sender's, not a path here)
+        curve.attrs["file"] = str(task.file)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res["estimate"] = invert(curve, task.method, **dict(task.options))

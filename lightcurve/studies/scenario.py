@@ -488,7 +488,8 @@ def parse_scenario(doc, file="<scenario>", text: str | None = None, library_dirs
         # re-parses the same table when simulating (studies.simulate)
         from ..physics.registry import parse_effects
 
-        parse_effects(effects, file=file, site_names=[s.site.id for s in sites])
+        parse_effects(effects, file=file, site_names=[s.site.id for s in sites],
+                      embedded=embedded)
         if meas.ignore_eclipse and "penumbra" in effects and effects["penumbra"].get("enabled", True):
             raise InputError("the penumbra effect contradicts measurement.ignore_eclipse = true",
                              file=file, field="effects.penumbra")

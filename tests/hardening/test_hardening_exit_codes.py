@@ -219,8 +219,9 @@ def test_long_gap_is_not_a_silent_confident_answer(after_gap):
 # ----------------------------------------------------------------------------------------
 # smaller defects
 # ----------------------------------------------------------------------------------------
-def test_decayed_tle_error_is_one_short_line():
-    """The decayed-TLE error listed one `None` per good epoch (hundreds)."""
+def test_decayed_tle_error_is_one_short_line(tmp_path, capsys):
+    """The decayed-TLE error listed one `None` per good epoch (hundreds); found while
+    simulating a scenario, it named neither the scenario file nor the field."""
     from lightcurve.geometry.orbits import tle_positions
 
     def fix(line):  # TLE checksum: digits plus one per minus sign, modulo 10
@@ -233,6 +234,14 @@ def test_decayed_tle_error_is_one_short_line():
         tle_positions(l1, l2, "2020-03-01T08:06:00Z", np.arange(0, 40 * 86400.0, 600.0))
     text = str(ei.value)
     assert "None" not in text and len(text) < 600 and "of 5760 requested time(s)" in text
+    # the same TLE in a scenario: the line names the scenario file and its [orbit] lines
+    orbit = DEFAULT[DEFAULT.index("[orbit]"):DEFAULT.index("[shape]")]
+    p = _scenario(tmp_path, DEFAULT.replace(
+        orbit, f'[orbit]\ntype = "tle"\nline1 = "{l1}"\nline2 = "{l2}"\n\n'))
+    code, err = run_cli(["simulate", p, "-o", tmp_path / "o.h5"], capsys)
+    line = one_line(err)
+    assert code == 2 and f"{p}: field 'orbit.line1/line2': SGP4 failed" in line, err
+    assert not (tmp_path / "o.h5").exists()
 
 
 def test_unknown_brdf_imports_no_plugin(monkeypatch):

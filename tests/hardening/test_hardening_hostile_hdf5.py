@@ -160,6 +160,37 @@ def test_never_written_huge_datasets_refused_before_reading(tmp_path, compressed
         read_lightcurve(p)
 
 
+@pytest.mark.parametrize("compression", [None, "gzip"])
+def test_partly_written_datasets_refused_constant_columns_read(tmp_path, compression):
+    """A chunked dataset of which one chunk of 750 was written (the rest would read as fill
+    values) is refused, plain or compressed. Compressed, its declared bytes are only ~800x what
+    it stores, inside the 1100x bound that deflate's 1032:1 maximum needs: the byte bound let
+    it through, the count of stored chunks does not. A fully written constant column, which
+    deflate shrinks ~980:1, is read."""
+    from lightcurve.io.safe_open import open_hdf5
+
+    n, chunk = 49_152_000, 1 << 16
+    p = tmp_path / "partial.h5"
+    with h5py.File(p, "w") as h:
+        d = h.create_dataset("mag", shape=(n,), dtype="<f8", chunks=(chunk,),
+                             compression=compression)
+        # one chunk of random data: stored bytes ~ declared / 750 (deflate gains little)
+        d[:chunk] = np.random.default_rng(1).uniform(5.0, 9.0, chunk)
+        assert 700 < d.nbytes / d.id.get_storage_size() < 1000  # inside the byte bound
+    with deadline(), pytest.raises(InputError, match="declares 750 chunks but the file stores 1") as ei:
+        with open_hdf5(p):
+            pass
+    assert str(p) in str(ei.value) and "'mag'" in str(ei.value)
+    q = tmp_path / "constant.h5"
+    with h5py.File(q, "w") as h:
+        h.create_dataset("lit", data=np.zeros(4_000_000), chunks=(1 << 20,),
+                         compression="gzip", compression_opts=9, shuffle=True)
+        ratio = h["lit"].nbytes / h["lit"].id.get_storage_size()
+    assert 500 < ratio < 1100, ratio
+    with open_hdf5(q) as h:
+        assert h["lit"].shape == (4_000_000,)
+
+
 def test_declared_rows_checked_against_memory_limit(tmp_path, monkeypatch):
     """Written data within the caps but over the memory limit: refused naming the limit."""
     p = tmp_path / "big.h5"

@@ -136,6 +136,9 @@ def test_batch_write_failure_recorded_and_batch_goes_on(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert sorted(summary) == ["b1", "b2", "b3"]
     assert summary["b2"]["error_kind"] == "output" and "b2.ukf.h5" in summary["b2"]["error"]
+    # the file named is the one asked for, not the (removed) temporary file beside it
+    assert "Is a directory: " in summary["b2"]["error"] and ".b2.ukf.h5." not in err + \
+        summary["b2"]["error"], (err, summary["b2"]["error"])
     for k in ("b1", "b3"):
         assert Path(summary[k]["result"]).is_file() and "error" not in summary[k]
 

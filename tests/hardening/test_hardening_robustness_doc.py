@@ -44,3 +44,20 @@ def test_dask_trust_model_is_stated():
     sec = sec[: sec.index("\n## ", 5)]
     for frag in ("pickle", "arbitrary code", "--scheduler", "tls://", "--dask-local"):
         assert frag in sec, frag
+    # ... and where the option is offered: the --help of every command with --scheduler
+    import argparse
+
+    from lightcurve.cli import build_parser
+
+    def helps(parser):
+        for a in parser._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for sub in a.choices.values():
+                    yield from helps(sub)
+            elif "--scheduler" in a.option_strings:
+                yield parser.prog, " ".join((a.help or "").split())
+
+    found = list(helps(build_parser()))
+    assert len(found) >= 3, found  # compare, invert, css study
+    for prog, text in found:
+        assert "pickles" in text and "run code in this process" in text, (prog, text)

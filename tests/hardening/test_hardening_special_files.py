@@ -97,7 +97,7 @@ def test_every_reader_refuses_special_files(kind, special):
 
 def test_mesh_and_materials_special_files_refused(special, tmp_path):
     """A shape whose mesh is a FIFO, whose BRDF table is /dev/zero, or a scenario whose
-    materials file is /dev/zero: refused, never read."""
+    materials file is /dev/zero or a FIFO: refused, never read (nor blocked on)."""
     from lightcurve.photometry import load_shape
 
     src = (data_dir("shapes") / "box_wing_mesh.toml").read_text()
@@ -125,6 +125,13 @@ def test_mesh_and_materials_special_files_refused(special, tmp_path):
 
     with deadline(), pytest.raises(InputError, match="/dev/zero"):
         load_scenario(p)
+    # ... and a FIFO as its materials file (opening it for reading used to block for ever)
+    mat_fifo = tmp_path / "materials.toml"
+    os.mkfifo(mat_fifo)
+    p.write_text(_mesh_scenario(str(mat_fifo)))
+    with deadline(), pytest.raises(InputError, match="FIFO") as ei:
+        load_scenario(p)
+    assert str(mat_fifo) in str(ei.value)
 
 
 def _mesh_scenario(materials: str) -> str:
@@ -201,3 +208,92 @@ def test_embedded_scenario_cannot_name_files(tmp_path, capsys):
     lc2.write(g)
     code, err = run_cli(["invert", g, "-o", tmp_path / "inv", "--workers", "1", "-q"], capsys)
     assert code == 2 and "not a shape library name" in err, err
+
+
+def test_embedded_scenario_cannot_name_an_albedo_map(tmp_path, capsys, monkeypatch):
+    """A stored scenario's `[effects.earthshine] albedo = "<path>"` made `invert` look the
+    path up (exit 0, or "file not found": an oracle of which files exist, and a file the
+    scenario would read when simulated); refused before the path is touched. The same
+    table in a scenario given as a file still works."""
+    import lightcurve.physics.earthshine as es
+
+    touched = []
+    real = es.Path
+    monkeypatch.setattr(es, "Path", lambda p: touched.append(str(p)) or real(p))
+    from lightcurve.studies.scenario import load_scenario
+
+    lc = small_curve()
+    base = (data_dir("pipelines") / "thesis" /
+            "leo-ic1-fast-spin-controlled-1site.toml").read_text()
+    ok = tmp_path / "map.csv"
+    ok.write_text("0.3\n")
+    for target in ("/etc/passwd", str(ok)):
+        lc.scenario_toml = base + f'\n[effects.earthshine]\nalbedo = "{target}"\n'
+        f = tmp_path / "received.h5"
+        lc.write(f)
+        code, err = run_cli(["invert", f, "-o", tmp_path / "inv", "--workers", "1", "-q"],
+                            capsys)
+        assert code == 2 and f"{f}:scenario: field 'effects.earthshine.albedo'" in err, err
+        assert "may not name files" in err and not touched, (err, touched)
+    # a scenario file of the user's own may name its map
+    p = tmp_path / "own.toml"
+    p.write_text(lc.scenario_toml)
+    assert load_scenario(p).name and touched == [str(ok)]
+
+
+def _cap_readers():
+    """(reader name, call on a path, its cap in bytes, file suffix) for every size-capped
+    reader of the size table in docs/robustness.md not tested on its own elsewhere."""
+    import lightcurve.io.safe_open as so
+    from lightcurve.earth.albedo import load_albedo_map
+    from lightcurve.geometry.tle import MAX_BYTES as TLE_MAX_BYTES
+    from lightcurve.geometry.tle import load_element_sets
+    from lightcurve.photometry import load_shape
+    from lightcurve.photometry.tabulated import load_brdf_table
+
+    def mesh_shape(path):  # a shape TOML whose mesh is the big file
+        src = (data_dir("shapes") / "box_wing_mesh.toml").read_text()
+        shp = path.with_name("shape.toml")
+        shp.write_text(src.replace('mesh = "box_wing_mesh.obj"', f'mesh = "{path}"'))
+        return load_shape(shp)
+
+    return [("mesh (OBJ)", mesh_shape, so.MESH_MAX_BYTES, ".obj"),
+            ("BRDF table", load_brdf_table, so.BRDF_MAX_BYTES, ".csv"),
+            ("albedo map", load_albedo_map, so.ALBEDO_MAX_BYTES, ".csv"),
+            ("JSON", so.read_json, so.JSON_MAX_BYTES, ".json"),
+            ("element-set file", load_element_sets, TLE_MAX_BYTES, ".tle")]
+
+
+@pytest.mark.parametrize("kind", ["mesh (OBJ)", "BRDF table", "albedo map", "JSON",
+                                  "element-set file"])
+def test_size_caps_of_the_other_readers(kind, tmp_path):
+    """Mesh 200 MiB, BRDF table 64 MiB, albedo map 16 MiB, JSON 256 MiB, element sets
+    64 MiB: a (sparse) file one byte over the cap is refused from its size, nothing read; a
+    file at the cap passes the size check (it fails later, as the zeros it holds are no valid
+    content, but not for its size)."""
+    name, reader, cap, suffix = next(r for r in _cap_readers() if r[0] == kind)
+    p = tmp_path / f"big{suffix}"
+    with open(p, "wb") as fh:  # sparse: the size is there, the bytes are not
+        fh.truncate(cap + 1)
+    with deadline(), pytest.raises(InputError, match="too large") as ei:
+        reader(p)
+    assert str(p) in str(ei.value) and f"<= {cap} bytes" in str(ei.value), (name, ei.value)
+    if cap <= 16 * 1024 * 1024:  # reading the zeros at the cap is cheap only for small caps
+        os.truncate(p, cap)
+        with deadline(), pytest.raises(InputError) as ei:
+            reader(p)
+        assert "too large" not in str(ei.value), (name, ei.value)
+
+
+def test_a_file_larger_than_its_stat_size_is_cut_at_the_cap():
+    """Whole-file reads stop at the cap + 1 byte whatever fstat said: /proc/self/maps is a
+    regular file whose size reads as 0 (like a file that grows while it is read)."""
+    from lightcurve.io.safe_open import read_bytes
+
+    maps = Path("/proc/self/maps")
+    if not maps.is_file() or maps.stat().st_size != 0:
+        pytest.skip("needs Linux /proc (a regular file whose stat size is 0)")
+    with deadline(), pytest.raises(InputError, match="grew past the limit") as ei:
+        read_bytes(maps, max_bytes=64, track=False)
+    assert str(maps) in str(ei.value)
+    assert len(read_bytes(maps, max_bytes=1 << 24, track=False)) > 64
