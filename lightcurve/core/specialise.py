@@ -34,7 +34,8 @@ def jit_copy(template, name, doc, jit_options, **bound):
     _NAMES.add((module, name))
     g = dict(template.__globals__)
     g.update(bound)
-    fn = types.FunctionType(template.__code__, g, name)
+    fn = types.FunctionType(template.__code__, g, name, template.__defaults__)
+    fn.__kwdefaults__ = template.__kwdefaults__
     fn.__qualname__ = name
     fn.__doc__ = doc
     return njit(**jit_options)(fn)
