@@ -21,7 +21,7 @@ from numba import njit
 
 __all__ = ["jit_copy"]
 
-_NAMES: set[tuple[str, str]] = set()
+_MADE: dict[tuple[str, str], tuple] = {}
 
 
 def jit_copy(template, name, doc, jit_options, **bound):
@@ -29,9 +29,11 @@ def jit_copy(template, name, doc, jit_options, **bound):
     unique per module) with docstring ``doc`` whose globals are the template module's, plus
     ``bound`` (the names the template leaves to its copies, e.g. the kernel it calls)."""
     module = template.__globals__["__name__"]
-    if (module, name) in _NAMES:
-        raise ValueError(f"jit_copy: {module}.{name} made twice (cache files are named by it)")
-    _NAMES.add((module, name))
+    what = (template.__name__,) + tuple(sorted((k, getattr(v, "__name__", repr(v)))
+                                               for k, v in bound.items()))
+    if _MADE.setdefault((module, name), what) != what:
+        raise ValueError(f"jit_copy: {module}.{name} already names another copy (its cache "
+                         "file is named by it)")
     g = dict(template.__globals__)
     g.update(bound)
     fn = types.FunctionType(template.__code__, g, name, template.__defaults__)
