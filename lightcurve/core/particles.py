@@ -33,8 +33,10 @@ import math
 import numba as nb
 import numpy as np
 
+from .specialise import jit_copy
+
 __all__ = [
-    "n_chunks", "chunk_bounds", "chunk_sums", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
+    "n_chunks", "chunk_bounds", "chunk_sums", "chunked_sum_kernel", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
     "ess_tempered", "temper_exponent", "innovation_loglik", "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
@@ -77,6 +79,47 @@ def chunk_sums(part):
         for k in range(K):
             out[k] += part[c, k]
     return out
+
+
+def _chunk_acc(lo, hi, *args):
+    acc = _ZERO  # noqa: F821  (_ZERO, _item, _K, _chunk bound per copy)
+    for i in range(lo, hi):
+        acc = _item(i, acc, args)  # noqa: F821
+    return acc
+
+
+def _chunked_sums(*args):
+    N = args[0].shape[0]
+    nch = n_chunks(N)
+    part = np.zeros((nch, _K))  # noqa: F821
+    for c in nb.prange(nch):
+        lo, hi = chunk_bounds(c, N, nch)
+        acc = _chunk(lo, hi, *args)  # noqa: F821
+        for k in range(_K):  # noqa: F821
+            part[c, k] = acc[k]
+    return chunk_sums(part)
+
+
+def chunked_sum_kernel(item, K):
+    """The parallel kernel ``name(*args)`` of ``item`` (named ``name_item``): the (K,) sums over
+    ``i < len(args[0])`` of the contributions of ``item(i, acc, args)``, an
+    ``inline="always"`` kernel that returns ``acc`` (a K-tuple of running sums) with row i's
+    terms added and may write row i of an argument.
+
+    Each of :func:`n_chunks` fixed chunks (:func:`chunk_bounds`) sums its rows in order from
+    zero (``name_chunk``, serial: the item is inlined there, and the arrays it takes out of
+    ``args`` are not inside a ``prange`` body, where numba can lose writes to an array taken
+    out of a tuple); the chunks run in ``prange`` and :func:`chunk_sums` adds their partials in
+    order: the same sums on any thread count. Compiled copies of the two loops per ``item``
+    (:func:`~lightcurve.core.specialise.jit_copy`: direct calls, not function pointers).
+    """
+    name = item.__name__.removesuffix("_item")
+    zero = (0.0,) * K
+    chunk = jit_copy(_chunk_acc, name + "_chunk", f"Serial sums of :func:`{item.__name__}` over "
+                     "rows lo:hi.", {"cache": True}, _item=item, _ZERO=zero)
+    doc = f"Ordered chunked sums (K = {K}) over rows i of :func:`{item.__name__}`: {item.__doc__}"
+    return jit_copy(_chunked_sums, name, doc, {"cache": True, "parallel": True}, _chunk=chunk,
+                    _K=K)
 
 
 # --------------------------------------------------------------------------------------------
@@ -134,26 +177,18 @@ def logsumexp_nb(a):
     return m + math.log(s)
 
 
-@nb.njit(cache=True, parallel=True)
-def _sum_exp(logw, ll, phi, m):
-    """``(Σ e^{a−m}, Σ e^{2(a−m)})`` with ``a = logw + φ ll`` (chunked, ordered)."""
-    N = logw.shape[0]
-    nch = n_chunks(N)
-    part = np.zeros((nch, 2))
-    for c in nb.prange(nch):
-        lo, hi = chunk_bounds(c, N, nch)
-        s1 = 0.0
-        s2 = 0.0
-        for i in range(lo, hi):
-            a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
-            if a > -np.inf:
-                e = math.exp(a - m)
-                s1 += e
-                s2 += e * e
-        part[c, 0] = s1
-        part[c, 1] = s2
-    tot = chunk_sums(part)
-    return tot[0], tot[1]
+@nb.njit(cache=True, inline="always")
+def _sum_exp_item(i, acc, args):
+    """``(e^{a−m}, e^{2(a−m)})`` of row i, ``a = logw + φ ll`` (0 where a = −inf)."""
+    logw, ll, phi, m = args
+    a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
+    if a > -np.inf:
+        e = math.exp(a - m)
+        return acc[0] + e, acc[1] + e * e
+    return acc
+
+
+_sum_exp = chunked_sum_kernel(_sum_exp_item, 2)
 
 
 @nb.njit(cache=True)
@@ -167,7 +202,8 @@ def ess_tempered(logw, ll, phi):
     m = _max_tempered(logw, ll, phi)
     if m == -np.inf or np.isnan(m):
         return 0.0
-    s1, s2 = _sum_exp(logw, ll, phi, m)
+    tot = _sum_exp(logw, ll, phi, m)
+    s1, s2 = tot[0], tot[1]
     return s1 * s1 / s2
 
 
@@ -189,7 +225,8 @@ def temper_exponent(logw, ll, rest, target, steps):
         mid = 0.5 * (lo + hi)
         e = 0.0
         if mw > -np.inf and ml > -np.inf:
-            s1, s2 = _sum_exp(logw, ll, mid, mw + mid * ml)
+            tot = _sum_exp(logw, ll, mid, mw + mid * ml)
+            s1, s2 = tot[0], tot[1]
             if s1 > 1e-150 and s2 > 0.0:
                 e = s1 * s1 / s2
             else:
@@ -201,37 +238,26 @@ def temper_exponent(logw, ll, rest, target, steps):
     return lo
 
 
-@nb.njit(cache=True, parallel=True)
-def _add_scaled_exp(logw, ll, phi, mx, w):
-    """``logw += φ ll`` is done by the caller; here ``w = exp(logw − mx)`` and its chunk sums."""
-    N = logw.shape[0]
-    nch = n_chunks(N)
-    part = np.zeros((nch, 1))
-    for c in nb.prange(nch):
-        lo, hi = chunk_bounds(c, N, nch)
-        s = 0.0
-        for i in range(lo, hi):
-            e = math.exp(logw[i] - mx)
-            w[i] = e
-            s += e
-        part[c, 0] = s
-    return chunk_sums(part)[0]
+@nb.njit(cache=True, inline="always")
+def _exp_shifted_item(i, acc, args):
+    """Writes ``w_i = exp(logw_i − mx)`` and adds it."""
+    logw, mx, w = args
+    e = math.exp(logw[i] - mx)
+    w[i] = e
+    return (acc[0] + e,)
 
 
-@nb.njit(cache=True, parallel=True)
-def _finish_normalize(logw, w, lse, s):
-    N = logw.shape[0]
-    nch = n_chunks(N)
-    part = np.zeros((nch, 1))
-    for c in nb.prange(nch):
-        lo, hi = chunk_bounds(c, N, nch)
-        s2 = 0.0
-        for i in range(lo, hi):
-            logw[i] -= lse
-            w[i] /= s
-            s2 += w[i] * w[i]
-        part[c, 0] = s2
-    return chunk_sums(part)[0]
+@nb.njit(cache=True, inline="always")
+def _finish_normalize_item(i, acc, args):
+    """``logw_i −= lse``, ``w_i /= s``; adds ``w_i²``."""
+    logw, w, lse, s = args
+    logw[i] -= lse
+    w[i] /= s
+    return (acc[0] + w[i] * w[i],)
+
+
+_exp_shifted = chunked_sum_kernel(_exp_shifted_item, 1)
+_finish_normalize = chunked_sum_kernel(_finish_normalize_item, 1)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -255,9 +281,9 @@ def add_loglik_normalize(logw, ll, phi, w):
     mx = _max_tempered(logw, ll, 0.0)
     if not mx > -np.inf:
         return 0.0, False
-    s = _add_scaled_exp(logw, ll, phi, mx, w)
+    s = _exp_shifted(logw, mx, w)[0]
     lse = mx + math.log(s)
-    s2 = _finish_normalize(logw, w, lse, s)
+    s2 = _finish_normalize(logw, w, lse, s)[0]
     return 1.0 / s2, True
 
 
@@ -268,52 +294,40 @@ def normalize_log_weights_nb(logw, w):
     mx = _max_tempered(logw, logw, 0.0)
     if not mx > -np.inf:
         return -np.inf, False
-    s = _add_scaled_exp(logw, logw, 0.0, mx, w)
+    s = _exp_shifted(logw, mx, w)[0]
     lse = mx + math.log(s)
     _finish_normalize(logw, w, lse, s)
     return lse, True
 
 
-@nb.njit(cache=True, parallel=True)
-def _innov_pass1(logw, mpred, y, sig, ll, mx):
-    N = logw.shape[0]
-    nch = n_chunks(N)
-    part = np.zeros((nch, 2))
-    for c in nb.prange(nch):
-        lo, hi = chunk_bounds(c, N, nch)
-        s0 = 0.0
-        s1 = 0.0
-        for i in range(lo, hi):
-            m = mpred[i]
-            if np.isfinite(m):
-                e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
-                s0 += e
-                s1 += e * m
-                r = (y - m) / sig
-                ll[i] = -0.5 * r * r
-            else:
-                ll[i] = -np.inf
-        part[c, 0] = s0
-        part[c, 1] = s1
-    tot = chunk_sums(part)
-    return tot[0], tot[1]
+@nb.njit(cache=True, inline="always")
+def _innov_pass1_item(i, acc, args):
+    """Writes ``ll_i`` (:func:`innovation_loglik`); adds the prior weight ``e`` and ``e m_i`` of a
+    finite prediction."""
+    logw, mpred, y, sig, ll, mx = args
+    m = mpred[i]
+    if np.isfinite(m):
+        e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+        r = (y - m) / sig
+        ll[i] = -0.5 * r * r
+        return acc[0] + e, acc[1] + e * m
+    ll[i] = -np.inf
+    return acc
 
 
-@nb.njit(cache=True, parallel=True)
-def _innov_pass2(logw, mpred, mean, mx):
-    N = logw.shape[0]
-    nch = n_chunks(N)
-    part = np.zeros((nch, 1))
-    for c in nb.prange(nch):
-        lo, hi = chunk_bounds(c, N, nch)
-        s2 = 0.0
-        for i in range(lo, hi):
-            m = mpred[i]
-            if np.isfinite(m):
-                e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
-                s2 += e * (m - mean) * (m - mean)
-        part[c, 0] = s2
-    return chunk_sums(part)[0]
+@nb.njit(cache=True, inline="always")
+def _innov_pass2_item(i, acc, args):
+    """Adds ``e (m_i − mean)²`` of a finite prediction."""
+    logw, mpred, mean, mx = args
+    m = mpred[i]
+    if np.isfinite(m):
+        e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+        return (acc[0] + e * (m - mean) * (m - mean),)
+    return acc
+
+
+_innov_pass1 = chunked_sum_kernel(_innov_pass1_item, 2)
+_innov_pass2 = chunked_sum_kernel(_innov_pass2_item, 1)
 
 
 @nb.njit(cache=True)
@@ -327,11 +341,12 @@ def innovation_loglik(logw, mpred, y, sig, ll):
     (renormalised over them); ``ok`` False when no prediction is finite. Magnitudes, mag².
     """
     mx = _max_tempered(logw, logw, 0.0)
-    s0, s1 = _innov_pass1(logw, mpred, y, sig, ll, mx)
+    tot = _innov_pass1(logw, mpred, y, sig, ll, mx)
+    s0, s1 = tot[0], tot[1]
     if not s0 > 0.0:
         return np.nan, np.nan, False
     mean = s1 / s0
-    s2 = _innov_pass2(logw, mpred, mean, mx)
+    s2 = _innov_pass2(logw, mpred, mean, mx)[0]
     return mean, s2 / s0, True
 
 

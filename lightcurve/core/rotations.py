@@ -33,6 +33,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .specialise import jit_copy
+
 __all__ = [
     "qmul_xyz", "qrot_xyz_nb", "qrot_inv_xyz", "rotvec2q_xyz", "q2grp_xyz", "grp2q_xyz",
     "skew_nb", "qmul_nb", "qmul_into_nb", "qrot_nb", "qrot_inv_nb", "q2dcm_nb", "dcm2q_nb",
@@ -46,6 +48,51 @@ __all__ = [
     "q2euler321_batch_nb", "skew_batch_nb", "euler321_to_q_batch_nb", "mrp_shadow_batch_nb",
     "mrp_dcm_vec_jac_batch_nb",
 ]
+
+
+# ----------------------------------------------------------------------------------------
+# templates of the array-valued forms (one loop each; every copy binds its own ``_kernel``)
+# ----------------------------------------------------------------------------------------
+def _new_filled(x):
+    out = np.empty(_shape)  # noqa: F821  (bound per copy, see _filled_by)
+    _kernel(x, out)  # noqa: F821
+    return out
+
+
+def _value_rows(X, out):
+    for i in range(X.shape[0]):
+        out[i] = _kernel(X[i])  # noqa: F821
+
+
+def _value_rows2(X, Y, out):
+    for i in range(X.shape[0]):
+        out[i] = _kernel(X[i], Y[i])  # noqa: F821
+
+
+def _into_rows(X, out):
+    for i in range(X.shape[0]):
+        _kernel(X[i], out[i])  # noqa: F821
+
+
+def _filled_by(kernel, shape, name, doc):
+    """``name(x)``: a new array of ``shape`` filled by ``kernel(x, out)`` (:func:`_new_filled`)."""
+    return jit_copy(_new_filled, name, doc, {"cache": True}, _kernel=kernel, _shape=shape)
+
+
+def _row_kernels(template, *kernels):
+    """The row-wise forms of ``kernels``, one compiled copy of ``template`` each
+    (:func:`~lightcurve.core.specialise.jit_copy`): :func:`_value_rows`
+    ``out[i] = kernel(X[i])``, :func:`_value_rows2` ``out[i] = kernel(X[i], Y[i])`` or
+    :func:`_into_rows` ``kernel(X[i], out[i])``. The form of ``name_nb`` or ``name_into_nb`` is
+    ``name_batch_nb``."""
+    out = []
+    for k in kernels:
+        stem = k.__name__.removesuffix("_nb").removesuffix("_into")
+        name = stem + "_batch_nb"
+        doc = (f"Row-wise :func:`{k.__name__}` ({template.__name__.strip('_')}: the rows of "
+               "(N, …) arrays into ``out``); equation and units as there.")
+        out.append(jit_copy(template, name, doc, {"cache": True}, _kernel=k))
+    return tuple(out)
 
 
 # ----------------------------------------------------------------------------------------
@@ -80,13 +127,10 @@ def qrot_xyz_nb(q0, q1, q2, q3, vx, vy, vz):
 
 @njit(cache=True, inline="always")
 def qrot_inv_xyz(q0, q1, q2, q3, vx, vy, vz):
-    """``A(q)ᵀ v`` (body→inertial) on scalars → ``(x, y, z)``: ``v + q1 t + q_v × t``."""
-    tx = 2.0 * (q2 * vz - q3 * vy)
-    ty = 2.0 * (q3 * vx - q1 * vz)
-    tz = 2.0 * (q1 * vy - q2 * vx)
-    return (vx + q0 * tx + (q2 * tz - q3 * ty),
-            vy + q0 * ty + (q3 * tx - q1 * tz),
-            vz + q0 * tz + (q1 * ty - q2 * tx))
+    """``A(q)ᵀ v`` (body→inertial) on scalars → ``(x, y, z)``: ``A(q)ᵀ = A(q⁻¹)`` and
+    ``q⁻¹ = [q1, −q_v]`` is the rotation of ``[−q1, q_v]`` (Bernard eq. 3.17 is even in q), so
+    :func:`qrot_xyz_nb` of ``(−q1, q_v)``: ``v + q1 t + q_v × t``."""
+    return qrot_xyz_nb(-q0, q1, q2, q3, vx, vy, vz)
 
 
 @njit(cache=True, inline="always")
@@ -152,25 +196,23 @@ def qmul_nb(q, p):
 
 
 @njit(cache=True)
+def _qrot_signed_nb(q, v, sign):
+    """``A(q) v`` (sign +1) or ``A(q)ᵀ v`` (sign −1, :func:`qrot_inv_xyz`) for 1-D arrays."""
+    out = np.empty(3)
+    out[0], out[1], out[2] = qrot_xyz_nb(sign * q[0], q[1], q[2], q[3], v[0], v[1], v[2])
+    return out
+
+
+@njit(cache=True)
 def qrot_nb(q, v):
     """``A(q) v`` (inertial→body; Bernard eq. 3.16) for 1-D arrays."""
-    x, y, z = qrot_xyz_nb(q[0], q[1], q[2], q[3], v[0], v[1], v[2])
-    out = np.empty(3)
-    out[0] = x
-    out[1] = y
-    out[2] = z
-    return out
+    return _qrot_signed_nb(q, v, 1.0)
 
 
 @njit(cache=True)
 def qrot_inv_nb(q, v):
     """``A(q)ᵀ v`` (body→inertial) for 1-D arrays."""
-    x, y, z = qrot_inv_xyz(q[0], q[1], q[2], q[3], v[0], v[1], v[2])
-    out = np.empty(3)
-    out[0] = x
-    out[1] = y
-    out[2] = z
-    return out
+    return _qrot_signed_nb(q, v, -1.0)
 
 
 @njit(cache=True)
@@ -188,12 +230,8 @@ def q2dcm_into_nb(q, A):
     A[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
 
 
-@njit(cache=True)
-def q2dcm_nb(q):
-    """``A(q)`` (inertial→body; Bernard eq. 3.17) as a 3×3 array."""
-    A = np.empty((3, 3))
-    q2dcm_into_nb(q, A)
-    return A
+q2dcm_nb = _filled_by(q2dcm_into_nb, (3, 3), "q2dcm_nb",
+                      "``A(q)`` (inertial→body; Bernard eq. 3.17) as a 3×3 array.")
 
 
 @njit(cache=True)
@@ -235,12 +273,9 @@ def dcm2q_into_nb(A, out):
     out[3] = a3 / n
 
 
-@njit(cache=True)
-def dcm2q_nb(A):
-    """Unit quaternion (scalar ≥ 0) of the attitude matrix ``A`` (Shepperd's method)."""
-    out = np.empty(4)
-    dcm2q_into_nb(A, out)
-    return out
+dcm2q_nb = _filled_by(dcm2q_into_nb, (4,), "dcm2q_nb",
+                      "Unit quaternion (scalar ≥ 0) of the attitude matrix ``A`` "
+                      "(Shepperd's method).")
 
 
 @njit(cache=True)
@@ -289,12 +324,8 @@ def q2rotvec_into_nb(q, out):
     out[2] = fac * v2
 
 
-@njit(cache=True)
-def q2rotvec_nb(q):
-    """Rotation vector (rad) of a unit quaternion (:func:`q2rotvec_into_nb`)."""
-    out = np.empty(3)
-    q2rotvec_into_nb(q, out)
-    return out
+q2rotvec_nb = _filled_by(q2rotvec_into_nb, (3,), "q2rotvec_nb",
+                         "Rotation vector (rad) of a unit quaternion (:func:`q2rotvec_into_nb`).")
 
 
 @njit(cache=True)
@@ -501,12 +532,9 @@ def euler321_to_dcm_into_nb(ang, A):
     A[2, 2] = cp * ct
 
 
-@njit(cache=True)
-def euler321_to_dcm_nb(ang):
-    """``A = R1(ψ) R2(θ) R3(φ)`` (Bernard eq. 3.7) for ``ang = (φ, θ, ψ)``, rad."""
-    A = np.empty((3, 3))
-    euler321_to_dcm_into_nb(ang, A)
-    return A
+euler321_to_dcm_nb = _filled_by(euler321_to_dcm_into_nb, (3, 3), "euler321_to_dcm_nb",
+                                "``A = R1(ψ) R2(θ) R3(φ)`` (Bernard eq. 3.7) for "
+                                "``ang = (φ, θ, ψ)``, rad.")
 
 
 @njit(cache=True)
@@ -539,12 +567,8 @@ def q2euler321_into_nb(q, out):
         out[2] = math.atan2(A[1, 2], A[2, 2])
 
 
-@njit(cache=True)
-def q2euler321_nb(q):
-    """3-2-1 angles (rad) of one quaternion (:func:`q2euler321_into_nb`)."""
-    out = np.empty(3)
-    q2euler321_into_nb(q, out)
-    return out
+q2euler321_nb = _filled_by(q2euler321_into_nb, (3,), "q2euler321_nb",
+                           "3-2-1 angles (rad) of one quaternion (:func:`q2euler321_into_nb`).")
 
 
 # ----------------------------------------------------------------------------------------
@@ -565,28 +589,12 @@ def qmul_batch_nb(Q, P, sign, out):
 
 @njit(cache=True)
 def qrot_batch_nb(Q, V, inverse, out):
-    """Row-wise ``A(Q[i]) V[i]`` (inverse False) or ``A(Q[i])ᵀ V[i]``; Q (N,4), V, out (N,3)."""
+    """Row-wise ``A(Q[i]) V[i]`` (inverse False) or ``A(Q[i])ᵀ V[i]`` (:func:`qrot_inv_xyz`);
+    Q (N,4), V, out (N,3)."""
+    sign = -1.0 if inverse else 1.0
     for i in range(Q.shape[0]):
-        if inverse:
-            out[i, 0], out[i, 1], out[i, 2] = qrot_inv_xyz(Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3],
-                                                           V[i, 0], V[i, 1], V[i, 2])
-        else:
-            out[i, 0], out[i, 1], out[i, 2] = qrot_xyz_nb(Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3],
-                                                          V[i, 0], V[i, 1], V[i, 2])
-
-
-@njit(cache=True)
-def q2dcm_batch_nb(Q, out):
-    """Row-wise attitude matrices: out (N,3,3) from Q (N,4) (Bernard eq. 3.17)."""
-    for i in range(Q.shape[0]):
-        q2dcm_into_nb(Q[i], out[i])
-
-
-@njit(cache=True)
-def dcm2q_batch_nb(A, out):
-    """Row-wise Shepperd quaternions (scalar ≥ 0): out (N,4) from A (N,3,3)."""
-    for i in range(A.shape[0]):
-        dcm2q_into_nb(A[i], out[i])
+        out[i, 0], out[i, 1], out[i, 2] = qrot_xyz_nb(sign * Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3],
+                                                      V[i, 0], V[i, 1], V[i, 2])
 
 
 @njit(cache=True)
@@ -594,13 +602,6 @@ def rotvec2q_batch_nb(TH, out):
     """Row-wise quaternions (N,4) of rotation vectors TH (N,3), rad."""
     for i in range(TH.shape[0]):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = rotvec2q_xyz(TH[i, 0], TH[i, 1], TH[i, 2])
-
-
-@njit(cache=True)
-def q2rotvec_batch_nb(Q, out):
-    """Row-wise rotation vectors (N,3), rad, of unit quaternions Q (N,4)."""
-    for i in range(Q.shape[0]):
-        q2rotvec_into_nb(Q[i], out[i])
 
 
 @njit(cache=True)
@@ -617,60 +618,14 @@ def grp2q_batch_nb(P, a, f, out):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = grp2q_xyz(P[i, 0], P[i, 1], P[i, 2], a, f)
 
 
-@njit(cache=True)
-def q2mrp_batch_nb(Q, out):
-    """Row-wise MRP (N,3), |σ| ≤ 1, of unit quaternions Q (N,4) (O'Keefe eq. 4.1)."""
-    for i in range(Q.shape[0]):
-        out[i] = q2mrp_nb(Q[i])
-
-
-@njit(cache=True)
-def mrp2q_batch_nb(S, out):
-    """Row-wise quaternions (N,4) of MRPs S (N,3)."""
-    for i in range(S.shape[0]):
-        out[i] = mrp2q_nb(S[i])
-
-
-@njit(cache=True)
-def mrp_compose_batch_nb(S_outer, S_inner, out):
-    """Row-wise :func:`mrp_compose_nb` (O'Keefe eq. 4.4): out (N,3)."""
-    for i in range(S_outer.shape[0]):
-        out[i] = mrp_compose_nb(S_outer[i], S_inner[i])
-
-
-@njit(cache=True)
-def mrp2dcm_batch_nb(S, out):
-    """Row-wise ``C(σ)`` (O'Keefe eq. 4.21): out (N,3,3)."""
-    for i in range(S.shape[0]):
-        out[i] = mrp2dcm_nb(S[i])
-
-
-@njit(cache=True)
-def euler321_to_dcm_batch_nb(ANG, out):
-    """Row-wise 3-2-1 attitude matrices (Bernard eq. 3.7): out (N,3,3) from ANG (N,3) rad."""
-    for i in range(ANG.shape[0]):
-        euler321_to_dcm_into_nb(ANG[i], out[i])
-
-
-@njit(cache=True)
-def q2euler321_batch_nb(Q, out):
-    """Row-wise 3-2-1 angles (N,3), rad, of Q (N,4) (:func:`q2euler321_into_nb`)."""
-    for i in range(Q.shape[0]):
-        q2euler321_into_nb(Q[i], out[i])
-
-
-@njit(cache=True)
-def skew_batch_nb(V, out):
-    """Row-wise cross-product matrices: out (N,3,3) from V (N,3)."""
-    for i in range(V.shape[0]):
-        out[i] = skew_nb(V[i])
-
-
-@njit(cache=True)
-def euler321_to_q_batch_nb(ANG, out):
-    """Row-wise quaternions (N,4) of 3-2-1 angles ANG (N,3) rad (:func:`euler321_to_q_nb`)."""
-    for i in range(ANG.shape[0]):
-        out[i] = euler321_to_q_nb(ANG[i])
+(q2mrp_batch_nb, mrp2q_batch_nb, mrp2dcm_batch_nb, skew_batch_nb,
+ euler321_to_q_batch_nb) = _row_kernels(_value_rows, q2mrp_nb, mrp2q_nb, mrp2dcm_nb, skew_nb,
+                                        euler321_to_q_nb)
+mrp_compose_batch_nb, mrp_dcm_vec_jac_batch_nb = _row_kernels(_value_rows2, mrp_compose_nb,
+                                                              mrp_dcm_vec_jac_nb)
+(q2dcm_batch_nb, dcm2q_batch_nb, q2rotvec_batch_nb, euler321_to_dcm_batch_nb,
+ q2euler321_batch_nb) = _row_kernels(_into_rows, q2dcm_into_nb, dcm2q_into_nb, q2rotvec_into_nb,
+                                     euler321_to_dcm_into_nb, q2euler321_into_nb)
 
 
 @njit(cache=True)
@@ -680,8 +635,3 @@ def mrp_shadow_batch_nb(S, threshold, out):
         out[i] = mrp_shadow_nb(S[i], threshold)
 
 
-@njit(cache=True)
-def mrp_dcm_vec_jac_batch_nb(S, A, out):
-    """Row-wise :func:`mrp_dcm_vec_jac_nb` (O'Keefe eq. 4.32): out (N,3,3)."""
-    for i in range(S.shape[0]):
-        out[i] = mrp_dcm_vec_jac_nb(S[i], A[i])

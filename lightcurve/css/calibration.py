@@ -209,12 +209,37 @@ def _innovation_variance(P, Hrow, r):
 
 
 @numba.njit(cache=True)
+def _selected_update(x, P, nu, Hm, R, N, gate, infl_max):
+    """Measurement update of both filters with the m selected sensors (rows ``Hm``,
+    innovations ``nu``, covariance ``R``), in place: the Joseph update with the albedo errors
+    considered (:func:`_consider_mask`) and, when ``NIS > gate·m``, once more with R inflated
+    by ``min(NIS/(gate·m), infl_max)`` (gate = inf: never; module docstring), then the MRP
+    correction (:func:`~lightcurve.css.attitude_ekf.mrp_apply_correction_nb`). Returns
+    ``(m, NIS, inflation)``; ``(0, NaN, 1)`` when no sensor is selected or the update fails."""
+    m = nu.shape[0]
+    if m == 0:
+        return 0, np.nan, 1.0
+    n = x.shape[0]
+    cons = _consider_mask(n, N)
+    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
+    if not ok:
+        return 0, np.nan, 1.0
+    infl = 1.0
+    if nis > gate * m:
+        infl = min(nis / (gate * m), infl_max)
+        xn, Pn, nis2, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R * infl, cons)
+        if not ok:
+            return 0, np.nan, 1.0
+    mrp_apply_correction_nb(x, P, xn, Pn)
+    return m, nis, infl
+
+
+@numba.njit(cache=True)
 def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E,
                    cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
                    nu_out, s_out, u_out, cells_sig, init):
     """O'Keefe §4.2-4.3 measurement update (see :func:`calibration_update_nb`)."""
     N = az0.shape[0]
-    n = x.shape[0]
     sig_v, floor_y, init_thr = prm[0], prm[18], prm[19]
     h, H, D, A, cosd, _ = calibration_measurement_nb(
         x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
@@ -248,8 +273,6 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
             continue
         idx[m] = k
         m += 1
-    if m == 0:
-        return 0, np.nan, 1.0
     Hm, nu = _gather_rows(idx, m, H, y, h)
     R = np.zeros((m, m))
     for i in range(m):
@@ -258,17 +281,12 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
         for j in range(m):
             R[i, j] = gk * x[6 + idx[j]] * Ra[k, idx[j]]
         R[i, i] += (gk * sig_v) ** 2
-    cons = _consider_mask(n, N)
     # per-sensor prior innovation statistics (the fault detector of §5.1)
     for i in range(m):
         k = idx[i]
         nu_out[k] = nu[i]
         s_out[k] = _innovation_variance(P, Hm[i], R[i, i])
-    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
-    if not ok:
-        return 0, np.nan, 1.0
-    mrp_apply_correction_nb(x, P, xn, Pn)
-    return m, nis, 1.0
+    return _selected_update(x, P, nu, Hm, R, N, np.inf, 1.0)
 
 
 @numba.njit(cache=True)
@@ -296,7 +314,6 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     flags, updated here) and while its output is above the noise floor (§4.2).
     """
     N = az0.shape[0]
-    n = x.shape[0]
     if prm.shape[0] > 17 and prm[17] > 0.5:
         return _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
                               r_E, s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0,
@@ -343,24 +360,11 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
                 if gate_s <= 0.0 or (y[k] - h[k]) ** 2 / v <= gate_s:
                     idx[m] = k
                     m += 1
-    if m == 0:
-        return 0, np.nan, 1.0
     Hm, nu = _gather_rows(idx, m, H, y, h)
     R = np.zeros((m, m))
     for i in range(m):
         R[i, i] = Rk[idx[i]]
-    cons = _consider_mask(n, N)
-    xn, Pn, nis, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R, cons)
-    if not ok:
-        return 0, np.nan, 1.0
-    infl = 1.0
-    if nis > gate * m:
-        infl = min(nis / (gate * m), infl_max)
-        xn, Pn, nis2, ok = joseph_update_nb(np.zeros(n), P, nu, Hm, R * infl, cons)
-        if not ok:
-            return 0, np.nan, 1.0
-    mrp_apply_correction_nb(x, P, xn, Pn)
-    return m, nis, infl
+    return _selected_update(x, P, nu, Hm, R, N, gate, infl_max)
 
 
 @numba.njit(cache=True)

@@ -42,6 +42,7 @@ from scipy.interpolate import CubicSpline
 from .. import rotations as rot
 from ..core.constants import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU
 from ..core.dynamics import gravity_gradient_batch_nb
+from ..core.specialise import jit_copy
 from . import _checks as ck
 from .atmosphere import altitude_m, density_kg_m3
 from .rigid_body import check_inertia
@@ -201,30 +202,44 @@ def _add_moment(out, c, fx, fy, fz):
     out[2] += c[0] * fy - c[1] * fx
 
 
-@njit(cache=True)
-def srp_torque_nb(q, s_eci, P, areas, normals, centers, c_spec, c_diff):
-    """Numba kernel of :func:`srp_torque` for one state (1-D/2-D float64 arrays, no validation).
-
-    ``q`` (4,) unit quaternion inertial→body; ``s_eci`` (3,) unit object→Sun; ``P`` the pressure
-    already scaled by distance and lit fraction (N/m²); facet arrays (F,), (F,3), (F,3);
-    ``c_spec``, ``c_diff`` (F,). Returns the body torque (3,), N m — the same sum
-    ``Σ c_i × F_i`` as :func:`srp_facet_forces`.
-    """
-    sb = rot.qrot_nb(q, s_eci)
+def _facing_facet_torque(q, d_eci, scale, areas, normals, centers, prm1, prm2=None):
+    db = rot.qrot_nb(q, d_eci)
     out = np.zeros(3)
     for i in range(areas.shape[0]):
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        cos = nx * sb[0] + ny * sb[1] + nz * sb[2]
-        if cos <= 0.0:
+        c = nx * db[0] + ny * db[1] + nz * db[2]
+        if c <= 0.0:
             continue
-        a = -P * areas[i] * cos
-        kn = 2.0 * (c_spec[i] * cos + c_diff[i] / 3.0)
-        ks = 1.0 - c_spec[i]
-        fx = a * (ks * sb[0] + kn * nx)
-        fy = a * (ks * sb[1] + kn * ny)
-        fz = a * (ks * sb[2] + kn * nz)
+        fx, fy, fz = _force(i, c, db, nx, ny, nz, scale, areas, prm1, prm2)  # noqa: F821
         _add_moment(out, centers[i], fx, fy, fz)
     return out
+
+
+def _facet_torque_kernel(force, name):
+    """The kernel ``name(q, d_eci, scale, areas, normals, centers, prm1[, prm2])`` → body
+    torque (3,), N m: ``Σ c_i × F_i`` (:func:`_add_moment`) over the facets that face the
+    body-frame direction ``d_b = A(q) d_eci`` (``c = n̂_i·d_b > 0``), with the facet force
+    ``F_i = force(i, c, d_b, n̂_i, scale, areas, prm1, prm2)``. One compiled copy of the facet
+    loop per force (:func:`~lightcurve.core.specialise.jit_copy`); fixed arguments, not
+    ``*args``, which numba's dispatcher packs more slowly per call."""
+    doc = f"Facet torque of :func:`{force.__name__}` (no validation): {force.__doc__}"
+    return jit_copy(_facing_facet_torque, name, doc, {"cache": True}, _force=force)
+
+
+@njit(cache=True, inline="always")
+def _srp_facet_force(i, cos, sb, nx, ny, nz, P, areas, c_spec, c_diff):
+    """Numba kernel of :func:`srp_torque` for one state, ``srp_torque_nb(q, s_eci, P, areas,
+    normals, centers, c_spec, c_diff)``: ``q`` (4,) unit quaternion inertial→body; ``s_eci``
+    (3,) unit object→Sun; ``P`` the pressure already scaled by distance and lit fraction
+    (N/m²); facet arrays (F,), (F,3), (F,3); ``c_spec``, ``c_diff`` (F,). Returns the body
+    torque (3,), N m — the same sum ``Σ c_i × F_i`` as :func:`srp_facet_forces`."""
+    a = -P * areas[i] * cos
+    kn = 2.0 * (c_spec[i] * cos + c_diff[i] / 3.0)
+    ks = 1.0 - c_spec[i]
+    return a * (ks * sb[0] + kn * nx), a * (ks * sb[1] + kn * ny), a * (ks * sb[2] + kn * nz)
+
+
+srp_torque_nb = _facet_torque_kernel(_srp_facet_force, "srp_torque_nb")
 
 
 # ----------------------------------------------------------------------------------------
@@ -276,29 +291,21 @@ def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *
     return np.sum(np.cross(c, Fi), axis=-2)
 
 
-@njit(cache=True)
-def drag_torque_nb(q, vrel_eci, rho_cd, areas, normals, centers, along_normal):
-    """Numba kernel of :func:`drag_torque` for one state (no validation).
+@njit(cache=True, inline="always")
+def _drag_facet_force(i, nv, vb, nx, ny, nz, rho_cd, areas, along_normal, _):
+    """Numba kernel of :func:`drag_torque` for one state, ``drag_torque_nb(q, vrel_eci, rho_cd,
+    areas, normals, centers, along_normal)``: ``vrel_eci`` (3,) flow velocity (m/s, ECI;
+    relative to the atmosphere, or the orbital velocity for the thesis form); ``rho_cd`` =
+    ρ C_D (kg/m³); ``along_normal`` selects Bernard's eq. 4.21 form (force along n̂) instead
+    of along the flow. Returns N m, body axes."""
+    k = -0.5 * rho_cd * areas[i] * nv
+    if along_normal:
+        vn = np.sqrt(vb[0] ** 2 + vb[1] ** 2 + vb[2] ** 2)
+        return k * vn * nx, k * vn * ny, k * vn * nz
+    return k * vb[0], k * vb[1], k * vb[2]
 
-    ``vrel_eci`` (3,) flow velocity (m/s, ECI; relative to the atmosphere, or the orbital
-    velocity for the thesis form); ``rho_cd`` = ρ C_D (kg/m³); ``along_normal`` selects
-    Bernard's eq. 4.21 form (force along n̂) instead of along the flow. Returns N m, body axes.
-    """
-    vb = rot.qrot_nb(q, vrel_eci)
-    vn = np.sqrt(vb[0] ** 2 + vb[1] ** 2 + vb[2] ** 2)
-    out = np.zeros(3)
-    for i in range(areas.shape[0]):
-        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        nv = nx * vb[0] + ny * vb[1] + nz * vb[2]
-        if nv <= 0.0:
-            continue
-        k = -0.5 * rho_cd * areas[i] * nv
-        if along_normal:
-            fx, fy, fz = k * vn * nx, k * vn * ny, k * vn * nz
-        else:
-            fx, fy, fz = k * vb[0], k * vb[1], k * vb[2]
-        _add_moment(out, centers[i], fx, fy, fz)
-    return out
+
+drag_torque_nb = _facet_torque_kernel(_drag_facet_force, "drag_torque_nb")
 
 
 # ----------------------------------------------------------------------------------------

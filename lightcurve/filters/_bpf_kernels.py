@@ -21,7 +21,7 @@ import numba as nb
 import numpy as np
 
 from ..core.dynamics import const_rate_xyz, mat9, rk4_step_xyz
-from ..core.particles import chunk_bounds, chunk_sums, n_chunks
+from ..core.particles import chunk_bounds, chunk_sums, chunked_sum_kernel, n_chunks
 from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, facet_flux_nb,
                                facet_sum_fresnel_xyz, fresnel_xyz)
 from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
@@ -68,16 +68,20 @@ def _flux_pre(q0, q1, q2, q3, s, o, h, c, Fr, normals, areas, ids, params):
 
 
 @nb.njit(cache=True, inline="always")
-def _grp_of(q, r, a, f, out):
-    """GRP (3,) of ``q ⊗ r⁻¹`` (Bernard eq. 7.100 and 7.1) with the sign of the scalar part
-    made ≥ 0, into ``out``."""
+def _grp_of_xyz(q, r, a, f):
+    """GRP 3-tuple of ``q ⊗ r⁻¹`` (Bernard eq. 7.100 and 7.1) with the sign of the scalar part
+    made ≥ 0."""
     d0, d1, d2, d3 = qmul_xyz(q[0], q[1], q[2], q[3], r[0], -r[1], -r[2], -r[3])
     if d0 < 0.0:
         d0, d1, d2, d3 = -d0, -d1, -d2, -d3
     den = a + d0
-    out[0] = f * d1 / den
-    out[1] = f * d2 / den
-    out[2] = f * d3 / den
+    return f * d1 / den, f * d2 / den, f * d3 / den
+
+
+@nb.njit(cache=True, inline="always")
+def _grp_of(q, r, a, f, out):
+    """:func:`_grp_of_xyz` into ``out`` (3,)."""
+    out[0], out[1], out[2] = _grp_of_xyz(q, r, a, f)
 
 
 @nb.njit(cache=True, inline="always")
@@ -209,21 +213,17 @@ def argmax_weights(w):
     return k
 
 
-@nb.njit(cache=True, parallel=True)
-def grp_weighted_mean(Q, qref, w, a, f):
-    """``Σ_i w_i δp_i`` (3,) with δp_i the GRP of ``Q_i ⊗ qref⁻¹`` (Bernard eq. 7.100–7.102)."""
-    N = Q.shape[0]
-    nch = n_chunks(N)
-    part = np.zeros((nch, 3))
-    for c in nb.prange(nch):
-        lo, hi = chunk_bounds(c, N, nch)
-        g = np.empty(3)
-        for i in range(lo, hi):
-            _grp_of(Q[i], qref, a, f, g)
-            wi = w[i]
-            for j in range(3):
-                part[c, j] += wi * g[j]
-    return chunk_sums(part)
+@nb.njit(cache=True, inline="always")
+def grp_weighted_mean_item(i, acc, args):
+    """Adds ``w_i δp_i`` with δp_i the GRP of ``Q_i ⊗ qref⁻¹`` (Bernard eq. 7.100–7.102):
+    :func:`grp_weighted_mean` ``(Q, qref, w, a, f)`` is ``Σ_i w_i δp_i`` (3,)."""
+    Q, qref, w, a, f = args
+    g0, g1, g2 = _grp_of_xyz(Q[i], qref, a, f)
+    wi = w[i]
+    return acc[0] + wi * g0, acc[1] + wi * g1, acc[2] + wi * g2
+
+
+grp_weighted_mean = chunked_sum_kernel(grp_weighted_mean_item, 3)
 
 
 @nb.njit(cache=True, inline="always")

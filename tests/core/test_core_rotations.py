@@ -1,6 +1,11 @@
 """Core rotation kernels (lightcurve.core.rotations) against independent NumPy algebra written
 here and published relations (Bernard 2021 ch. 3; O'Keefe 2015 §4.1)."""
 
+import json
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -144,3 +149,33 @@ def test_euler_321_eq_3_7():
 def test_skew_is_cross_product(v):
     w = RNG.normal(size=3)
     np.testing.assert_array_equal(R.skew_nb(v) @ w, np.cross(v, w))
+
+
+_CACHE_PROBE = """
+import json
+import numpy as np
+import lightcurve.core.rotations as C
+Q = np.array([[0.5, 0.5, 0.5, 0.5], [1.0, 0.0, 0.0, 0.0]])
+S = np.array([[0.1, -0.2, 0.3], [0.0, 0.0, 1.0]])
+o3, o4 = np.empty((2, 3)), np.empty((2, 4))
+C.q2mrp_batch_nb(Q, o3)
+C.mrp2q_batch_nb(S, o4)
+hits = sum(f.stats.cache_hits.total() for f in (C.q2mrp_batch_nb, C.mrp2q_batch_nb))
+print(json.dumps([o3.tolist(), o4.tolist(), hits]))
+"""
+
+
+def test_row_forms_cached_apart(tmp_path):
+    # The row-wise forms are copies of one template with the same bytecode and, for these two,
+    # the same numba signature ((N,k) in, (N,m) out); each must be cached in a file of its own
+    # and load from it in a new process (a shared entry would hand mrp2q the code of q2mrp).
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    runs = [json.loads(subprocess.run([sys.executable, "-c", _CACHE_PROBE], env=env,
+                                      capture_output=True, text=True, check=True).stdout)
+            for _ in range(2)]
+    Q = np.array([[0.5, 0.5, 0.5, 0.5], [1.0, 0.0, 0.0, 0.0]])
+    S = np.array([[0.1, -0.2, 0.3], [0.0, 0.0, 1.0]])
+    for out in runs:
+        np.testing.assert_array_equal(out[0], np.stack([R.q2mrp_nb(q) for q in Q]))
+        np.testing.assert_array_equal(out[1], np.stack([R.mrp2q_nb(s) for s in S]))
+    assert runs[0][2] == 0 and runs[1][2] == 2
