@@ -34,8 +34,8 @@ import numba as nb
 import numpy as np
 
 __all__ = [
-    "n_chunks", "chunk_bounds", "chunk_sums", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
-    "ess_tempered", "temper_exponent", "innovation_loglik", "cumulative_weights",
+    "n_chunks", "chunk_bounds", "chunk_sums", "exp_or_zero", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
+    "ess_tempered", "temper_exponent", "innovation_loglik", "gaussian_loglik_into", "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
     "philox4x32", "philox_normals", "philox_uniforms", "ziggurat_normal",
@@ -77,6 +77,17 @@ def chunk_sums(part):
         for k in range(K):
             out[k] += part[c, k]
     return out
+
+
+_EXP_ZERO = -746.0   # below ln(2⁻¹⁰⁷⁵) = −745.133…: exp rounds to 0 (half the least subnormal)
+
+
+@nb.njit(cache=True, inline="always")
+def exp_or_zero(x):
+    """``math.exp(x)`` for every double x (NaN included), returning the 0 that exp rounds to
+    below −746 without calling it: the libm underflow path costs ≈ 3× a normal exp, and the
+    tempering evaluates it for most particles (weights ≪ 2⁻¹⁰⁷⁴ under the full likelihood)."""
+    return 0.0 if x < _EXP_ZERO else math.exp(x)
 
 
 # --------------------------------------------------------------------------------------------
@@ -147,7 +158,7 @@ def _sum_exp(logw, ll, phi, m):
         for i in range(lo, hi):
             a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
             if a > -np.inf:
-                e = math.exp(a - m)
+                e = exp_or_zero(a - m)
                 s1 += e
                 s2 += e * e
         part[c, 0] = s1
@@ -211,7 +222,7 @@ def _add_scaled_exp(logw, ll, phi, mx, w):
         lo, hi = chunk_bounds(c, N, nch)
         s = 0.0
         for i in range(lo, hi):
-            e = math.exp(logw[i] - mx)
+            e = exp_or_zero(logw[i] - mx)
             w[i] = e
             s += e
         part[c, 0] = s
@@ -286,7 +297,7 @@ def _innov_pass1(logw, mpred, y, sig, ll, mx):
         for i in range(lo, hi):
             m = mpred[i]
             if np.isfinite(m):
-                e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+                e = exp_or_zero(logw[i] - mx) if mx > -np.inf else 1.0
                 s0 += e
                 s1 += e * m
                 r = (y - m) / sig
@@ -310,7 +321,7 @@ def _innov_pass2(logw, mpred, mean, mx):
         for i in range(lo, hi):
             m = mpred[i]
             if np.isfinite(m):
-                e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+                e = exp_or_zero(logw[i] - mx) if mx > -np.inf else 1.0
                 s2 += e * (m - mean) * (m - mean)
         part[c, 0] = s2
     return chunk_sums(part)[0]
@@ -333,6 +344,21 @@ def innovation_loglik(logw, mpred, y, sig, ll):
     mean = s1 / s0
     s2 = _innov_pass2(logw, mpred, mean, mx)
     return mean, s2 / s0, True
+
+
+@nb.njit(cache=True, parallel=True)
+def gaussian_loglik_into(mpred, y, sig, ll):
+    """``ll[i] = −½ ((y − m_i)/σ)²``, −inf where ``m_i`` is not finite: the log-likelihoods of
+    :func:`innovation_loglik` (same arithmetic, the same values) without its predictive
+    moments, for a caller that already has them (a new σ, a re-predicted cloud)."""
+    N = mpred.shape[0]
+    for i in nb.prange(N):
+        m = mpred[i]
+        if np.isfinite(m):
+            r = (y - m) / sig
+            ll[i] = -0.5 * r * r
+        else:
+            ll[i] = -np.inf
 
 
 # --------------------------------------------------------------------------------------------

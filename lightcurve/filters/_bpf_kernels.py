@@ -21,14 +21,14 @@ import numba as nb
 import numpy as np
 
 from ..core.dynamics import const_rate_xyz, mat9, rk4_step_xyz
-from ..core.particles import chunk_bounds, chunk_sums, n_chunks
+from ..core.particles import _ZIG_R, _ZIG_X, chunk_bounds, chunk_sums, n_chunks, ziggurat_normal
 from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, facet_flux_nb,
                                facet_sum_fresnel_xyz, fresnel_xyz)
 from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 from .facet_states import fill_facet_arrays_nb, from_unbounded_xyz
 
-__all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
-           "chart_rows", "chart_stats", "roughen_chart", "roughen_compose", "liu_west_attitude",
+__all__ = ["bpf_predict_nb", "jitter_rows_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
+           "chart_rows", "chart_stats", "grp_compose", "roughen_chart", "roughen_compose", "liu_west_attitude",
            "min_abs_residual", "facet_mag_particles_nb", "weighted_param_stats_nb",
            "facet_loglik_history_nb"]
 
@@ -146,7 +146,7 @@ def predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, ze
 
 @nb.njit(cache=True, parallel=True)
 def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
-                   params, offset, m_out):
+                   params, offset, m_out, dq):
     """One fused bootstrap-PF prediction for every particle (in place on Q, W; fills m_out).
 
     mode 0: constant rate (controlled; the exact step ``exp(ω dt) ⊗ q``,
@@ -160,7 +160,9 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     ``m_out`` (N,) receives ``offset − 2.5 log10 Φ(q)`` (DESIGN.md magnitude equation; +inf
     where no light reaches the observer). With ``s[0]`` NaN no magnitude is computed
     (propagation only). The quaternions are renormalised; the facet sum uses the epoch's
-    attitude-independent half vector and Fresnel factors (:func:`flux_invariants`).
+    attitude-independent half vector and Fresnel factors (:func:`flux_invariants`). ``dq``
+    (N,4): the quaternions ``exp(ζ_i)`` of ``zeta`` already formed (:func:`jitter_rows_nb`;
+    the same values, used instead of forming them again), or (0,4).
     """
     N = Q.shape[0]
     h = dt / max(nsub, 1)
@@ -174,13 +176,49 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     cI = -1.0
     if predict:
         hI, cI = flux_invariants(s, o, ids, params, Fr)
+    use_dq = use_zeta and dq.shape[0] == N
     nch = n_chunks(N)
     for c in nb.prange(nch):
         lo, hi = chunk_bounds(c, N, nch)
         for i in range(lo, hi):
-            predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
-                        use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
-                        offset, m_out)
+            if use_dq:     # predict_row's steps, with exp(ζ_i) read from dq
+                predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
+                            False, False, s, o, hI, cI, Fr, normals, areas, ids, params,
+                            offset, m_out)
+                if predict:
+                    q0, q1, q2, q3 = qmul_xyz(dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3],
+                                              Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
+                    fl = _flux_pre(q0, q1, q2, q3, s, o, hI, cI, Fr, normals, areas, ids,
+                                   params)
+                    m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+            else:
+                predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
+                            use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
+                            offset, m_out)
+
+
+@nb.njit(cache=True, parallel=True)
+def jitter_rows_nb(k0, k1, call, sigma, draw, zeta, dq):
+    """ACS jitter of every particle (Bernard eq. 7.8–7.11, the "jitter" model): with
+    ``draw``, ``zeta[i, j] = σ · n_ij`` where n_ij is the standard normal of
+    :func:`~lightcurve.core.particles.philox_normals` for (k0, k1, call) (the same number,
+    the same product as drawing and then scaling); without it ``zeta`` is kept. Fills
+    ``dq[i]`` with the quaternion ``exp(ζ_i)`` (:func:`~lightcurve.core.rotations.rotvec2q_xyz`)
+    that :func:`bpf_predict_nb` applies: formed once per epoch, it is carried through the
+    tempering stages' resamplings instead of being formed again at every prediction."""
+    N = zeta.shape[0]
+    kk0 = np.uint64(k0)
+    kk1 = np.uint64(k1)
+    cl = np.uint64(call) & np.uint64(0xFFFFFFFF)
+    ch = np.uint64(call) >> np.uint64(32)
+    zx = _ZIG_X
+    zr = _ZIG_R
+    for i in nb.prange(N):
+        if draw:
+            ci = np.uint64(i) & np.uint64(0xFFFFFFFF)
+            for j in range(3):
+                zeta[i, j] = ziggurat_normal(ci, np.uint64(j), cl, ch, kk0, kk1, zx, zr) * sigma
+        dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3] = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
 
 
 @nb.njit(cache=True, parallel=True)
@@ -503,3 +541,15 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
                 r = (y[j] - (offs[j] - 2.5 * math.log10(fl))) / sig[j]
                 acc += -0.5 * wj * r * r
             out[i] = acc
+
+
+@nb.njit(cache=True)
+def grp_compose(p, q, a, f):
+    """``grp2q(p) ⊗ q`` (4,), not renormalised (Bernard eq. 7.105: the estimate from the mean
+    GRP p (3,) about the reference q (4,)); the arithmetic of
+    :func:`lightcurve.rotations.grp_to_quat` then :func:`lightcurve.rotations.quat_mult`,
+    without their per-call array handling."""
+    d0, d1, d2, d3 = grp2q_xyz(p[0], p[1], p[2], a, f)
+    out = np.empty(4)
+    out[0], out[1], out[2], out[3] = qmul_xyz(d0, d1, d2, d3, q[0], q[1], q[2], q[3])
+    return out

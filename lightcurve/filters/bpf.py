@@ -456,9 +456,14 @@ class _NumbaOps(_HostOps):
         BK.bpf_predict_nb(run.Q, run.W, dt, run.mode, run.J, run.Ji,
                           run.p.dynamics.nsub(dt) if (run.mode and dt != 0.0) else 1, z, L,
                           zeta, s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          run.mpred)
+                          run.mpred, run.dq if zeta.shape[0] else run.dq[:0])
 
     innov = staticmethod(CP.innovation_loglik)
+
+    @staticmethod
+    def loglik(logw, mpred, y, sig, ll):
+        """The log-likelihoods of ``innov`` alone (its moments are not needed)."""
+        CP.gaussian_loglik_into(mpred, y, sig, ll)
     addnorm = staticmethod(CP.add_loglik_normalize)
     ess = staticmethod(CP.ess_tempered)
     temper = staticmethod(CP.temper_exponent)
@@ -521,6 +526,10 @@ class _NumpyOps(_HostOps):
             run.mpred[:] = _predict_np(run.p.model, Qm, k)
 
     innov = staticmethod(_innov_np)
+
+    @staticmethod
+    def loglik(logw, mpred, y, sig, ll):
+        _innov_np(logw, mpred, y, sig, ll)
     addnorm = staticmethod(_addnorm_np)
     ess = staticmethod(_ess_np)
     temper = staticmethod(_temper_np)
@@ -919,6 +928,9 @@ class _Run:
         nz = N if (p.jitter_zeta() and not fixed) else 0
         self.zeta = ops.empty((nz, 3))
         self.zeta2 = ops.empty((nz, 3))
+        # exp(ζ_i) of the jitter, kept through the tempering stages (numba backend)
+        self.dq = np.empty((nz if backend == "numba" else 0, 4))
+        self.dq2 = np.empty_like(self.dq)
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
         self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
@@ -938,6 +950,7 @@ class _Run:
         self.n_joint = 0
         self._empty6 = ops.empty((0, 6))
         self._zero6 = np.zeros((6, 6))
+        self._noL = np.zeros((6, 0))
 
     def _init_cloud(self, initial_cloud):
         p, N = self.p, self.N
@@ -991,7 +1004,8 @@ class _Run:
                 if p.random_walk_zeta():
                     Qd = Qd.copy()
                     Qd[:3, :3] += dyn.zeta_cov
-                L = np.ascontiguousarray(psd_sqrt(Qd))
+                # no process noise (Q_d = 0): psd_sqrt's (6, 0) without its eigh
+                L = np.ascontiguousarray(psd_sqrt(Qd)) if Qd.any() else self._noL
                 if L.shape[1]:
                     z = ops.normals(self.draws, _flat(self.zbuf, N, L.shape[1]))
             y = m.y[k]
@@ -1000,8 +1014,7 @@ class _Run:
             has_y = has_y and not skipped
             zeta = empty3
             if has_y and p.jitter_zeta() and not self.fixed:
-                zeta = ops.normals(self.draws, self.zeta)
-                ops.scale(zeta, dyn.acs_sigma)
+                zeta = self._jitter(dyn.acs_sigma)
             ext.propagate(dt, w_mean, self.draws)
             mpred = self.mpred
             if self.fixed:
@@ -1061,6 +1074,22 @@ class _Run:
         else:
             self.ops.predict(self, k, 0.0, self._empty6, self._zero6, zeta, self.p.model.s_eci[k])
 
+    def _jitter(self, sigma):
+        """ACS jitter draws ζ_i = σ n_i (N,3) into ``self.zeta`` (module docstring, step 2);
+        the numba backend also forms their quaternions ``exp(ζ_i)`` once (``self.dq``)."""
+        d, zeta = self.draws, self.zeta
+        if not self.dq.shape[0]:
+            zeta = self.ops.normals(d, zeta)
+            self.ops.scale(zeta, sigma)
+        elif d.kind == "philox":
+            BK.jitter_rows_nb(d.k0, d.k1, d.call, float(sigma), True, zeta, self.dq)
+            d.call += 1
+        else:
+            d.normals_into(zeta)
+            zeta *= sigma
+            BK.jitter_rows_nb(0, 0, 0, 0.0, False, zeta, self.dq)
+        return zeta
+
     def _update(self, k, y, zeta):
         """Measurement update of epoch k (steps 3, 3b) → (N_eff, ζ after resamplings)."""
         p, cfg, ops, rec, gate, N = self.p, self.cfg, self.ops, self.rec, self.gate, self.N
@@ -1074,7 +1103,7 @@ class _Run:
             ops.fill(ll, 0.0)   # outlier rejected: the weights are left unchanged
         elif R != sig * sig:
             sig = float(np.sqrt(R))   # gate mode "inflate": the inflated noise
-            ops.innov(logw, mpred, y, sig, ll)
+            ops.loglik(logw, mpred, y, sig, ll)
         if any_fin and R is not None:
             rec.innovation(k, y - yhat, var_m + sig * sig)
         rest = 1.0
@@ -1098,7 +1127,7 @@ class _Run:
                     ops.gather(mpred.reshape(N, 1), self.idx, self.mpred2.reshape(N, 1))
                     self.mpred, self.mpred2 = self.mpred2, self.mpred
                     mpred = self.mpred
-                ops.innov(logw, mpred, y, sig, ll)
+                ops.loglik(logw, mpred, y, sig, ll)
                 rec.stages[k] += 1
         neff, ok = ops.addnorm(logw, ll, rest, w)
         if not ok:
@@ -1137,6 +1166,9 @@ class _Run:
             self.ops.gather(zeta, self.idx, self.zeta2)
             self.zeta, self.zeta2 = self.zeta2, self.zeta
             zeta = self.zeta
+            if self.dq.shape[0]:
+                self.ops.gather(self.dq, self.idx, self.dq2)
+                self.dq, self.dq2 = self.dq2, self.dq
         self._reset_weights(k)
         rej = cfg.rejuvenation
         if self.fixed:
@@ -1250,13 +1282,14 @@ class _Run:
         imax = int(ops.argmax(w))
         qmax = ops.row(Q, imax)
         if self.cfg.reference == "refined":
-            qref = rot.quat_mult(rot.grp_to_quat(ops.grp_mean(Q, qmax, w), GRP_A, GRP_F), qmax)
+            qref = BK.grp_compose(np.ascontiguousarray(ops.grp_mean(Q, qmax, w)), qmax, GRP_A,
+                                  GRP_F)
             qref = qref / np.linalg.norm(qref)
         else:
             qref = qmax
         qref = np.ascontiguousarray(qref)
         mean, C = ops.chart_stats(Q, self.W, w, qref, ops.row(self.W, imax), self.X)
-        qhat = rot.quat_mult(rot.grp_to_quat(mean[:3], GRP_A, GRP_F), qref)
+        qhat = BK.grp_compose(np.ascontiguousarray(mean[:3]), qref, GRP_A, GRP_F)
         return qhat / np.linalg.norm(qhat), mean[3:6].copy(), 0.5 * (C + C.T), qref
 
     def _cloud(self, k):
@@ -1285,7 +1318,7 @@ def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
         n_arr, a_arr, ids, prm = m._karrs
         BK.bpf_predict_nb(Q, W, 0.0, 0, J, Ji, 1, np.zeros((0, 6)), np.zeros((6, 6)), zeta,
                           m.s_eci[k], m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          out)
+                          out, np.empty((0, 4)))
     else:
         Qm = Q
         if zeta.shape[0]:
