@@ -34,8 +34,9 @@ import numba as nb
 import numpy as np
 
 __all__ = [
-    "n_chunks", "chunk_bounds", "chunk_sums", "exp_or_zero", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
-    "ess_tempered", "temper_exponent", "innovation_loglik", "gaussian_loglik_into", "cumulative_weights",
+    "n_chunks", "chunk_bounds", "chunk_sums", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
+    "exp_or_zero", "ess_tempered", "temper_exponent", "innovation_loglik", "gaussian_loglik_into",
+    "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
     "philox4x32", "philox_normals", "philox_uniforms", "ziggurat_normal",

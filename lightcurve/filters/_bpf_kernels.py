@@ -21,14 +21,15 @@ import numba as nb
 import numpy as np
 
 from ..core.dynamics import const_rate_xyz, mat9, rk4_step_xyz
-from ..core.particles import _ZIG_R, _ZIG_X, chunk_bounds, chunk_sums, n_chunks, ziggurat_normal
+from ..core.particles import chunk_bounds, chunk_sums, n_chunks
 from ..core.photometry import (COOK_TORRANCE, COOK_TORRANCE_THESIS, facet_flux_nb,
                                facet_sum_fresnel_xyz, fresnel_xyz)
 from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 from .facet_states import fill_facet_arrays_nb, from_unbounded_xyz
 
-__all__ = ["bpf_predict_nb", "jitter_rows_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
-           "chart_rows", "chart_stats", "grp_compose", "roughen_chart", "roughen_compose", "liu_west_attitude",
+__all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
+           "chart_rows", "chart_stats", "grp_compose", "grp_times_rows", "roughen_chart",
+           "roughen_compose", "liu_west_attitude",
            "min_abs_residual", "facet_mag_particles_nb", "weighted_param_stats_nb",
            "facet_loglik_history_nb"]
 
@@ -146,7 +147,7 @@ def predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, ze
 
 @nb.njit(cache=True, parallel=True)
 def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
-                   params, offset, m_out, dq):
+                   params, offset, m_out, dq, dq_mode):
     """One fused bootstrap-PF prediction for every particle (in place on Q, W; fills m_out).
 
     mode 0: constant rate (controlled; the exact step ``exp(ω dt) ⊗ q``,
@@ -161,8 +162,9 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     where no light reaches the observer). With ``s[0]`` NaN no magnitude is computed
     (propagation only). The quaternions are renormalised; the facet sum uses the epoch's
     attitude-independent half vector and Fresnel factors (:func:`flux_invariants`). ``dq``
-    (N,4): the quaternions ``exp(ζ_i)`` of ``zeta`` already formed (:func:`jitter_rows_nb`;
-    the same values, used instead of forming them again), or (0,4).
+    (N,4) with ``dq_mode`` 1: the quaternions ``exp(ζ_i)`` formed here are also stored in
+    ``dq``; 2: they are read from ``dq`` (formed by an earlier call for the same ζ; the same
+    values, not formed again); 0: ``dq`` unused.
     """
     N = Q.shape[0]
     h = dt / max(nsub, 1)
@@ -176,15 +178,19 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     cI = -1.0
     if predict:
         hI, cI = flux_invariants(s, o, ids, params, Fr)
-    use_dq = use_zeta and dq.shape[0] == N
+    use_dq = use_zeta and dq_mode != 0 and dq.shape[0] == N
+    fill_dq = use_dq and dq_mode == 1
     nch = n_chunks(N)
     for c in nb.prange(nch):
         lo, hi = chunk_bounds(c, N, nch)
         for i in range(lo, hi):
-            if use_dq:     # predict_row's steps, with exp(ζ_i) read from dq
+            if use_dq:     # predict_row's steps, with exp(ζ_i) kept in dq
                 predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
                             False, False, s, o, hI, cI, Fr, normals, areas, ids, params,
                             offset, m_out)
+                if fill_dq:
+                    dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3] = rotvec2q_xyz(zeta[i, 0], zeta[i, 1],
+                                                                          zeta[i, 2])
                 if predict:
                     q0, q1, q2, q3 = qmul_xyz(dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3],
                                               Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
@@ -198,27 +204,12 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
 
 
 @nb.njit(cache=True, parallel=True)
-def jitter_rows_nb(k0, k1, call, sigma, draw, zeta, dq):
-    """ACS jitter of every particle (Bernard eq. 7.8–7.11, the "jitter" model): with
-    ``draw``, ``zeta[i, j] = σ · n_ij`` where n_ij is the standard normal of
-    :func:`~lightcurve.core.particles.philox_normals` for (k0, k1, call) (the same number,
-    the same product as drawing and then scaling); without it ``zeta`` is kept. Fills
-    ``dq[i]`` with the quaternion ``exp(ζ_i)`` (:func:`~lightcurve.core.rotations.rotvec2q_xyz`)
-    that :func:`bpf_predict_nb` applies: formed once per epoch, it is carried through the
-    tempering stages' resamplings instead of being formed again at every prediction."""
-    N = zeta.shape[0]
-    kk0 = np.uint64(k0)
-    kk1 = np.uint64(k1)
-    cl = np.uint64(call) & np.uint64(0xFFFFFFFF)
-    ch = np.uint64(call) >> np.uint64(32)
-    zx = _ZIG_X
-    zr = _ZIG_R
-    for i in nb.prange(N):
-        if draw:
-            ci = np.uint64(i) & np.uint64(0xFFFFFFFF)
-            for j in range(3):
-                zeta[i, j] = ziggurat_normal(ci, np.uint64(j), cl, ch, kk0, kk1, zx, zr) * sigma
-        dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3] = rotvec2q_xyz(zeta[i, 0], zeta[i, 1], zeta[i, 2])
+def grp_times_rows(P, qref, a, f, Q):
+    """``Q_i = normalise(grp2q(P_i) ⊗ qref)`` for the GRP rows P (N,3) (Bernard eq. 7.105,
+    table 7.7's initial cloud): the values of
+    :func:`lightcurve.core.rotations.from_grp_rel_nb`, computed in parallel into Q (N,4)."""
+    for i in nb.prange(P.shape[0]):
+        _grp_times(P[i, 0], P[i, 1], P[i, 2], a, f, qref, Q[i])
 
 
 @nb.njit(cache=True, parallel=True)

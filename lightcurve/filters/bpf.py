@@ -64,7 +64,6 @@ import numpy as np
 
 from .. import rotations as rot
 from ..core import particles as CP
-from ..core.rotations import from_grp_rel_nb
 from ..errors import InputError
 from ..memory import check_allocation
 from ..threads import limited_threads
@@ -456,7 +455,7 @@ class _NumbaOps(_HostOps):
         BK.bpf_predict_nb(run.Q, run.W, dt, run.mode, run.J, run.Ji,
                           run.p.dynamics.nsub(dt) if (run.mode and dt != 0.0) else 1, z, L,
                           zeta, s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          run.mpred, run.dq if zeta.shape[0] else run.dq[:0])
+                          run.mpred, run.dq, run.dq_mode(zeta))
 
     innov = staticmethod(CP.innovation_loglik)
 
@@ -928,9 +927,10 @@ class _Run:
         nz = N if (p.jitter_zeta() and not fixed) else 0
         self.zeta = ops.empty((nz, 3))
         self.zeta2 = ops.empty((nz, 3))
-        # exp(ζ_i) of the jitter, kept through the tempering stages (numba backend)
-        self.dq = np.empty((nz if backend == "numba" else 0, 4))
+        # exp(ζ_i) of the jitter, kept through the tempering stages' re-predictions (numba)
+        self.dq = np.empty((nz if (backend == "numba" and cfg.progressive) else 0, 4))
         self.dq2 = np.empty_like(self.dq)
+        self.dq_ok = False
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
         self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
@@ -974,7 +974,9 @@ class _Run:
             X0 = self.draws.normal((N, 6)) @ psd_sqrt(p.P0).T
             P0 = np.ascontiguousarray(X0[:, :3])
             if self.backend != "numpy":
-                self.Q = from_grp_rel_nb(P0, np.ascontiguousarray(p.q0), GRP_A, GRP_F)
+                self.Q = np.empty((N, 4))
+                BK.grp_times_rows(P0, np.ascontiguousarray(p.q0, dtype=float), GRP_A, GRP_F,
+                                  self.Q)
             else:
                 self.Q = np.ascontiguousarray(_from_grp_np(P0, p.q0))
             self.W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
@@ -1014,7 +1016,9 @@ class _Run:
             has_y = has_y and not skipped
             zeta = empty3
             if has_y and p.jitter_zeta() and not self.fixed:
-                zeta = self._jitter(dyn.acs_sigma)
+                zeta = ops.normals(self.draws, self.zeta)
+                ops.scale(zeta, dyn.acs_sigma)
+                self.dq_ok = False
             ext.propagate(dt, w_mean, self.draws)
             mpred = self.mpred
             if self.fixed:
@@ -1074,21 +1078,17 @@ class _Run:
         else:
             self.ops.predict(self, k, 0.0, self._empty6, self._zero6, zeta, self.p.model.s_eci[k])
 
-    def _jitter(self, sigma):
-        """ACS jitter draws ζ_i = σ n_i (N,3) into ``self.zeta`` (module docstring, step 2);
-        the numba backend also forms their quaternions ``exp(ζ_i)`` once (``self.dq``)."""
-        d, zeta = self.draws, self.zeta
-        if not self.dq.shape[0]:
-            zeta = self.ops.normals(d, zeta)
-            self.ops.scale(zeta, sigma)
-        elif d.kind == "philox":
-            BK.jitter_rows_nb(d.k0, d.k1, d.call, float(sigma), True, zeta, self.dq)
-            d.call += 1
-        else:
-            d.normals_into(zeta)
-            zeta *= sigma
-            BK.jitter_rows_nb(0, 0, 0, 0.0, False, zeta, self.dq)
-        return zeta
+    def dq_mode(self, zeta):
+        """``dq_mode`` of :func:`~lightcurve.filters._bpf_kernels.bpf_predict_nb` for a
+        prediction with the jitter ``zeta``: 0 (no ζ, or nothing keeps exp(ζ)), 1 (form
+        exp(ζ_i) and keep them in ``self.dq``), 2 (read them: the same ζ, resampled with the
+        cloud since)."""
+        if not (zeta.shape[0] and self.dq.shape[0]):
+            return 0
+        if self.dq_ok:
+            return 2
+        self.dq_ok = True
+        return 1
 
     def _update(self, k, y, zeta):
         """Measurement update of epoch k (steps 3, 3b) → (N_eff, ζ after resamplings)."""
@@ -1166,7 +1166,7 @@ class _Run:
             self.ops.gather(zeta, self.idx, self.zeta2)
             self.zeta, self.zeta2 = self.zeta2, self.zeta
             zeta = self.zeta
-            if self.dq.shape[0]:
+            if self.dq_ok:
                 self.ops.gather(self.dq, self.idx, self.dq2)
                 self.dq, self.dq2 = self.dq2, self.dq
         self._reset_weights(k)
@@ -1318,7 +1318,7 @@ def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
         n_arr, a_arr, ids, prm = m._karrs
         BK.bpf_predict_nb(Q, W, 0.0, 0, J, Ji, 1, np.zeros((0, 6)), np.zeros((6, 6)), zeta,
                           m.s_eci[k], m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          out, np.empty((0, 4)))
+                          out, np.empty((0, 4)), 0)
     else:
         Qm = Q
         if zeta.shape[0]:
