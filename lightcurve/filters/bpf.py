@@ -929,7 +929,6 @@ class _Run:
         self.zeta2 = ops.empty((nz, 3))
         # exp(ζ_i) of the jitter, kept through the tempering stages' re-predictions (numba)
         self.dq = np.empty((nz if (backend == "numba" and cfg.progressive) else 0, 4))
-        self.dq2 = np.empty_like(self.dq)
         self.dq_ok = False
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
@@ -941,6 +940,9 @@ class _Run:
         D = 6 + self.ext.ne
         self.X = ops.full((N, D), 0.0)
         self.X2 = ops.full((N, D), 0.0)
+        # the resampled exp(ζ) of a stage go to X2's memory: X2 is not used between the
+        # epoch's prediction and its end-of-epoch resampling, which sets dq_ok False
+        self.dq2 = _flat(self.X2.reshape(-1), self.dq.shape[0], 4)
         # normals of the process noise, the roughening and the kernel moves (never at once)
         self.ebuf = ops.empty(N * max(D, 6))
         self.zbuf = self.ebuf
@@ -1209,6 +1211,7 @@ class _Run:
     def _resample_move(self, k, qref, qhat):
         """End-of-epoch resampling and rejuvenation (step 5)."""
         ext, cfg, N = self.ext, self.cfg, self.N
+        self.dq_ok = False          # X2 (one of the exp(ζ) buffers) is overwritten below
         self._resample()
         self._reset_weights(k)
         if self.fixed:
