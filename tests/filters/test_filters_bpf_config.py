@@ -174,3 +174,54 @@ def test_unmoved_copies_keep_their_predictions(monkeypatch):
     b = run_bpf(p, particles=1500, seed=2, rejuvenation="none")
     assert a.meta["tempering_stages"] == b.meta["tempering_stages"]
     np.testing.assert_allclose(a.q, b.q, atol=1e-10)
+
+
+def test_exp_or_zero_is_exp():
+    """The weight sums' exp with its underflow shortcut returns math.exp's value for every
+    argument: below −746 exp is below half the least subnormal (2⁻¹⁰⁷⁵, ln = −745.133…) and
+    rounds to 0 (IEEE 754 round to nearest); NaN stays NaN."""
+    import math
+
+    f = numba.njit(lambda x: CP.exp_or_zero(x))
+    xs = np.concatenate([np.linspace(-760.0, -700.0, 6001), [-746.0, np.nextafter(-746.0, 0.0),
+                         -745.2, -745.13, -1e300, -np.inf, 0.0, -1.0, 3.0]])
+    for x in xs:
+        assert f(x) == math.exp(x), x
+    assert np.isnan(f(np.nan))
+
+
+def test_loglik_pass_equals_innovation_loglik():
+    """The log-likelihood-only pass fills the ll of innovation_loglik (Bernard eq. 6.55–6.56
+    without the constant; −inf for a non-finite prediction) to the last bit."""
+    rng = np.random.default_rng(3)
+    N = 5000
+    m = 8.0 + rng.normal(size=N)
+    m[::17] = np.inf
+    logw = np.log(rng.random(N))
+    a, b = np.empty(N), np.empty(N)
+    CP.innovation_loglik(logw, m, 8.3, 0.02, a)
+    CP.gaussian_loglik_into(m, 8.3, 0.02, b)
+    np.testing.assert_array_equal(a, b)
+    assert np.all(b[::17] == -np.inf)
+
+
+def test_jitter_rotation_kept_through_stages_is_exact(monkeypatch):
+    """ACS jitter model (Bernard eq. 7.8–7.11): the quaternions exp(ζ_i) formed once per epoch
+    and resampled with the cloud give the posterior of forming them again at every tempering
+    stage's prediction, bit for bit."""
+    import lightcurve.filters.bpf as B
+
+    p = build_problem(make_curve(n=12, seed=4, acs_mode="jitter"), seed=1, sigma_theta_deg=30.0,
+                      acs_mode="jitter")
+    assert p.jitter_zeta()
+    modes = []
+    orig = B._Run.dq_mode
+    monkeypatch.setattr(B._Run, "dq_mode", lambda self, zeta: modes.append(orig(self, zeta))
+                        or modes[-1])
+    a = run_bpf(p, particles=3000, seed=2)
+    assert sum(a.meta["tempering_stages"]) > 0 and 1 in modes and 2 in modes
+    monkeypatch.setattr(B._Run, "dq_mode", lambda self, zeta: 0)
+    b = run_bpf(p, particles=3000, seed=2)
+    assert a.meta["tempering_stages"] == b.meta["tempering_stages"]
+    for key in ("q", "omega_rad_s", "cov", "n_eff"):
+        np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)
