@@ -15,7 +15,8 @@ plus optional extra states (site biases, Model 3 facet parameters; Bernard ch. 8
    horizon are skipped; the robust variant gates outliers (:mod:`lightcurve.filters.gating`).
 3b. Progressive correction (Oudjane & Musso 2000; robust variant): while the full likelihood
    would leave ``N_eff < ess_threshold · N`` it is applied as ``L^φ₁ L^φ₂ … (Σφ = 1)``, each φ
-   the largest keeping ``N_eff`` at the threshold (bisection), each stage followed by
+   the largest keeping ``N_eff`` at the threshold (bisection, or the faster bracketed root
+   finder of ``BPFConfig.temper_solver``), each stage followed by
    resampling, a move of the attitude and a new prediction of the moved particles. If every
    weight is zero the weights are reset to uniform and the epoch is flagged
    (:data:`~lightcurve.filters.result.FLAG_COLLAPSE`; the run is reported as diverged).
@@ -73,12 +74,14 @@ from .config import ConfigBase, register_filter_config
 from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
-__all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS"]
+__all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS",
+           "TEMPER_SOLVERS"]
 
 VARIANTS = ("robust", "thesis")
 RESAMPLERS = ("systematic", "multinomial")
 REJUVENATIONS = ("auto", "joint", "separate", "table7.9", "none")
 RNGS = ("philox", "numpy")
+TEMPER_SOLVERS = ("bisection", "bracketed")
 
 # variant → defaults of the fields left None (module docstring, "Variants")
 _VARIANT_DEFAULTS = {
@@ -107,6 +110,11 @@ class BPFConfig(ConfigBase):
     roughening : float ≥ 0 — 𝒢 of table 7.9 (0: no roughening).
     progressive : bool — progressive correction (module docstring, step 3b).
     max_stages : int ≥ 1 — most tempering stages per measurement.
+    temper_solver : {"bisection", "bracketed"} — root finder of each stage's exponent:
+        24 halvings of [0, rest] (the stored reference runs), or the octave bisection and
+        Illinois regula falsi of :func:`lightcurve.core.particles.temper_exponent_bracketed`
+        to 0.1 % of φ (≈ 10 N_eff evaluations instead of 24; other φ, so other runs; numba
+        CPU backend only).
     rejuvenation : {"auto", "joint", "separate", "table7.9", "none"} (module docstring, step 5).
     kernel_bandwidth : float in [0, 1) or None — h of the joint kernel; None: the optimal
         Gaussian-kernel bandwidth ``(4/(d+2))^(1/(d+4)) N^(−1/(d+4))`` (Musso, Oudjane & Le
@@ -136,6 +144,7 @@ class BPFConfig(ConfigBase):
     roughening: float = 0.2
     progressive: bool | None = None
     max_stages: int = 30
+    temper_solver: str = "bisection"
     rejuvenation: str | None = None
     kernel_bandwidth: float | None = None
     joint_max_spread_deg: float = 25.0
@@ -168,6 +177,9 @@ class BPFConfig(ConfigBase):
             raise ValueError(f"ess_threshold must lie in [0, 1], got {self.ess_threshold}")
         if int(self.max_stages) < 1:
             raise ValueError(f"max_stages must be >= 1, got {self.max_stages}")
+        if self.temper_solver not in TEMPER_SOLVERS:
+            raise ValueError(f"temper_solver must be one of {', '.join(TEMPER_SOLVERS)}, "
+                             f"got {self.temper_solver!r}")
         if self.rejuvenation not in REJUVENATIONS:
             raise ValueError(f"rejuvenation must be one of {', '.join(map(repr, REJUVENATIONS))}, "
                              f"got {self.rejuvenation!r}")
@@ -467,6 +479,12 @@ class _NumbaOps(_HostOps):
     ess = staticmethod(CP.ess_tempered)
     temper = staticmethod(CP.temper_exponent)
     argmax = staticmethod(BK.argmax_weights)
+
+    @staticmethod
+    def temper_bracketed(logw, ll, rest, target):
+        """The exponent of :func:`~lightcurve.core.particles.temper_exponent_bracketed`
+        (relative precision 1e-3, at most 40 N_eff evaluations)."""
+        return CP.temper_exponent_bracketed(logw, ll, rest, target, 1e-3, 40)
     wstats = staticmethod(CP.weighted_mean_cov_rows)
     nearest = staticmethod(BK.min_abs_residual)
 
@@ -895,6 +913,10 @@ class _Run:
                              "holds q and ω at the truth; use 'separate' or mcmc_moves there)")
         self.p, self.cfg, self.seed, self.backend, self.fixed = p, cfg, int(seed), backend, fixed
         self.ops = _BACKENDS[backend]()
+        if (cfg.progressive and cfg.temper_solver != "bisection"
+                and not hasattr(self.ops, "temper_bracketed")):
+            raise NotImplementedError(f"temper_solver={cfg.temper_solver!r} runs on the numba "
+                                      f"CPU backend only (this run: {backend})")
         self.draws = _Draws(seed, cfg.rng)
         self.N = N = cfg.particles
         # the run's buffers: ≈ 32 + 3 (6 + e) doubles per particle (refused before allocating)
@@ -1113,7 +1135,10 @@ class _Run:
             for _stage in range(int(cfg.max_stages)):
                 if ops.ess(logw, ll, rest) >= self.thr:
                     break
-                phi = ops.temper(logw, ll, rest, self.thr, 24)
+                if cfg.temper_solver == "bisection":
+                    phi = ops.temper(logw, ll, rest, self.thr, 24)
+                else:
+                    phi = ops.temper_bracketed(logw, ll, rest, self.thr)
                 if not phi > 0.0:
                     break
                 _, ok = ops.addnorm(logw, ll, phi, w)
