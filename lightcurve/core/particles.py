@@ -37,7 +37,9 @@ from .specialise import jit_copy
 
 __all__ = [
     "n_chunks", "chunk_bounds", "chunk_sums", "chunked_sum_kernel", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
-    "ess_tempered", "temper_exponent", "innovation_loglik", "cumulative_weights",
+    "exp_or_zero", "ess_tempered", "temper_exponent", "temper_exponent_bracketed",
+    "innovation_loglik", "gaussian_loglik_into",
+    "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
     "philox4x32", "philox_normals", "philox_uniforms", "ziggurat_normal",
@@ -122,6 +124,17 @@ def chunked_sum_kernel(item, K):
                     _K=K)
 
 
+_EXP_ZERO = -746.0   # below ln(2⁻¹⁰⁷⁵) = −745.133…: exp rounds to 0 (half the least subnormal)
+
+
+@nb.njit(cache=True, inline="always")
+def exp_or_zero(x):
+    """``math.exp(x)`` for every double x (NaN included), returning the 0 that exp rounds to
+    below −746 without calling it: the libm underflow path costs ≈ 3× a normal exp, and the
+    tempering evaluates it for most particles (weights ≪ 2⁻¹⁰⁷⁴ under the full likelihood)."""
+    return 0.0 if x < _EXP_ZERO else math.exp(x)
+
+
 # --------------------------------------------------------------------------------------------
 # log weights, ESS
 # --------------------------------------------------------------------------------------------
@@ -183,7 +196,7 @@ def _sum_exp_item(i, acc, args):
     logw, ll, phi, m = args
     a = logw[i] + phi * ll[i] if phi != 0.0 else logw[i]
     if a > -np.inf:
-        e = math.exp(a - m)
+        e = exp_or_zero(a - m)
         return acc[0] + e, acc[1] + e * e
     return acc
 
@@ -238,11 +251,87 @@ def temper_exponent(logw, ll, rest, target, steps):
     return lo
 
 
+@nb.njit(cache=True)
+def _ess_shifted(logw, ll, phi, mw, ml):
+    """N_eff of ``logw + φ ll`` in one pass with the shift bound of :func:`temper_exponent`
+    (``mw``, ``ml`` the maxima of logw and ll); the exact two-pass value when the shift
+    underflows every weight."""
+    if not (mw > -np.inf and ml > -np.inf):
+        return 0.0
+    tot = _sum_exp(logw, ll, phi, mw + phi * ml)
+    s1, s2 = tot[0], tot[1]
+    if s1 > 1e-150 and s2 > 0.0:
+        return s1 * s1 / s2
+    return ess_tempered(logw, ll, phi)
+
+
+@nb.njit(cache=True)
+def temper_exponent_bracketed(logw, ll, rest, target, rtol, max_evals):
+    """Largest φ ∈ (0, rest] with ``N_eff(logw + φ ll) ≥ target`` (the progressive correction
+    of Oudjane & Musso 2000) to the relative precision ``rtol`` in fewer N_eff evaluations than
+    the 24 halvings of :func:`temper_exponent`: a bisection over the binary exponent of φ/rest
+    (2⁰ … 2⁻⁴⁰, N_eff(rest) < target assumed, as the caller has checked) finds the octave of
+    the root, then regula falsi with the Illinois modification (Dowell & Jarratt 1971, BIT 11)
+    on ``log N_eff − log target`` narrows it to ``hi − lo ≤ rtol · lo``. Returns the lower end
+    of the final bracket (N_eff ≥ target there), 0 when even rest·2⁻⁴⁰ falls below, and stops
+    after ``max_evals`` evaluations. Typically 9–12 evaluations; the φ differs from the
+    bisection's within its bracket, so runs differ from those of :func:`temper_exponent`."""
+    mw = _max_tempered(logw, ll, 0.0)
+    ml = _max_tempered(ll, ll, 0.0)
+    kf = 0            # N_eff(rest · 2^-kf) < target
+    ko = 41           # N_eff(rest · 2^-ko) ≥ target (41: not found yet)
+    elo = 0.0
+    ehi = -1.0        # not evaluated
+    evals = 0
+    while ko - kf > 1 and evals < max_evals:
+        km = (kf + ko) // 2
+        e = _ess_shifted(logw, ll, rest * 2.0 ** (-km), mw, ml)
+        evals += 1
+        if e >= target:
+            ko = km
+            elo = e
+        else:
+            kf = km
+            ehi = e
+    if ko > 40:
+        return 0.0
+    lo = rest * 2.0 ** (-ko)
+    hi = rest * 2.0 ** (-kf)
+    if ehi < 0.0:
+        ehi = _ess_shifted(logw, ll, hi, mw, ml)
+        evals += 1
+    flo = math.log(elo / target) if elo > 0.0 else 0.0
+    fhi = math.log(ehi / target) if ehi > 0.0 else -np.inf
+    side = 0
+    while hi - lo > rtol * lo and evals < max_evals:
+        x = 0.5 * (lo + hi)
+        if fhi > -np.inf and flo - fhi > 0.0:
+            xs = lo + (hi - lo) * flo / (flo - fhi)
+            if lo < xs < hi:
+                x = xs
+        e = _ess_shifted(logw, ll, x, mw, ml)
+        evals += 1
+        fx = math.log(e / target) if e > 0.0 else -np.inf
+        if e >= target:
+            lo = x
+            flo = fx
+            if side == 1:
+                fhi *= 0.5
+            side = 1
+        else:
+            hi = x
+            fhi = fx
+            if side == -1:
+                flo *= 0.5
+            side = -1
+    return lo
+
+
 @nb.njit(cache=True, inline="always")
 def _exp_shifted_item(i, acc, args):
     """Writes ``w_i = exp(logw_i − mx)`` and adds it."""
     logw, mx, w = args
-    e = math.exp(logw[i] - mx)
+    e = exp_or_zero(logw[i] - mx)
     w[i] = e
     return (acc[0] + e,)
 
@@ -307,7 +396,7 @@ def _innov_pass1_item(i, acc, args):
     logw, mpred, y, sig, ll, mx = args
     m = mpred[i]
     if np.isfinite(m):
-        e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+        e = exp_or_zero(logw[i] - mx) if mx > -np.inf else 1.0
         r = (y - m) / sig
         ll[i] = -0.5 * r * r
         return acc[0] + e, acc[1] + e * m
@@ -321,7 +410,7 @@ def _innov_pass2_item(i, acc, args):
     logw, mpred, mean, mx = args
     m = mpred[i]
     if np.isfinite(m):
-        e = math.exp(logw[i] - mx) if mx > -np.inf else 1.0
+        e = exp_or_zero(logw[i] - mx) if mx > -np.inf else 1.0
         return (acc[0] + e * (m - mean) * (m - mean),)
     return acc
 
@@ -348,6 +437,21 @@ def innovation_loglik(logw, mpred, y, sig, ll):
     mean = s1 / s0
     s2 = _innov_pass2(logw, mpred, mean, mx)[0]
     return mean, s2 / s0, True
+
+
+@nb.njit(cache=True, parallel=True)
+def gaussian_loglik_into(mpred, y, sig, ll):
+    """``ll[i] = −½ ((y − m_i)/σ)²``, −inf where ``m_i`` is not finite: the log-likelihoods of
+    :func:`innovation_loglik` (same arithmetic, the same values) without its predictive
+    moments, for a caller that already has them (a new σ, a re-predicted cloud)."""
+    N = mpred.shape[0]
+    for i in nb.prange(N):
+        m = mpred[i]
+        if np.isfinite(m):
+            r = (y - m) / sig
+            ll[i] = -0.5 * r * r
+        else:
+            ll[i] = -np.inf
 
 
 # --------------------------------------------------------------------------------------------

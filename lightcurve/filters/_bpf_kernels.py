@@ -28,7 +28,8 @@ from ..core.rotations import grp2q_xyz, qmul_xyz, qrot_xyz_nb, rotvec2q_xyz
 from .facet_states import fill_facet_arrays_nb, from_unbounded_xyz
 
 __all__ = ["bpf_predict_nb", "flux_invariants", "argmax_weights", "grp_weighted_mean",
-           "chart_rows", "chart_stats", "roughen_chart", "roughen_compose", "liu_west_attitude",
+           "chart_rows", "chart_stats", "grp_compose", "grp_times_rows", "roughen_chart",
+           "roughen_compose", "liu_west_attitude",
            "min_abs_residual", "facet_mag_particles_nb", "weighted_param_stats_nb",
            "facet_loglik_history_nb"]
 
@@ -150,7 +151,7 @@ def predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, ze
 
 @nb.njit(cache=True, parallel=True)
 def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
-                   params, offset, m_out):
+                   params, offset, m_out, dq, dq_mode):
     """One fused bootstrap-PF prediction for every particle (in place on Q, W; fills m_out).
 
     mode 0: constant rate (controlled; the exact step ``exp(ω dt) ⊗ q``,
@@ -164,7 +165,10 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     ``m_out`` (N,) receives ``offset − 2.5 log10 Φ(q)`` (DESIGN.md magnitude equation; +inf
     where no light reaches the observer). With ``s[0]`` NaN no magnitude is computed
     (propagation only). The quaternions are renormalised; the facet sum uses the epoch's
-    attitude-independent half vector and Fresnel factors (:func:`flux_invariants`).
+    attitude-independent half vector and Fresnel factors (:func:`flux_invariants`). ``dq``
+    (N,4) with ``dq_mode`` 1: the quaternions ``exp(ζ_i)`` formed here are also stored in
+    ``dq``; 2: they are read from ``dq`` (formed by an earlier call for the same ζ; the same
+    values, not formed again); 0: ``dq`` unused.
     """
     N = Q.shape[0]
     h = dt / max(nsub, 1)
@@ -178,13 +182,38 @@ def bpf_predict_nb(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, norma
     cI = -1.0
     if predict:
         hI, cI = flux_invariants(s, o, ids, params, Fr)
+    use_dq = use_zeta and dq_mode != 0 and dq.shape[0] == N
+    fill_dq = use_dq and dq_mode == 1
     nch = n_chunks(N)
     for c in nb.prange(nch):
         lo, hi = chunk_bounds(c, N, nch)
         for i in range(lo, hi):
-            predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
-                        use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
-                        offset, m_out)
+            if use_dq:     # predict_row's steps, with exp(ζ_i) kept in dq
+                predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
+                            False, False, s, o, hI, cI, Fr, normals, areas, ids, params,
+                            offset, m_out)
+                if fill_dq:
+                    dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3] = rotvec2q_xyz(zeta[i, 0], zeta[i, 1],
+                                                                          zeta[i, 2])
+                if predict:
+                    q0, q1, q2, q3 = qmul_xyz(dq[i, 0], dq[i, 1], dq[i, 2], dq[i, 3],
+                                              Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3])
+                    fl = _flux_pre(q0, q1, q2, q3, s, o, hI, cI, Fr, normals, areas, ids,
+                                   params)
+                    m_out[i] = offset - 2.5 * math.log10(fl) if fl > 0.0 else np.inf
+            else:
+                predict_row(i, Q, W, dt, mode, h, nsub, Jt, Kt, noise, Lnoise, use_noise, zeta,
+                            use_zeta, predict, s, o, hI, cI, Fr, normals, areas, ids, params,
+                            offset, m_out)
+
+
+@nb.njit(cache=True, parallel=True)
+def grp_times_rows(P, qref, a, f, Q):
+    """``Q_i = normalise(grp2q(P_i) ⊗ qref)`` for the GRP rows P (N,3) (Bernard eq. 7.105,
+    table 7.7's initial cloud): the values of
+    :func:`lightcurve.core.rotations.from_grp_rel_nb`, computed in parallel into Q (N,4)."""
+    for i in nb.prange(P.shape[0]):
+        _grp_times(P[i, 0], P[i, 1], P[i, 2], a, f, qref, Q[i])
 
 
 @nb.njit(cache=True, parallel=True)
@@ -503,3 +532,15 @@ def facet_loglik_history_nb(Z, kmax, phi_last, Qs, S, O, offs, y, sig, facet, ki
                 r = (y[j] - (offs[j] - 2.5 * math.log10(fl))) / sig[j]
                 acc += -0.5 * wj * r * r
             out[i] = acc
+
+
+@nb.njit(cache=True)
+def grp_compose(p, q, a, f):
+    """``grp2q(p) ⊗ q`` (4,), not renormalised (Bernard eq. 7.105: the estimate from the mean
+    GRP p (3,) about the reference q (4,)); the arithmetic of
+    :func:`lightcurve.rotations.grp_to_quat` then :func:`lightcurve.rotations.quat_mult`,
+    without their per-call array handling."""
+    d0, d1, d2, d3 = grp2q_xyz(p[0], p[1], p[2], a, f)
+    out = np.empty(4)
+    out[0], out[1], out[2], out[3] = qmul_xyz(d0, d1, d2, d3, q[0], q[1], q[2], q[3])
+    return out

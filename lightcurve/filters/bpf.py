@@ -15,7 +15,8 @@ plus optional extra states (site biases, Model 3 facet parameters; Bernard ch. 8
    horizon are skipped; the robust variant gates outliers (:mod:`lightcurve.filters.gating`).
 3b. Progressive correction (Oudjane & Musso 2000; robust variant): while the full likelihood
    would leave ``N_eff < ess_threshold · N`` it is applied as ``L^φ₁ L^φ₂ … (Σφ = 1)``, each φ
-   the largest keeping ``N_eff`` at the threshold (bisection), each stage followed by
+   the largest keeping ``N_eff`` at the threshold (bisection, or the faster bracketed root
+   finder of ``BPFConfig.temper_solver``), each stage followed by
    resampling, a move of the attitude and a new prediction of the moved particles. If every
    weight is zero the weights are reset to uniform and the epoch is flagged
    (:data:`~lightcurve.filters.result.FLAG_COLLAPSE`; the run is reported as diverged).
@@ -64,7 +65,6 @@ import numpy as np
 
 from .. import rotations as rot
 from ..core import particles as CP
-from ..core.rotations import from_grp_rel_nb
 from ..errors import InputError
 from ..memory import check_allocation
 from ..threads import limited_threads
@@ -74,12 +74,14 @@ from .config import ConfigBase, register_filter_config
 from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
-__all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS"]
+__all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS",
+           "TEMPER_SOLVERS"]
 
 VARIANTS = ("robust", "thesis")
 RESAMPLERS = ("systematic", "multinomial")
 REJUVENATIONS = ("auto", "joint", "separate", "table7.9", "none")
 RNGS = ("philox", "numpy")
+TEMPER_SOLVERS = ("bisection", "bracketed")
 
 # variant → defaults of the fields left None (module docstring, "Variants")
 _VARIANT_DEFAULTS = {
@@ -108,6 +110,11 @@ class BPFConfig(ConfigBase):
     roughening : float ≥ 0 — 𝒢 of table 7.9 (0: no roughening).
     progressive : bool — progressive correction (module docstring, step 3b).
     max_stages : int ≥ 1 — most tempering stages per measurement.
+    temper_solver : {"bisection", "bracketed"} — root finder of each stage's exponent:
+        24 halvings of [0, rest] (the stored reference runs), or the octave bisection and
+        Illinois regula falsi of :func:`lightcurve.core.particles.temper_exponent_bracketed`
+        to 0.1 % of φ (≈ 10 N_eff evaluations instead of 24; other φ, so other runs; numba
+        CPU backend only).
     rejuvenation : {"auto", "joint", "separate", "table7.9", "none"} (module docstring, step 5).
     kernel_bandwidth : float in [0, 1) or None — h of the joint kernel; None: the optimal
         Gaussian-kernel bandwidth ``(4/(d+2))^(1/(d+4)) N^(−1/(d+4))`` (Musso, Oudjane & Le
@@ -137,6 +144,7 @@ class BPFConfig(ConfigBase):
     roughening: float = 0.2
     progressive: bool | None = None
     max_stages: int = 30
+    temper_solver: str = "bisection"
     rejuvenation: str | None = None
     kernel_bandwidth: float | None = None
     joint_max_spread_deg: float = 25.0
@@ -169,6 +177,9 @@ class BPFConfig(ConfigBase):
             raise ValueError(f"ess_threshold must lie in [0, 1], got {self.ess_threshold}")
         if int(self.max_stages) < 1:
             raise ValueError(f"max_stages must be >= 1, got {self.max_stages}")
+        if self.temper_solver not in TEMPER_SOLVERS:
+            raise ValueError(f"temper_solver must be one of {', '.join(TEMPER_SOLVERS)}, "
+                             f"got {self.temper_solver!r}")
         if self.rejuvenation not in REJUVENATIONS:
             raise ValueError(f"rejuvenation must be one of {', '.join(map(repr, REJUVENATIONS))}, "
                              f"got {self.rejuvenation!r}")
@@ -456,13 +467,24 @@ class _NumbaOps(_HostOps):
         BK.bpf_predict_nb(run.Q, run.W, dt, run.mode, run.J, run.Ji,
                           run.p.dynamics.nsub(dt) if (run.mode and dt != 0.0) else 1, z, L,
                           zeta, s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          run.mpred)
+                          run.mpred, run.dq, run.dq_mode(zeta))
 
     innov = staticmethod(CP.innovation_loglik)
+
+    @staticmethod
+    def loglik(logw, mpred, y, sig, ll):
+        """The log-likelihoods of ``innov`` alone (its moments are not needed)."""
+        CP.gaussian_loglik_into(mpred, y, sig, ll)
     addnorm = staticmethod(CP.add_loglik_normalize)
     ess = staticmethod(CP.ess_tempered)
     temper = staticmethod(CP.temper_exponent)
     argmax = staticmethod(BK.argmax_weights)
+
+    @staticmethod
+    def temper_bracketed(logw, ll, rest, target):
+        """The exponent of :func:`~lightcurve.core.particles.temper_exponent_bracketed`
+        (relative precision 1e-3, at most 40 N_eff evaluations)."""
+        return CP.temper_exponent_bracketed(logw, ll, rest, target, 1e-3, 40)
     wstats = staticmethod(CP.weighted_mean_cov_rows)
     nearest = staticmethod(BK.min_abs_residual)
 
@@ -521,6 +543,10 @@ class _NumpyOps(_HostOps):
             run.mpred[:] = _predict_np(run.p.model, Qm, k)
 
     innov = staticmethod(_innov_np)
+
+    @staticmethod
+    def loglik(logw, mpred, y, sig, ll):
+        _innov_np(logw, mpred, y, sig, ll)
     addnorm = staticmethod(_addnorm_np)
     ess = staticmethod(_ess_np)
     temper = staticmethod(_temper_np)
@@ -887,6 +913,10 @@ class _Run:
                              "holds q and ω at the truth; use 'separate' or mcmc_moves there)")
         self.p, self.cfg, self.seed, self.backend, self.fixed = p, cfg, int(seed), backend, fixed
         self.ops = _BACKENDS[backend]()
+        if (cfg.progressive and cfg.temper_solver != "bisection"
+                and not hasattr(self.ops, "temper_bracketed")):
+            raise NotImplementedError(f"temper_solver={cfg.temper_solver!r} runs on the numba "
+                                      f"CPU backend only (this run: {backend})")
         self.draws = _Draws(seed, cfg.rng)
         self.N = N = cfg.particles
         # the run's buffers: ≈ 32 + 3 (6 + e) doubles per particle (refused before allocating)
@@ -919,6 +949,9 @@ class _Run:
         nz = N if (p.jitter_zeta() and not fixed) else 0
         self.zeta = ops.empty((nz, 3))
         self.zeta2 = ops.empty((nz, 3))
+        # exp(ζ_i) of the jitter, kept through the tempering stages' re-predictions (numba)
+        self.dq = np.empty((nz if (backend == "numba" and cfg.progressive) else 0, 4))
+        self.dq_ok = False
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
         self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
@@ -929,6 +962,9 @@ class _Run:
         D = 6 + self.ext.ne
         self.X = ops.full((N, D), 0.0)
         self.X2 = ops.full((N, D), 0.0)
+        # the resampled exp(ζ) of a stage go to X2's memory: X2 is not used between the
+        # epoch's prediction and its end-of-epoch resampling, which sets dq_ok False
+        self.dq2 = _flat(self.X2.reshape(-1), self.dq.shape[0], 4)
         # normals of the process noise, the roughening and the kernel moves (never at once)
         self.ebuf = ops.empty(N * max(D, 6))
         self.zbuf = self.ebuf
@@ -938,6 +974,7 @@ class _Run:
         self.n_joint = 0
         self._empty6 = ops.empty((0, 6))
         self._zero6 = np.zeros((6, 6))
+        self._noL = np.zeros((6, 0))
 
     def _init_cloud(self, initial_cloud):
         p, N = self.p, self.N
@@ -961,7 +998,9 @@ class _Run:
             X0 = self.draws.normal((N, 6)) @ psd_sqrt(p.P0).T
             P0 = np.ascontiguousarray(X0[:, :3])
             if self.backend != "numpy":
-                self.Q = from_grp_rel_nb(P0, np.ascontiguousarray(p.q0), GRP_A, GRP_F)
+                self.Q = np.empty((N, 4))
+                BK.grp_times_rows(P0, np.ascontiguousarray(p.q0, dtype=float), GRP_A, GRP_F,
+                                  self.Q)
             else:
                 self.Q = np.ascontiguousarray(_from_grp_np(P0, p.q0))
             self.W = np.ascontiguousarray(p.omega0[None, :] + X0[:, 3:])
@@ -991,7 +1030,8 @@ class _Run:
                 if p.random_walk_zeta():
                     Qd = Qd.copy()
                     Qd[:3, :3] += dyn.zeta_cov
-                L = np.ascontiguousarray(psd_sqrt(Qd))
+                # no process noise (Q_d = 0): psd_sqrt's (6, 0) without its eigh
+                L = np.ascontiguousarray(psd_sqrt(Qd)) if Qd.any() else self._noL
                 if L.shape[1]:
                     z = ops.normals(self.draws, _flat(self.zbuf, N, L.shape[1]))
             y = m.y[k]
@@ -1002,6 +1042,7 @@ class _Run:
             if has_y and p.jitter_zeta() and not self.fixed:
                 zeta = ops.normals(self.draws, self.zeta)
                 ops.scale(zeta, dyn.acs_sigma)
+                self.dq_ok = False
             ext.propagate(dt, w_mean, self.draws)
             mpred = self.mpred
             if self.fixed:
@@ -1061,6 +1102,18 @@ class _Run:
         else:
             self.ops.predict(self, k, 0.0, self._empty6, self._zero6, zeta, self.p.model.s_eci[k])
 
+    def dq_mode(self, zeta):
+        """``dq_mode`` of :func:`~lightcurve.filters._bpf_kernels.bpf_predict_nb` for a
+        prediction with the jitter ``zeta``: 0 (no ζ, or nothing keeps exp(ζ)), 1 (form
+        exp(ζ_i) and keep them in ``self.dq``), 2 (read them: the same ζ, resampled with the
+        cloud since)."""
+        if not (zeta.shape[0] and self.dq.shape[0]):
+            return 0
+        if self.dq_ok:
+            return 2
+        self.dq_ok = True
+        return 1
+
     def _update(self, k, y, zeta):
         """Measurement update of epoch k (steps 3, 3b) → (N_eff, ζ after resamplings)."""
         p, cfg, ops, rec, gate, N = self.p, self.cfg, self.ops, self.rec, self.gate, self.N
@@ -1074,7 +1127,7 @@ class _Run:
             ops.fill(ll, 0.0)   # outlier rejected: the weights are left unchanged
         elif R != sig * sig:
             sig = float(np.sqrt(R))   # gate mode "inflate": the inflated noise
-            ops.innov(logw, mpred, y, sig, ll)
+            ops.loglik(logw, mpred, y, sig, ll)
         if any_fin and R is not None:
             rec.innovation(k, y - yhat, var_m + sig * sig)
         rest = 1.0
@@ -1082,7 +1135,10 @@ class _Run:
             for _stage in range(int(cfg.max_stages)):
                 if ops.ess(logw, ll, rest) >= self.thr:
                     break
-                phi = ops.temper(logw, ll, rest, self.thr, 24)
+                if cfg.temper_solver == "bisection":
+                    phi = ops.temper(logw, ll, rest, self.thr, 24)
+                else:
+                    phi = ops.temper_bracketed(logw, ll, rest, self.thr)
                 if not phi > 0.0:
                     break
                 _, ok = ops.addnorm(logw, ll, phi, w)
@@ -1098,7 +1154,7 @@ class _Run:
                     ops.gather(mpred.reshape(N, 1), self.idx, self.mpred2.reshape(N, 1))
                     self.mpred, self.mpred2 = self.mpred2, self.mpred
                     mpred = self.mpred
-                ops.innov(logw, mpred, y, sig, ll)
+                ops.loglik(logw, mpred, y, sig, ll)
                 rec.stages[k] += 1
         neff, ok = ops.addnorm(logw, ll, rest, w)
         if not ok:
@@ -1137,6 +1193,9 @@ class _Run:
             self.ops.gather(zeta, self.idx, self.zeta2)
             self.zeta, self.zeta2 = self.zeta2, self.zeta
             zeta = self.zeta
+            if self.dq_ok:
+                self.ops.gather(self.dq, self.idx, self.dq2)
+                self.dq, self.dq2 = self.dq2, self.dq
         self._reset_weights(k)
         rej = cfg.rejuvenation
         if self.fixed:
@@ -1177,6 +1236,7 @@ class _Run:
     def _resample_move(self, k, qref, qhat):
         """End-of-epoch resampling and rejuvenation (step 5)."""
         ext, cfg, N = self.ext, self.cfg, self.N
+        self.dq_ok = False          # X2 (one of the exp(ζ) buffers) is overwritten below
         self._resample()
         self._reset_weights(k)
         if self.fixed:
@@ -1250,13 +1310,14 @@ class _Run:
         imax = int(ops.argmax(w))
         qmax = ops.row(Q, imax)
         if self.cfg.reference == "refined":
-            qref = rot.quat_mult(rot.grp_to_quat(ops.grp_mean(Q, qmax, w), GRP_A, GRP_F), qmax)
+            qref = BK.grp_compose(np.ascontiguousarray(ops.grp_mean(Q, qmax, w)), qmax, GRP_A,
+                                  GRP_F)
             qref = qref / np.linalg.norm(qref)
         else:
             qref = qmax
         qref = np.ascontiguousarray(qref)
         mean, C = ops.chart_stats(Q, self.W, w, qref, ops.row(self.W, imax), self.X)
-        qhat = rot.quat_mult(rot.grp_to_quat(mean[:3], GRP_A, GRP_F), qref)
+        qhat = BK.grp_compose(np.ascontiguousarray(mean[:3]), qref, GRP_A, GRP_F)
         return qhat / np.linalg.norm(qhat), mean[3:6].copy(), 0.5 * (C + C.T), qref
 
     def _cloud(self, k):
@@ -1285,7 +1346,7 @@ def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
         n_arr, a_arr, ids, prm = m._karrs
         BK.bpf_predict_nb(Q, W, 0.0, 0, J, Ji, 1, np.zeros((0, 6)), np.zeros((6, 6)), zeta,
                           m.s_eci[k], m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          out)
+                          out, np.empty((0, 4)), 0)
     else:
         Qm = Q
         if zeta.shape[0]:

@@ -145,6 +145,9 @@ class _CudaOps:
                            mean, True)
         return mean, float(np.sum(p[:, 0])) / s0, True
 
+    def loglik(self, logw, mpred, y, sig, ll):
+        self.innov(logw, mpred, y, sig, ll)
+
     def nearest(self, mpred, y):
         return float(np.min(self._partials(self.k["k_nearest"], mpred.shape[0], 1, mpred,
                                            float(y))))

@@ -163,7 +163,16 @@ def test_bpf_fused_kernel_equals_separate_steps(curve):
     k = 7
     L = np.tril(rng.standard_normal((6, 6))) * 0.5
     BK.bpf_predict_nb(Q1, W1, 5.0, 0, np.eye(3), np.eye(3), 1, noise, L, zeta, m.s_eci[k],
-                     m.o_eci[k], n, a, ids, p, float(m.offset[k]), out)
+                     m.o_eci[k], n, a, ids, p, float(m.offset[k]), out, np.empty((0, 4)), 0)
+    # exp(ζ) formed and kept (dq_mode 1), then read back (2): the same numbers, bit for bit
+    dq = np.empty((N, 4))
+    for mode in (1, 2):
+        Q3, W3, out3 = Q.copy(), W.copy(), np.empty(N)
+        BK.bpf_predict_nb(Q3, W3, 5.0, 0, np.eye(3), np.eye(3), 1, noise, L, zeta, m.s_eci[k],
+                         m.o_eci[k], n, a, ids, p, float(m.offset[k]), out3, dq, mode)
+        assert np.array_equal(Q3, Q1) and np.array_equal(W3, W1)
+        assert np.array_equal(out3, out)
+    np.testing.assert_allclose(dq, rot.rotvec_to_quat(zeta), atol=1e-15)
     noise = noise @ L.T   # the kernel applies the sample L · z_i
     Q2 = rot.quat_mult(rot.rotvec_to_quat(W * 5.0), Q)
     Q2 = rot.quat_mult(rot.rotvec_to_quat(noise[:, :3]), Q2)
