@@ -38,7 +38,7 @@ from .specialise import jit_copy
 __all__ = [
     "n_chunks", "chunk_bounds", "chunk_sums", "chunked_sum_kernel", "max_finite", "logsumexp_nb", "normalize_log_weights_nb", "add_loglik_normalize",
     "exp_or_zero", "ess_tempered", "temper_exponent", "temper_exponent_bracketed",
-    "innovation_loglik", "gaussian_loglik_into",
+    "innovation_loglik", "gaussian_loglik", "gaussian_loglik_into",
     "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
@@ -395,13 +395,21 @@ def _innov_pass1_item(i, acc, args):
     finite prediction."""
     logw, mpred, y, sig, ll, mx = args
     m = mpred[i]
+    ll[i] = gaussian_loglik(y, m, sig)
     if np.isfinite(m):
         e = exp_or_zero(logw[i] - mx) if mx > -np.inf else 1.0
-        r = (y - m) / sig
-        ll[i] = -0.5 * r * r
         return acc[0] + e, acc[1] + e * m
-    ll[i] = -np.inf
     return acc
+
+
+@nb.njit(cache=True, inline="always")
+def gaussian_loglik(y, m, sig):
+    """``−½ ((y − m)/σ)²`` (Bernard eq. 6.55–6.56 without the constant); −inf where the
+    prediction ``m`` is not finite (the particle reflects no light)."""
+    if np.isfinite(m):
+        r = (y - m) / sig
+        return -0.5 * r * r
+    return -np.inf
 
 
 @nb.njit(cache=True, inline="always")
@@ -446,12 +454,7 @@ def gaussian_loglik_into(mpred, y, sig, ll):
     moments, for a caller that already has them (a new σ, a re-predicted cloud)."""
     N = mpred.shape[0]
     for i in nb.prange(N):
-        m = mpred[i]
-        if np.isfinite(m):
-            r = (y - m) / sig
-            ll[i] = -0.5 * r * r
-        else:
-            ll[i] = -np.inf
+        ll[i] = gaussian_loglik(y, mpred[i], sig)
 
 
 # --------------------------------------------------------------------------------------------
