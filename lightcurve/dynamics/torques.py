@@ -204,13 +204,14 @@ def _add_moment(out, c, fx, fy, fz):
 
 def _facing_facet_torque(q, d_eci, scale, areas, normals, centers, prm1, prm2=None):
     db = rot.qrot_nb(q, d_eci)
+    dn = np.sqrt(db[0] ** 2 + db[1] ** 2 + db[2] ** 2)   # |d_b|, once per call
     out = np.zeros(3)
     for i in range(areas.shape[0]):
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         c = nx * db[0] + ny * db[1] + nz * db[2]
         if c <= 0.0:
             continue
-        fx, fy, fz = _force(i, c, db, nx, ny, nz, scale, areas, prm1, prm2)  # noqa: F821
+        fx, fy, fz = _force(i, c, db, dn, nx, ny, nz, scale, areas, prm1, prm2)  # noqa: F821
         _add_moment(out, centers[i], fx, fy, fz)
     return out
 
@@ -219,7 +220,7 @@ def _facet_torque_kernel(force, name):
     """The kernel ``name(q, d_eci, scale, areas, normals, centers, prm1[, prm2])`` → body
     torque (3,), N m: ``Σ c_i × F_i`` (:func:`_add_moment`) over the facets that face the
     body-frame direction ``d_b = A(q) d_eci`` (``c = n̂_i·d_b > 0``), with the facet force
-    ``F_i = force(i, c, d_b, n̂_i, scale, areas, prm1, prm2)``. One compiled copy of the facet
+    ``F_i = force(i, c, d_b, |d_b|, n̂_i, scale, areas, prm1, prm2)``. One compiled copy of the facet
     loop per force (:func:`~lightcurve.core.specialise.jit_copy`); fixed arguments, not
     ``*args``, which numba's dispatcher packs more slowly per call."""
     doc = f"Facet torque of :func:`{force.__name__}` (no validation): {force.__doc__}"
@@ -227,7 +228,7 @@ def _facet_torque_kernel(force, name):
 
 
 @njit(cache=True, inline="always")
-def _srp_facet_force(i, cos, sb, nx, ny, nz, P, areas, c_spec, c_diff):
+def _srp_facet_force(i, cos, sb, _sn, nx, ny, nz, P, areas, c_spec, c_diff):
     """Numba kernel of :func:`srp_torque` for one state, ``srp_torque_nb(q, s_eci, P, areas,
     normals, centers, c_spec, c_diff)``: ``q`` (4,) unit quaternion inertial→body; ``s_eci``
     (3,) unit object→Sun; ``P`` the pressure already scaled by distance and lit fraction
@@ -292,7 +293,7 @@ def drag_torque(q, r_eci_m, v_eci_m_s, areas_m2, normals_body, centers_body_m, *
 
 
 @njit(cache=True, inline="always")
-def _drag_facet_force(i, nv, vb, nx, ny, nz, rho_cd, areas, along_normal, _):
+def _drag_facet_force(i, nv, vb, vn, nx, ny, nz, rho_cd, areas, along_normal, _):
     """Numba kernel of :func:`drag_torque` for one state, ``drag_torque_nb(q, vrel_eci, rho_cd,
     areas, normals, centers, along_normal)``: ``vrel_eci`` (3,) flow velocity (m/s, ECI;
     relative to the atmosphere, or the orbital velocity for the thesis form); ``rho_cd`` =
@@ -300,7 +301,6 @@ def _drag_facet_force(i, nv, vb, nx, ny, nz, rho_cd, areas, along_normal, _):
     of along the flow. Returns N m, body axes."""
     k = -0.5 * rho_cd * areas[i] * nv
     if along_normal:
-        vn = np.sqrt(vb[0] ** 2 + vb[1] ** 2 + vb[2] ** 2)
         return k * vn * nx, k * vn * ny, k * vn * nz
     return k * vb[0], k * vb[1], k * vb[2]
 
