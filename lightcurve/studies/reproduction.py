@@ -412,12 +412,18 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
         lines.append("")
     extra = [k for k in studies if k not in _EXPERIMENT_TITLE]
     if extra:
-        lines += ["### Ablations", "", "Studies that switch one error source of an experiment "
-                  "off (their [simulation]/[scenario] differences are in their study.json).", ""]
+        lines += ["### Ablations", "", "Studies that change one thing of an experiment, with "
+                  "its seeds (run i flies the same spacecraft); the change is in their study "
+                  "file (study.json), the truth albedo and thesis-filter overrides are repeated "
+                  "here. Compare with a reference of the same runs where one is listed.", ""]
         for k in extra:
             s = studies[k]
-            lines += [f"#### {k}", "", f"{s['runs']} runs per case, truth albedo `{s['albedo']}`.",
-                      ""]
+            tf = s.get("thesis_filter") or {}
+            over = (", thesis-filter overrides " + ", ".join(f"`{n} = {v:g}`"
+                                                            for n, v in tf.items())
+                    if tf else ", no thesis-filter override")
+            lines += [f"#### {k}", "", f"{s['runs']} runs per case of experiment "
+                      f"`{s.get('experiment', '–')}`, truth albedo `{s['albedo']}`{over}.", ""]
             lines += _table(s)
             lines.append("")
     lines += _timing_section(timing)

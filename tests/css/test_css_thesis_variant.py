@@ -546,3 +546,20 @@ def test_reproduction_time_above_15_claims(tmp_path):
     assert "at most 8.0 min — **disagrees** (5 runs per case: indicative)" in line(
         "- Without a gyro, every EKF run")
     assert "**agrees**" in line("- Without a gyro, the ECKF slightly more")
+
+
+def test_reproduction_ablation_states_its_switch(tmp_path):
+    # an ablation study is listed under its name with the change it makes
+    from lightcurve.studies.reproduction import css_section
+
+    d = tmp_path / "a"
+    d.mkdir()
+    (d / "summary.json").write_text(json.dumps({
+        "study": "ablation-fig3_09-x", "experiment": "fig3_09", "runs": 7, "albedo": "toms",
+        "failures": 0, "verdict": "v", "thesis_filter": {"sigma_valpha": 0.2},
+        "cases": [_c("eckf", 4.0, 3.1, runs=7)]}))
+    txt = css_section([d])
+    assert "#### ablation-fig3_09-x" in txt
+    assert "7 runs per case of experiment `fig3_09`, truth albedo `toms`, thesis-filter " \
+           "overrides `sigma_valpha = 0.2`." in txt
+    assert "### Fig. 3.9 — tumbling, dual pyramid (§3.3.1)\n\nNot run yet." in txt
