@@ -563,3 +563,14 @@ def test_reproduction_ablation_states_its_switch(tmp_path):
     assert "7 runs per case of experiment `fig3_09`, truth albedo `toms`, thesis-filter " \
            "overrides `sigma_valpha = 0.2`." in txt
     assert "### Fig. 3.9 — tumbling, dual pyramid (§3.3.1)\n\nNot run yet." in txt
+
+
+def test_reproduction_cube_single_point_claim(tmp_path):
+    # §3.3.1 (fig. 3.10): "the angular error in the three single-point methods are all the same
+    # due to the orthogonality of the measurements"
+    from lightcurve.studies.reproduction import css_section
+
+    d = _summary(tmp_path / "c", "fig3_10", [_c("wavg", 50.0), _c("lsmn", 60.0),
+                                             _c("wlsmn", 50.5)])
+    line = next(x for x in css_section([d]).splitlines() if x.startswith("- Cube (fig. 3.10"))
+    assert "WAVG 50.0°, LSMN 60.0°, WLSMN 50.5° — **disagrees**" in line
