@@ -574,3 +574,13 @@ def test_reproduction_cube_single_point_claim(tmp_path):
                                              _c("wlsmn", 50.5)])
     line = next(x for x in css_section([d]).splitlines() if x.startswith("- Cube (fig. 3.10"))
     assert "WAVG 50.0°, LSMN 60.0°, WLSMN 50.5° — **disagrees**" in line
+
+
+def test_reproduction_cli_counts_css_outputs(tmp_path, capsys):
+    from lightcurve.cli import main
+
+    d = _summary(tmp_path / "c", "fig3_10", [_c("ekf", 2.2, 2.0)])
+    out = tmp_path / "r.md"
+    assert main(["reproduction", "--css", str(d), "-o", str(out)]) == 0
+    assert "(0 Bernard and 1 CSS study output(s) read)" in capsys.readouterr().out
+    assert "| EKF | intermediate | 2 | 2.20 / 2.20 | 1.10 |" in out.read_text()
