@@ -159,9 +159,11 @@ def _cmd_css_study(args) -> int:
     for c in summary["cases"]:
         lv = c.get("p99_level_deg")
         th = c.get("thesis_p99_deg")
+        if th is not None:   # a bound printed as one (okeefe2015.thesis_p99_bound)
+            th = {"lower": ">", "upper": "<="}.get(c.get("thesis_p99_bound"), "") + format(th, "g")
         a15 = c.get("above15_s_per_orbit", {}).get("max")
         print(f"{c['estimator']:>9} {c['variant']:>7} {c['gyro']:>12} {c['runs']:5d} "
-              f"{'-' if lv is None else format(lv, '8.2f'):>8} {'-' if th is None else format(th, 'g'):>7} "
+              f"{'-' if lv is None else format(lv, '8.2f'):>8} {'-' if th is None else th:>7} "
               f"{'-' if a15 is None else format(a15 / 60, '15.2f'):>15}")
     print(f"report in {out_dir}/ (summary.json, report.html)")
     return 0

@@ -23,7 +23,9 @@ def _cmd_reproduction(args) -> int:
                             table44=args.css_table44)]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
-    return report_written(args.output, detail=f" ({n} study output(s) read)")
+    n_css = len(args.css or [])
+    return report_written(args.output, detail=f" ({n} Bernard and {n_css} CSS study output(s) "
+                          "read)")
 
 
 def register(sub) -> None:

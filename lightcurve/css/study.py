@@ -17,6 +17,9 @@ A study TOML (``pipelines/css/okeefe2015/*.toml``)::
     duration_s = 6000.0
     albedo = "toms"                   # "toms" (1°×1.25° with its spread), "toms5", "builtin", "none"
     [simulation]                      # optional overrides of the §2.4 values (okeefe2015.py)
+    [thesis_filter]                   # optional, for measured ablations: overrides of the thesis
+    sigma_valpha = 0.2                # sun-line EKF/ECKF parameters (sunline_thesis.THESIS_PRM
+                                      # names, SI units) in both thesis filters
 
 Every case (estimator × variant × gyro) flies the same dispersed spacecraft for run ``i``
 (seed ``[seed, i]``, common random numbers; :func:`lightcurve.css.truth.simulate_css_cases`).
@@ -130,6 +133,7 @@ class StudySpec:
     albedo: str = "toms"
     thresholds_deg: tuple = (15.0, 30.0)
     simulation: dict = field(default_factory=dict)
+    thesis_filter: dict = field(default_factory=dict)
     text: str = ""
     source: str = ""
 
@@ -139,6 +143,8 @@ class StudySpec:
         d.pop("runs")
         d.pop("text")
         d.pop("source")
+        if not d["thesis_filter"]:      # no override: the hash of a study without the section
+            d.pop("thesis_filter")
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()
 
     def cases(self):
@@ -159,9 +165,17 @@ def scenario_for(spec: StudySpec, estimator, variant, gyro):
         alb = thesis_albedo("5x5" if alb == "toms5" else "10x10")
         if alb is None:
             alb = "builtin"
-    return thesis_scenario(spec.configuration, estimator, variant=variant,
-                           gyro=None if gyro == "none" else gyro, controlled=spec.controlled,
-                           duration_s=spec.duration_s, albedo=alb, sim=dict(spec.simulation))
+    sc = thesis_scenario(spec.configuration, estimator, variant=variant,
+                         gyro=None if gyro == "none" else gyro, controlled=spec.controlled,
+                         duration_s=spec.duration_s, albedo=alb, sim=dict(spec.simulation))
+    if spec.thesis_filter and variant == "thesis" and sc.thesis_params is not None:
+        from .sunline_thesis import THESIS_PRM
+
+        p = np.array(sc.thesis_params, dtype=float)
+        for k, v in spec.thesis_filter.items():
+            p[THESIS_PRM.index(k)] = float(v)
+        sc.thesis_params = p
+    return sc
 
 
 @dataclass(frozen=True)
@@ -234,6 +248,21 @@ def _run_metrics(spec: StudySpec, r, period_s):
     return out
 
 
+def _interruption(exc):
+    """The KeyboardInterrupt (Ctrl-C, or :class:`lightcurve.process.Terminated` for SIGTERM/
+    SIGHUP) behind ``exc``, or None.  A signal handler that raises while a numba kernel runs
+    surfaces as ``SystemError: ... returned a result with an exception set`` with the
+    interruption as its cause."""
+    seen = set()
+    e = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return None
+
+
 def run_task(task: Task) -> dict:
     """Execute one task (module-level, picklable; never raises: failures are returned)."""
     import time
@@ -256,6 +285,9 @@ def run_task(task: Task) -> dict:
         for c, r in zip(task.cases, rs):
             res["cases"][_case_key(c)] = _run_metrics(spec, r, period)
     except Exception as exc:  # noqa: BLE001 - a failing run is recorded, the study goes on
+        intr = _interruption(exc)
+        if intr is not None:     # a signal that arrived inside a numba kernel: stop, record nothing
+            raise intr from None
         res["status"] = "failed"
         res["error"] = f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=6)}"
     res["wall_s"] = time.perf_counter() - t0
@@ -446,7 +478,10 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
                     envelopes[k]["pointing99"] = np.nanpercentile(P, 99, axis=0).tolist()
         th_p99 = ref.get("p99_deg", {}).get(e)
         entry["thesis_p99_deg"] = th_p99
-        if th_p99 is not None and entry.get("p99_level_deg") is not None:
+        if th_p99 is not None:
+            entry["thesis_p99_bound"] = ok.thesis_p99_bound(spec.experiment, e)
+        if (th_p99 is not None and entry.get("p99_level_deg") is not None
+                and entry["thesis_p99_bound"] is None):
             entry["ratio_to_thesis"] = entry["p99_level_deg"] / th_p99
         th15 = ref.get("above15_min_per_orbit", {}).get(e)
         if th15 is not None:
@@ -457,6 +492,7 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
                "runs": n, "failures": failures, "first_error": first_error,
                "configuration": spec.configuration, "controlled": spec.controlled,
                "albedo": spec.albedo, "settle_s": spec.settle_s,
+               "simulation": dict(spec.simulation), "thesis_filter": dict(spec.thesis_filter),
                "tau_step_s": TAU_STEP_S, "cases": cases, "open_choices": ok.OPEN_CHOICES,
                "verdict": _verdict(spec, cases)}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float) + "\n")
@@ -466,7 +502,8 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
 
 def _verdict(spec, cases) -> dict:
     """One line, ``{"level", "text"}``: thesis-variant p99 levels against the thesis's numbers
-    (±25 %); ok when all agree, warn otherwise."""
+    (:func:`lightcurve.css.okeefe2015.thesis_p99_agrees`: ±25 % of a level, or the side of a
+    bound); ok when all agree, warn otherwise."""
     parts = []
     all_ok = True
     for c in cases:
@@ -476,11 +513,14 @@ def _verdict(spec, cases) -> dict:
         if lv is None:
             continue
         th = c["thesis_p99_deg"]
-        if spec.experiment == "fig3_09" and c["estimator"] in ("wavg", "lsmn", "wlsmn"):
-            agree = lv > th
+        bound = ok.thesis_p99_bound(spec.experiment, c["estimator"])
+        agree = ok.thesis_p99_agrees(spec.experiment, c["estimator"], lv)
+        if bound == "lower":
             parts.append(f"{c['estimator'].upper()} {lv:.1f}° ({'>' if agree else '≤'} {th:g}°)")
+        elif bound == "upper":
+            parts.append(f"{c['estimator'].upper()} {lv:.2f}° ({'≤' if agree else '>'} {th:g}°, "
+                         "the thesis's bound)")
         else:
-            agree = abs(lv / th - 1.0) <= 0.25
             parts.append(f"{c['estimator'].upper()} {lv:.2f}° vs {th:g}° "
                          f"({'within' if agree else 'outside'} ±25 %)")
         all_ok &= bool(agree)
@@ -630,9 +670,26 @@ def load_css_study(path) -> StudySpec:
                 sim.str(k) if isinstance(sim.data[k], str) else sim.float(k))
         sim.check_unknown()
         spec = replace(spec, simulation=d)
+    tf = doc.section("thesis_filter", None)
+    if tf is not None:
+        d = {}
+        for k in list(tf.data):
+            if k not in _THESIS_FILTER_KEYS:
+                raise InputError("unknown thesis-filter parameter", file=path,
+                                 field=f"thesis_filter.{k}", value=tf.data[k],
+                                 allowed=", ".join(_THESIS_FILTER_KEYS))
+            d[k] = tf.float(k, min=0.0)
+        tf.check_unknown()
+        spec = replace(spec, thesis_filter=d)
     doc.check_unknown()
     return spec
 
+
+# sun-line thesis-filter parameters a study may override (sunline_thesis.THESIS_PRM; "kind"
+# excluded: it selects the filter)
+_THESIS_FILTER_KEYS = ("sigma_v", "sigma_s", "sigma_w", "sigma_wd", "sigma_wr", "strong_frac",
+                       "strong_factor", "shadow_level", "cons_sigmas", "sigma_mis",
+                       "sigma_valpha", "sigma_ck", "sdd_x", "sdd_y", "sdd_z", "p0", "shadow_frac")
 
 _SIM_KEYS = ("altitude_km", "inclination_deg", "raan_deg", "epoch_utc", "perturbations",
              "css_rate_hz", "gyro_rate_hz", "fov_half_angle_deg", "noise_sigma",

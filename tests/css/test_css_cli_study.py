@@ -152,3 +152,96 @@ def test_read_recording_rejects_other_hdf5(tmp_path):
     with pytest.raises(InputError) as e:
         read_css_recording(p)
     assert "format" in str(e.value)
+
+
+def test_study_thesis_filter_override(tmp_path):
+    # [thesis_filter]: one thesis-filter parameter switched for a measured ablation; it reaches
+    # the thesis filters only, changes the study hash, and a study without it keeps its hash
+    from lightcurve.css.study import scenario_for
+    from lightcurve.css.sunline_thesis import THESIS_PRM
+
+    base = load_css_study(_study_toml(tmp_path))
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + "\n[thesis_filter]\nsigma_valpha = 0.2\n")
+    spec = load_css_study(p)
+    assert spec.thesis_filter == {"sigma_valpha": 0.2} and base.thesis_filter == {}
+    assert spec.hash != base.hash
+    i = THESIS_PRM.index("sigma_valpha")
+    th = scenario_for(spec, "eckf", "thesis", "intermediate")
+    assert th.thesis_params[i] == 0.2
+    # O'Keefe §3.2.3's σ_Vα = 0.1 stays the default of the thesis ECKF
+    assert scenario_for(base, "eckf", "thesis", "intermediate").thesis_params[i] == 0.1
+    # a study file without the section hashes as before the section existed
+    import hashlib
+    from dataclasses import asdict
+
+    d = asdict(base)
+    for k in ("runs", "text", "source", "thesis_filter"):
+        d.pop(k)
+    assert base.hash == hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()
+                                       ).hexdigest()
+
+
+@pytest.mark.parametrize("extra,field", [
+    ("sigma_valfa = 0.2", "thesis_filter.sigma_valfa"),
+    ("kind = 1.0", "thesis_filter.kind"),
+    ("sigma_valpha = -0.1", "thesis_filter.sigma_valpha"),
+])
+def test_study_thesis_filter_bad(tmp_path, extra, field):
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + f"\n[thesis_filter]\n{extra}\n")
+    with pytest.raises(InputError) as e:
+        load_css_study(p)
+    assert field in str(e.value)
+
+
+def test_thesis_filter_keys_are_filter_parameters():
+    from lightcurve.css.study import _THESIS_FILTER_KEYS
+    from lightcurve.css.sunline_thesis import THESIS_PRM
+
+    assert set(_THESIS_FILTER_KEYS) == set(THESIS_PRM) - {"kind"}
+
+
+def test_bundled_ablation_files_differ_by_one_switch():
+    # each fig. 3.9 ablation is the experiment file with one change (same seeds, orbit, sensors)
+    from lightcurve._paths import data_dir
+
+    d = data_dir("pipelines") / "css" / "okeefe2015"
+    ref = load_css_study(d / "fig3_09_tumbling_dual_pyramid.toml")
+    files = sorted((d / "ablations").glob("*.toml"))
+    assert files
+    for f in files:
+        a = load_css_study(f)
+        assert a.name.startswith("ablation-") and a.experiment == ref.experiment
+        assert (a.seed, a.settle_s, a.configuration, a.controlled, a.duration_s, a.gyros) == (
+            ref.seed, ref.settle_s, ref.configuration, ref.controlled, ref.duration_s, ref.gyros)
+        assert a.simulation == ref.simulation
+        changes = (a.albedo != ref.albedo) + bool(a.thesis_filter)
+        assert changes == 1, f.name
+
+
+def test_run_task_interruption_inside_kernel_is_not_a_failed_run(tmp_path, monkeypatch):
+    # SIGTERM/Ctrl-C while a numba kernel runs reaches Python as a SystemError caused by the
+    # interruption; it must stop the study, not be stored as a failed run (a resumed study
+    # skips stored runs, so that run would stay "failed" for good)
+    import lightcurve.css.truth as truth
+    from lightcurve.css.study import run_task, study_tasks
+    from lightcurve.process import Terminated
+
+    def interrupted(*a, **k):
+        try:
+            raise Terminated(15)
+        except Terminated as t:
+            raise SystemError("CPUDispatcher(truth_loop_nb) returned a result with an "
+                              "exception set") from t
+
+    def broken(*a, **k):
+        raise SystemError("some other failure")
+
+    task = study_tasks(load_css_study(_study_toml(tmp_path)), 1)[0]
+    monkeypatch.setattr(truth, "simulate_css_cases", interrupted)
+    with pytest.raises(Terminated):
+        run_task(task)
+    monkeypatch.setattr(truth, "simulate_css_cases", broken)
+    res = run_task(task)
+    assert res["status"] == "failed" and "some other failure" in res["error"]

@@ -472,3 +472,115 @@ def test_thesis_truth_shadow_is_binary_as_eq_2_21():
     assert np.all(rt.direct[rt.lit == 0] == 0)
     with pytest.raises(ValueError, match="shadow_model"):
         thesis_scenario("dual_pyramid", "wavg", sim={"shadow_model": "flat"}, **kw)
+
+
+def test_thesis_p99_bounds_from_the_text():
+    # §3.3.1: single-point errors "above 45°" (a lower bound); §3.3.2 (fig. 3.13): "within 25°"
+    # (an upper bound); the EKF's 1.75° (fig. 3.9) a level compared within ±25 %
+    from lightcurve.css.okeefe2015 import thesis_p99_agrees, thesis_p99_bound
+
+    assert thesis_p99_bound("fig3_09", "wavg") == "lower"
+    assert thesis_p99_bound("fig3_13", "eckf") == "upper"
+    assert thesis_p99_bound("fig3_09", "ekf") is None
+    assert thesis_p99_agrees("fig3_09", "wavg", 50.0) and not thesis_p99_agrees("fig3_09", "wavg", 30.0)
+    assert thesis_p99_agrees("fig3_13", "ekf", 8.0) and not thesis_p99_agrees("fig3_13", "ekf", 26.0)
+    assert thesis_p99_agrees("fig3_09", "ekf", 2.1) and not thesis_p99_agrees("fig3_09", "ekf", 2.3)
+
+
+def _summary(d, experiment, cases, runs=5):
+    d.mkdir()
+    (d / "summary.json").write_text(json.dumps({"experiment": experiment, "runs": runs,
+                                                "albedo": "toms", "failures": 0,
+                                                "verdict": "v", "cases": cases}))
+    return d
+
+
+def _c(est, p99, th=None, above15_s=None, runs=5, gyro="intermediate"):
+    c = {"estimator": est, "variant": "thesis", "gyro": gyro, "runs": runs,
+         "p99_level_deg": p99, "p99_pooled_deg": p99, "thesis_p99_deg": th}
+    if th is not None:
+        c["ratio_to_thesis"] = p99 / th
+    if above15_s is not None:
+        c["above15_s_per_orbit"] = {"median": above15_s / 2, "p99": above15_s, "max": above15_s}
+    return c
+
+
+def test_reproduction_bounds_are_not_ratios(tmp_path):
+    # a bound is printed as one ("≤ 25", "> 45") and gets no ratio; the study verdict reads it
+    # the same way
+    from lightcurve.css.study import StudySpec, _verdict
+    from lightcurve.studies.reproduction import css_section
+
+    d13 = _summary(tmp_path / "c", "fig3_13", [_c("ekf", 8.0, 25.0)])
+    d09 = _summary(tmp_path / "t", "fig3_09", [_c("ekf", 1.8, 1.75), _c("wavg", 40.0, 45.0)])
+    txt = css_section([d13, d09])
+    assert "| EKF | intermediate | ≤ 25 | 8.00 / 8.00 | – |" in txt
+    assert "| WAVG | intermediate | > 45 | 40.00 / 40.00 | – |" in txt
+    assert "| EKF | intermediate | 1.75 | 1.80 / 1.80 | 1.03 |" in txt
+    v = _verdict(StudySpec(experiment="fig3_13"), [_c("ekf", 8.0, 25.0)])
+    assert v["level"] == "ok" and "≤ 25°" in v["text"]
+    v = _verdict(StudySpec(experiment="fig3_13"), [_c("ekf", 30.0, 25.0)])
+    assert v["level"] == "warn"
+
+
+def test_reproduction_time_above_15_claims(tmp_path):
+    # fig. 3.12 (§3.3.2): EKF/ECKF least time above 15° (2 min), WAVG least of the single-point
+    # estimators (14 min), all below 17 min; §3.3.3: every gyro-less EKF run below ≈ 5 min
+    from lightcurve.studies.reproduction import css_section
+
+    d11 = _summary(tmp_path / "a", "fig3_11", [
+        _c("ekf", 3.0, 4.0, 60.0, runs=200), _c("eckf", 5.0, 6.0, 90.0, runs=200),
+        _c("wavg", 8.0, None, 600.0, runs=200), _c("lsmn", 20.0, None, 1200.0, runs=200),
+        _c("wlsmn", 10.0, None, 1100.0, runs=200)], runs=200)
+    d15 = _summary(tmp_path / "b", "fig3_15", [_c("ekf", 9.0, None, 8 * 60.0),
+                                               _c("eckf", 9.0, None, 9 * 60.0)])
+    lines = css_section([d11, d15]).splitlines()
+
+    def line(start):
+        return next(x for x in lines if x.startswith(start))
+
+    assert "**agrees**" in line("- Controlled dual pyramid: EKF and ECKF spend the least")
+    assert "indicative" not in line("- Controlled dual pyramid: EKF and ECKF spend the least")
+    assert "**agrees**" in line("- Controlled dual pyramid: WAVG the least")
+    assert "at most 20.0 min — **disagrees**" in line("- Controlled dual pyramid: every")
+    assert "at most 8.0 min — **disagrees** (5 runs per case: indicative)" in line(
+        "- Without a gyro, every EKF run")
+    assert "**agrees**" in line("- Without a gyro, the ECKF slightly more")
+
+
+def test_reproduction_ablation_states_its_switch(tmp_path):
+    # an ablation study is listed under its name with the change it makes
+    from lightcurve.studies.reproduction import css_section
+
+    d = tmp_path / "a"
+    d.mkdir()
+    (d / "summary.json").write_text(json.dumps({
+        "study": "ablation-fig3_09-x", "experiment": "fig3_09", "runs": 7, "albedo": "toms",
+        "failures": 0, "verdict": "v", "thesis_filter": {"sigma_valpha": 0.2},
+        "cases": [_c("eckf", 4.0, 3.1, runs=7)]}))
+    txt = css_section([d])
+    assert "#### ablation-fig3_09-x" in txt
+    assert "7 runs per case of experiment `fig3_09`, truth albedo `toms`, thesis-filter " \
+           "overrides `sigma_valpha = 0.2`." in txt
+    assert "### Fig. 3.9 — tumbling, dual pyramid (§3.3.1)\n\nNot run yet." in txt
+
+
+def test_reproduction_cube_single_point_claim(tmp_path):
+    # §3.3.1 (fig. 3.10): "the angular error in the three single-point methods are all the same
+    # due to the orthogonality of the measurements"
+    from lightcurve.studies.reproduction import css_section
+
+    d = _summary(tmp_path / "c", "fig3_10", [_c("wavg", 50.0), _c("lsmn", 60.0),
+                                             _c("wlsmn", 50.5)])
+    line = next(x for x in css_section([d]).splitlines() if x.startswith("- Cube (fig. 3.10"))
+    assert "WAVG 50.0°, LSMN 60.0°, WLSMN 50.5° — **disagrees**" in line
+
+
+def test_reproduction_cli_counts_css_outputs(tmp_path, capsys):
+    from lightcurve.cli import main
+
+    d = _summary(tmp_path / "c", "fig3_10", [_c("ekf", 2.2, 2.0)])
+    out = tmp_path / "r.md"
+    assert main(["reproduction", "--css", str(d), "-o", str(out)]) == 0
+    assert "(0 Bernard and 1 CSS study output(s) read)" in capsys.readouterr().out
+    assert "| EKF | intermediate | 2 | 2.20 / 2.20 | 1.10 |" in out.read_text()
