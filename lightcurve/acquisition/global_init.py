@@ -15,11 +15,9 @@ Prior
 q₀ uniform over SO(3) (Haar measure: normalised 4-D Gaussian vectors, Muller 1959 /
 Marsaglia 1972); the rate direction uniform on the sphere; the rate magnitude from the spin
 period analysis (:mod:`.period`): a mixture over the best period and its aliases (weights from
-their BIC differences), the stated spin period when the turn-to-turn correlation chose a
-multiple of the best (:mod:`.period`, step 6; the best period's weight) and the integer multiples
-2–4 of the best period (``RATE_PRIOR_MULTIPLES``: the brightness may repeat several times per
-turn), with the synodic bound (the bisector's rate) and the statistical 1σ as its width, plus a
-broad
+their BIC differences) and the integer multiples 2–4 of the best period (``RATE_PRIOR_MULTIPLES``:
+the brightness may repeat several times per turn), with the synodic bound and the statistical
+1σ as its width (:meth:`.period.PeriodResult.rate_candidates`), plus a broad
 log-uniform component (weight ``broad_weight``) over the periods the sampling allows, so a wrong
 period analysis can be outvoted by the data. Without a significant period the broad component
 alone.

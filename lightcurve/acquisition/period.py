@@ -432,19 +432,19 @@ class PeriodResult:
                 "n_points": self.n_points, "span_s": self.span_s, "n_clipped": self.n_clipped,
                 "aliases": [dict(a, interval_99_s=list(a["interval_99_s"])) for a in self.aliases]}
 
-    def rate_candidates(self, max_delta_bic=10.0, multiples=(2,), multiple_weight=0.25,
-                        spin_weight=1.0):
+    def rate_candidates(self, max_delta_bic=10.0, multiples=(2,), multiple_weight=0.25):
         """Spin-rate magnitude candidates for a rate prior, list of dicts.
 
-        Each: ``omega_rad_s`` (2π/P), ``halfwidth_rad_s`` (the synodic bound in rate: the
-        phase-angle bisector's rate, the same for every candidate since
-        ``ω_sid = ω_syn ± ω_PAB``, module docstring), ``sigma_rad_s`` (statistical 1σ in rate,
-        at the best period's relative precision), ``weight`` (normalised) and ``relation``.
+        Each: ``omega_rad_s`` (2π/P), ``halfwidth_rad_s`` (2π × the best period's synodic bound
+        / P², i.e. the bisector's rate ω_PAB at the best period and ω_PAB (P_best/P)² at
+        another candidate — narrower than the rate bound ω_PAB itself, which is the same for
+        every candidate; a sampler-efficiency choice kept because the prior with ω_PAB for every
+        candidate made the rocket body's first sampler attempts miss, docs/acquisition.md),
+        ``sigma_rad_s`` (statistical 1σ in rate), ``weight`` (normalised) and ``relation``.
         The best period and every alias with ΔBIC ≤ ``max_delta_bic`` (weights ∝ e^{−ΔBIC/2});
-        the stated spin period (:attr:`spin_period_s`, step 6) when it is not the best, with
-        ``spin_weight`` × the best's weight; ``multiples`` adds k × the best period with
-        ``multiple_weight`` × the best's weight (bodies whose brightness repeats k times per
-        turn). Empty when the period is not significant.
+        ``multiples`` adds k × the best period with ``multiple_weight`` × the best's weight
+        (bodies whose brightness repeats k times per turn). Empty when the period is not
+        significant.
         """
         if not self.significant:
             return []
@@ -453,7 +453,7 @@ class PeriodResult:
         def add(P, dbic, relation, w=None):
             om = 2.0 * math.pi / P
             frac = self.period_sigma_s / self.period_s
-            hw = self.pab_rate_rad_s
+            hw = 2.0 * math.pi * self.synodic_bound_s / P ** 2
             if any(abs(c["omega_rad_s"] - om) < 1e-9 * om for c in out):
                 return
             out.append({"omega_rad_s": om, "halfwidth_rad_s": hw, "sigma_rad_s": om * frac,
@@ -461,8 +461,6 @@ class PeriodResult:
                         "relation": relation})
 
         add(self.period_s, 0.0, "best")
-        if self.spin_relation != "best" and spin_weight > 0 and np.isfinite(self.spin_period_s):
-            add(self.spin_period_s, 0.0, f"spin ({self.spin_relation})", w=spin_weight)
         for a in self.aliases:
             if a["delta_bic"] <= max_delta_bic:
                 add(a["period_s"], a["delta_bic"], a["relation"])

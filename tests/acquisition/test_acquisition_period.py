@@ -318,27 +318,3 @@ def test_lag_pairs_interpolate_within_one_site_and_stop_at_gaps():
     a2, b2 = _lag_pairs(t, t.copy(), site2, 60.0, 10.0)
     assert a2.size == 0                     # t + 60 lands only in the other site's series
 
-
-def test_rate_candidates_carry_the_stated_spin_period_and_the_bisector_rate(thesis_fast_spin):
-    """The rate prior's candidates (Table 9.2 cube, seed 0): the stated spin period (3× best)
-    is a candidate with the best period's weight; every candidate's synodic half-width in rate
-    is the bisector's rate (ω_sid = ω_syn ± ω_PAB, Harris et al. 1984, independent of the
-    period); the true rate 2π/84.95 s lies within 3 of that component's standard deviations
-    √(σ² + hw²/3) (the global initialisation's Gaussian width)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        import lightcurve
-
-        lc = lightcurve.simulate(thesis_fast_spin, seed=0)
-    res = analyse_period(lc)
-    cands = res.rate_candidates(multiples=(2, 3, 4))
-    by = {c["relation"]: c for c in cands}
-    spin = by["spin (3x best)"]
-    assert spin["weight"] == pytest.approx(by["best"]["weight"], rel=1e-12)
-    assert all(c["halfwidth_rad_s"] == pytest.approx(res.pab_rate_rad_s, rel=1e-12)
-               for c in cands)
-    assert sum(c["weight"] for c in cands) == pytest.approx(1.0, rel=1e-12)
-    w_true = 2 * math.pi / (360.0 / math.sqrt(2.0**2 + 1.0**2 + 3.6**2))
-    sd = math.sqrt(spin["sigma_rad_s"] ** 2 + spin["halfwidth_rad_s"] ** 2 / 3.0)
-    assert abs(spin["omega_rad_s"] - w_true) < 3 * sd
-    assert "3x best" not in by                  # the same period is not listed twice
