@@ -56,8 +56,8 @@ Method
    detrended magnitudes r(t) and r(t + τ), r(t + τ) linearly interpolated in time within one
    site's series (a gap of at most two median cadences). For every candidate spin period (the
    best, the aliases with ΔBIC ≤ 6 and the 2–4 × multiples, each with at least two turns in the
-   window) τ is searched over the candidate's 99 % interval (steps of 1/20 of the cadence) and the
-   highest ρ kept. The best period stays the answer when the brightness repeats after one of its
+   window) τ is searched over the candidate's 99 % interval (steps of 1/20 of the cadence, at most
+   401 lags) and the highest ρ kept. The best period stays the answer when the brightness repeats after one of its
    periods (ρ_best significantly positive: ``atanh ρ_best · √(n_best − 3)/1.06 > 2.326``,
    one-sided 1 %; the Fisher-z standard error of a Spearman coefficient, Fieller, Hartley &
    Pearson 1957, Biometrika 44, 470): a longer candidate is then not needed. Otherwise the
@@ -272,10 +272,11 @@ def _spearman(a, b):
 
 def turn_correlation(t, r, site, lo_s, hi_s, cadence_s):
     """Highest turn-to-turn rank correlation over lags τ ∈ [lo_s, hi_s] (module docstring,
-    step 6) → (τ s, ρ, number of pairs). τ on a grid of cadence/20 (at most 2001 lags); lags
-    with fewer than 10 pairs are skipped (ρ = nan, 0 pairs when none qualifies)."""
+    step 6) → (τ s, ρ, number of pairs). τ on a grid of cadence/20 (at most 401 lags, the
+    cost bound of a long recording); lags with fewer than 10 pairs are skipped (ρ = nan,
+    0 pairs when none qualifies)."""
     step = cadence_s / 20.0
-    n_lag = int(min(2001, max(1, math.floor((hi_s - lo_s) / step) + 1)))
+    n_lag = int(min(401, max(1, math.floor((hi_s - lo_s) / step) + 1)))
     best = (float("nan"), float("nan"), 0)
     for tau in np.linspace(lo_s, hi_s, n_lag) if n_lag > 1 else [0.5 * (lo_s + hi_s)]:
         a, b = _lag_pairs(t, r, site, float(tau), 2.0 * cadence_s)
