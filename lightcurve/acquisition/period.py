@@ -45,10 +45,10 @@ Method
    bound to ±2.576σ.
 5. Significance: the F-test of trend + H harmonics against the trend alone, Bonferroni-
    corrected for the number of independent frequencies ``(f_max − f_min)·T``.
-6. Spin period (turn-to-turn repetition): a fit of a few harmonics may prefer a fraction of
-   the turn (a cube whose three bright faces pass by per turn, glints, a brightness that drifts
-   while the bisector sweeps), and the multi-harmonic model at the full period then pays for
-   many harmonics it cannot fit to a drifting curve. What tells the spin period is whether the
+6. Spin period (turn-to-turn repetition): a fit of a few harmonics may prefer a fraction of the
+   turn (a cube whose three bright faces pass by per turn, glints, a brightness that drifts while
+   the bisector sweeps), and the multi-harmonic model at the full period then pays for many
+   harmonics it cannot fit to a drifting curve. What tells the spin period is whether the
    brightness repeats *one turn later*: the autocorrelation of the lightcurve at the lag of one
    turn (the ACF method of McQuillan, Aigrain & Mazeh 2013, MNRAS 432, 1203, §3, which takes the
    higher of the first two ACF peaks for curves with two dips per turn). Here the correlation is
@@ -56,23 +56,24 @@ Method
    detrended magnitudes r(t) and r(t + τ), r(t + τ) linearly interpolated in time within one
    site's series (a gap of at most two median cadences). For every candidate spin period (the
    best, the aliases with ΔBIC ≤ 6 and the 2–4 × multiples, each with at least two turns in the
-   window) τ is searched over the candidate's 99 % interval (steps of 1/20 of the cadence, at most
-   401 lags) and the highest ρ kept. The best period stays the answer when the brightness repeats after one of its
-   periods (ρ_best significantly positive: ``atanh ρ_best · √(n_best − 3)/1.06 > 2.326``,
-   one-sided 1 %; the Fisher-z standard error of a Spearman coefficient, Fieller, Hartley &
-   Pearson 1957, Biometrika 44, 470): a longer candidate is then not needed. Otherwise the
-   candidate with the highest ρ replaces it when that ρ is higher by
-   ``z = (atanh ρ_k − atanh ρ_best)/√(1.06²/(n_k − 3) + 1.06²/(n_best − 3)) > 2.326`` (the two
-   coefficients treated as independent, which overstates the variance of the difference of
-   positively dependent coefficients, so the test is conservative). The first condition also
-   keeps a strictly periodic curve sampled a few times per turn at its period: there the lag of
-   one turn falls between samples, the interpolated partner is blurred, and a multiple whose
-   lag happens to fall nearer a sample can show a higher ρ without being the period. Candidates whose ρ is not significantly below the chosen one's (same test) are
-   stated as spin periods the data do not rule out. The stated spin period and its 99 % interval
-   are the chosen candidate's (steps 3–4: k × the best period, k × its σ and the synodic bound
-   at k × P); the lag of the highest ρ, which lies in that interval by construction, is listed
-   beside it (its precision is about one cadence: the correlation of a sharply varying curve is
-   highest where the lag falls on samples).
+   window) τ is searched over the candidate's 99 % interval (steps of 1/20 of the cadence, at
+   most 401 lags) and the highest ρ kept. The best period stays the answer when the brightness
+   repeats after one of its periods (ρ_best significantly positive: ``atanh ρ_best · √(n_best −
+   3)/1.06 > 2.326``, one-sided 1 %; the Fisher-z standard error of a Spearman coefficient,
+   Fieller, Hartley & Pearson 1957, Biometrika 44, 470): a longer candidate is then not needed.
+   Otherwise the candidate with the highest ρ replaces it when that ρ is higher by ``z = (atanh
+   ρ_k − atanh ρ_best)/√(1.06²/(n_k − 3) + 1.06²/(n_best − 3)) > 2.326`` (the two coefficients
+   treated as independent, which overstates the variance of the difference of positively
+   dependent coefficients, so the test is conservative). The first condition also keeps a
+   strictly periodic curve sampled a few times per turn at its period: there the lag of one turn
+   falls between samples, the interpolated partner is blurred, and a multiple whose lag happens
+   to fall nearer a sample can show a higher ρ without being the period. Candidates whose ρ is
+   not significantly below the chosen one's (same test) are stated as spin periods the data do
+   not rule out. The stated spin period and its 99 % interval are the chosen candidate's (steps
+   3–4: k × the best period, k × its σ and the synodic bound at k × P); the lag of the highest ρ,
+   which lies in that interval by construction, is listed beside it (its precision is about one
+   cadence: the correlation of a sharply varying curve is highest where the lag falls on
+   samples).
 
 Validity: a period between ``min_period_s`` (default 2.5 × the median cadence) and
 ``max_period_s`` (default the span / 1.5); several turns in the window make the estimate
