@@ -2,7 +2,8 @@
 
 For each case (scenario TOML) and seed: simulate the lightcurve with that seed; run
 ``analyse_period`` and check whether the true spin period lies in the stated 99 % interval of
-one of the reported candidate periods; run ``invert(initial="global")`` (no truth used by the
+one of the reported candidate periods, of the stated spin period (chosen by the turn-to-turn
+correlation), and of the stated spin period or an alternative it does not rule out; run ``invert(initial="global")`` (no truth used by the
 estimator: attitude uniform over SO(3), rate from the period analysis) with the chosen filter;
 score the final RSS attitude error of the best mode, whether any reported mode ends within
 5° of the truth, and whether the result states an ambiguity. Errors are also given modulo the
@@ -76,6 +77,10 @@ def run_one(case, seed, particles, moves, method):
     return {"case": case, "seed": seed, "true_period_s": Pt, "period_s": per.period_s,
             "period_ok": bool(per.contains(Pt)),
             "period_ok_with_multiples": bool(per.contains(Pt, multiples=True)),
+            "spin_period_s": per.spin_period_s, "spin_relation": per.spin_relation,
+            "spin_period_ok": bool(per.contains_spin(Pt)),
+            "spin_period_or_alternative_ok": bool(per.contains_spin(Pt, alternatives=True)),
+            "spin_alternatives": [c["relation"] for c in per.spin_alternatives],
             "period_ambiguous": per.ambiguous,
             "raw_final_err_deg": errs[0], "raw_mode_errs_deg": errs,
             "n_symmetries": len(sym), "final_err_deg": sym_errs[0],
@@ -156,6 +161,13 @@ def main(argv=None):
                    "period_in_99_interval": sum(r["period_ok"] for r in rows),
                    "period_in_99_interval_of_a_spin_candidate":
                        sum(r["period_ok_with_multiples"] for r in rows),
+                   "period_in_99_interval_of_the_stated_spin_period":
+                       sum(r["spin_period_ok"] for r in rows),
+                   "period_in_99_interval_of_the_spin_period_or_a_stated_alternative":
+                       sum(r["spin_period_or_alternative_ok"] for r in rows),
+                   "spin_relations": sorted({r["spin_relation"] for r in rows}),
+                   "max_cpu_s": max(r["cpu_s"] for r in rows),
+                   "particles_used": sorted({r["particles"] for r in rows}),
                    "ambiguous_runs": sum(r["ambiguous"] for r in rows),
                    "median_final_err_deg": float(np.median([r["final_err_deg"] for r in rows])),
                    "max_wall_s": max(r["wall_s"] for r in rows),

@@ -17,7 +17,7 @@ Marsaglia 1972); the rate direction uniform on the sphere; the rate magnitude fr
 period analysis (:mod:`.period`): a mixture over the best period and its aliases (weights from
 their BIC differences) and the integer multiples 2–4 of the best period (``RATE_PRIOR_MULTIPLES``:
 the brightness may repeat several times per turn), with the synodic bound and the statistical
-1σ as its width, plus a broad
+1σ as its width (:meth:`.period.PeriodResult.rate_candidates`), plus a broad
 log-uniform component (weight ``broad_weight``) over the periods the sampling allows, so a wrong
 period analysis can be outvoted by the data. Without a significant period the broad component
 alone.
@@ -60,8 +60,12 @@ accept are reported; when some were rejected the accepted ones are weighed by th
 prediction-error likelihood (Σ −½(νₖ²/Sₖ + ln 2πSₖ), the filter's evidence for the whole
 lightcurve; Bar-Shalom, Li & Kirubarajan 2001 §5.4 for the innovation statistics), and more than
 one accepted mode with weight ≥ ``report_weight`` is stated as an ambiguity. When no start is
-accepted, the search restarts with a fresh sampler of twice the particles (``restarts``), and a result that the
-data still reject is flagged as such.
+accepted, the search restarts with a fresh, independent sampler (``restarts`` times at most, each
+with ``restart_factor`` × the particles), and a result that the data still reject is flagged as
+such. The failures this catches are exploration failures of one sampler (the cloud collapses on
+a wrong mode with no particle near the truth), so independent repeats at the first attempt's
+size are the cheap remedy: with a per-attempt success p the chance that all 1 + R attempts miss
+is (1 − p)^(1+R).
 """
 
 from __future__ import annotations
@@ -140,8 +144,10 @@ class GlobalInitConfig:
         and the 23 axis-group images of the heaviest mode (the near-symmetric attitudes of
         box-like shapes, as for ``jumps``); the consistent ones are kept.
     restarts : int — when no started filter is consistent with the data, the search is
-        repeated (a fresh sampler with twice the particles), at most this many times; the attempt with consistent
-        modes (else the one whose best mode explains the window best) is kept.
+        repeated (a fresh sampler with ``restart_factor`` × the particles), at most this many
+        times; the attempt with consistent modes (else the one whose best mode explains the
+        window best) is kept.
+    restart_factor : float ≥ 1 — particles of a restart, as a multiple of ``particles``.
     min_sigma_theta_deg, min_sigma_omega_deg_s : floors of the hand-over 1σ.
     inflate : float ≥ 1 — factor on the modes' 1σ spread for the hand-over covariance.
     """
@@ -160,7 +166,8 @@ class GlobalInitConfig:
     min_mode_weight: float = 0.01
     report_weight: float = 0.05
     max_modes: int = 6
-    restarts: int = 2
+    restarts: int = 3
+    restart_factor: float = 1.0
     refine_modes: int = 4
     min_sigma_theta_deg: float = 2.0
     min_sigma_omega_deg_s: float = 0.05
@@ -185,7 +192,8 @@ class GlobalInitConfig:
               ("report_weight", self.report_weight, 0.0, 1.0),
               ("min_sigma_theta_deg", self.min_sigma_theta_deg, 1e-3, 180.0),
               ("min_sigma_omega_deg_s", self.min_sigma_omega_deg_s, 1e-6, 100.0),
-              ("inflate", self.inflate, 1.0, 100.0)]
+              ("inflate", self.inflate, 1.0, 100.0),
+              ("restart_factor", self.restart_factor, 1.0, 16.0)]
         for name, v, lo, hi in fl:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
                 raise InputError("out of range", field=f"global.{name}", value=v,
@@ -673,7 +681,7 @@ def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period
 
     attempts = []
     for attempt in range(int(cfg.restarts) + 1):
-        N = int(cfg.particles) * (2 if attempt else 1)
+        N = int(round(cfg.particles * (cfg.restart_factor if attempt else 1.0)))
         Q, W, ll, stages, converged, beta, acc_hist = _smc(win, prior, N, cfg, rng, progress)
         modes, heavy = _modes(Q, W, ll, cfg, gq)
         _hand_over(modes, cfg, run_filter)
@@ -691,7 +699,7 @@ def global_initialise(curve, problem, run_filter, *, seed=0, config=None, period
             break
         if progress is not None and attempt < int(cfg.restarts):
             progress(f"no started filter is consistent with the data: restarting with "
-                     f"{2 * N} particles")
+                     f"{int(round(cfg.particles * cfg.restart_factor))} particles")
     # the attempt with consistent modes, else the one whose best mode explains the window best
     started, modes, heavy, N, stages, converged, beta, acc_hist, n_ref = max(
         attempts, key=lambda a: (any(m.consistent for m in a[0]), a[1][0].best_loglik))

@@ -45,6 +45,35 @@ Method
    bound to ±2.576σ.
 5. Significance: the F-test of trend + H harmonics against the trend alone, Bonferroni-
    corrected for the number of independent frequencies ``(f_max − f_min)·T``.
+6. Spin period (turn-to-turn repetition): a fit of a few harmonics may prefer a fraction of the
+   turn (a cube whose three bright faces pass by per turn, glints, a brightness that drifts while
+   the bisector sweeps), and the multi-harmonic model at the full period then pays for many
+   harmonics it cannot fit to a drifting curve. What tells the spin period is whether the
+   brightness repeats *one turn later*: the autocorrelation of the lightcurve at the lag of one
+   turn (the ACF method of McQuillan, Aigrain & Mazeh 2013, MNRAS 432, 1203, §3, which takes the
+   higher of the first two ACF peaks for curves with two dips per turn). Here the correlation is
+   Spearman's rank correlation ρ (Spearman 1904; robust to glints and heavy tails) between the
+   detrended magnitudes r(t) and r(t + τ), r(t + τ) linearly interpolated in time within one
+   site's series (a gap of at most two median cadences). For every candidate spin period (the
+   best, the aliases with ΔBIC ≤ 6 and the 2–4 × multiples, each with at least two turns in the
+   window) τ is searched over the candidate's 99 % interval (steps of 1/20 of the cadence, at
+   most 401 lags) and the highest ρ kept. The best period stays the answer when the brightness
+   repeats after one of its periods (ρ_best significantly positive: ``atanh ρ_best · √(n_best −
+   3)/1.06 > 2.326``, one-sided 1 %; the Fisher-z standard error of a Spearman coefficient,
+   Fieller, Hartley & Pearson 1957, Biometrika 44, 470): a longer candidate is then not needed.
+   Otherwise the candidate with the highest ρ replaces it when that ρ is higher by ``z = (atanh
+   ρ_k − atanh ρ_best)/√(1.06²/(n_k − 3) + 1.06²/(n_best − 3)) > 2.326`` (the two coefficients
+   treated as independent, which overstates the variance of the difference of positively
+   dependent coefficients, so the test is conservative). The first condition also keeps a
+   strictly periodic curve sampled a few times per turn at its period: there the lag of one turn
+   falls between samples, the interpolated partner is blurred, and a multiple whose lag happens
+   to fall nearer a sample can show a higher ρ without being the period. Candidates whose ρ is
+   not significantly below the chosen one's (same test) are stated as spin periods the data do
+   not rule out. The stated spin period and its 99 % interval are the chosen candidate's (steps
+   3–4: k × the best period, k × its σ and the synodic bound at k × P); the lag of the highest ρ,
+   which lies in that interval by construction, is listed beside it (its precision is about one
+   cadence: the correlation of a sharply varying curve is highest where the lag falls on
+   samples).
 
 Validity: a period between ``min_period_s`` (default 2.5 × the median cadence) and
 ``max_period_s`` (default the span / 1.5); several turns in the window make the estimate
@@ -69,7 +98,7 @@ from ..core.constants import AU_M
 from ..errors import InputError
 
 __all__ = ["PeriodResult", "analyse_period", "reduced_magnitude", "pab_rate_rad_s",
-           "truth_spin_period_s",
+           "truth_spin_period_s", "turn_correlation",
            "INDISTINGUISHABLE_DBIC", "MAX_FREQUENCIES"]
 
 #: two-sided 99 % quantile of the standard normal distribution
@@ -79,6 +108,13 @@ Z99 = 2.5758293035489004
 INDISTINGUISHABLE_DBIC = 6.0
 #: relations of the integer multiples of the best period that are always scored and listed
 SPIN_MULTIPLE_RELATIONS = ("2x best", "3x best", "4x best")
+#: one-sided 1 % quantile of the standard normal: a spin candidate replaces the best period
+#: only when its turn-to-turn rank correlation is higher by more than this many standard errors
+#: (module docstring, step 6)
+Z_ONE_SIDED_01 = 2.3263478740408408
+#: factor on the Fisher-z standard error 1/√(n − 3) of a Spearman coefficient (Fieller, Hartley
+#: & Pearson 1957)
+SPEARMAN_SE_FACTOR = 1.06
 #: most trial frequencies of one analysis (memory and time stay bounded: a multi-month
 #: recording asks for ~10⁹; analyse its passes one at a time)
 MAX_FREQUENCIES = 500_000
@@ -198,6 +234,72 @@ def _pdm_theta(t, r, freqs, nbins=10):
     return theta
 
 
+def _lag_pairs(t, r, site, tau, max_gap):
+    """Pairs (r(tᵢ), r(tᵢ + τ)) of one lag τ, s: r(tᵢ + τ) linearly interpolated within tᵢ's own
+    site between two samples at most ``max_gap`` s apart (no pair across a larger gap or past the
+    end). ``t`` sorted; returns two arrays."""
+    a_out, b_out = [], []
+    for s in np.unique(site):
+        m = site == s
+        ts, rs = t[m], r[m]
+        if ts.size < 2:
+            continue
+        tq = ts + tau
+        j = np.searchsorted(ts, tq, side="right")
+        ok = (j > 0) & (j < ts.size)
+        j = np.where(ok, j, 1)
+        t0, t1 = ts[j - 1], ts[j]
+        exact = ok & (t0 == tq)
+        ok &= ((t1 - t0) <= max_gap) | exact
+        frac = np.where(t1 > t0, (tq - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)
+        frac = np.where(exact, 0.0, frac)
+        a_out.append(rs[ok])
+        b_out.append((rs[j - 1] * (1.0 - frac) + rs[j] * frac)[ok])
+    if not a_out:
+        return np.empty(0), np.empty(0)
+    return np.concatenate(a_out), np.concatenate(b_out)
+
+
+def _spearman(a, b):
+    """Spearman's rank correlation of two samples (average ranks for ties; 0 if constant)."""
+    from scipy.stats import rankdata
+
+    ra, rb = rankdata(a), rankdata(b)
+    ra -= ra.mean()
+    rb -= rb.mean()
+    den = math.sqrt(float(ra @ ra) * float(rb @ rb))
+    return float(ra @ rb / den) if den > 0 else 0.0
+
+
+def turn_correlation(t, r, site, lo_s, hi_s, cadence_s):
+    """Highest turn-to-turn rank correlation over lags τ ∈ [lo_s, hi_s] (module docstring,
+    step 6) → (τ s, ρ, number of pairs). τ on a grid of cadence/20 (at most 401 lags, the
+    cost bound of a long recording); lags with fewer than 10 pairs are skipped (ρ = nan,
+    0 pairs when none qualifies)."""
+    step = cadence_s / 20.0
+    n_lag = int(min(401, max(1, math.floor((hi_s - lo_s) / step) + 1)))
+    best = (float("nan"), float("nan"), 0)
+    for tau in np.linspace(lo_s, hi_s, n_lag) if n_lag > 1 else [0.5 * (lo_s + hi_s)]:
+        a, b = _lag_pairs(t, r, site, float(tau), 2.0 * cadence_s)
+        if a.size < 10:
+            continue
+        rho = _spearman(a, b)
+        if not best[2] or rho > best[1]:
+            best = (float(tau), rho, int(a.size))
+    return best
+
+
+def _fisher_z_gain(rho_k, n_k, rho_0, n_0):
+    """Standard-normal score of ρ_k > ρ_0 for two Spearman coefficients treated as independent
+    (Fisher z, standard error 1.06/√(n − 3); module docstring, step 6); ``n_0`` None: ρ_0 is a
+    fixed value, not an estimate."""
+    clip = 1.0 - 1e-12
+    se = SPEARMAN_SE_FACTOR * math.sqrt(1.0 / max(n_k - 3, 1)
+                                        + (0.0 if n_0 is None else 1.0 / max(n_0 - 3, 1)))
+    return float((math.atanh(max(-clip, min(clip, rho_k)))
+                  - math.atanh(max(-clip, min(clip, rho_0)))) / se)
+
+
 def _local_peaks(power, k):
     """Indices of the k largest local maxima of ``power`` (interior points)."""
     if power.size < 3:
@@ -216,6 +318,12 @@ class PeriodResult:
     fundamental of the chosen multi-harmonic model. ``interval_99_s`` is the 99 % interval of the
     sidereal period (±2.576σ plus the synodic bound). ``aliases`` lists other periods that fit
     (relation to the best, ΔBIC ≥ 0, harmonics used), best first.
+
+    The stated spin period (module docstring, step 6): ``spin_period_s`` (the chosen candidate's
+    period), ``spin_interval_99_s`` (its 99 % interval), ``spin_relation`` (which candidate:
+    "best", "3x best", ...) and ``spin_turn_correlation`` (per scored candidate: relation,
+    period_s, interval_99_s, lag_s, rho, n_pairs, z against the best period, z_below_chosen,
+    not_ruled_out; the best's entry also z_repeat, the score of its ρ > 0).
     """
 
     period_s: float
@@ -236,6 +344,10 @@ class PeriodResult:
     power_ls: np.ndarray = field(repr=False)
     theta_pdm: np.ndarray = field(repr=False)
     fold: dict = field(repr=False, default_factory=dict)
+    spin_period_s: float = float("nan")
+    spin_interval_99_s: tuple = (float("nan"), float("nan"))
+    spin_relation: str = "best"
+    spin_turn_correlation: list = field(default_factory=list)
 
     @property
     def candidates(self) -> list:
@@ -260,6 +372,23 @@ class PeriodResult:
         return out
 
     @property
+    def spin_alternatives(self) -> list:
+        """The other spin candidates the turn-to-turn correlation does not rule out (ρ not
+        significantly below the chosen one's, one-sided 1 %) that the data also cannot tell apart
+        by the fit (ΔBIC ≤ :data:`INDISTINGUISHABLE_DBIC`) or that are integer multiples of the
+        best period — dicts of :attr:`spin_turn_correlation`."""
+        return [c for c in self.spin_turn_correlation
+                if c["not_ruled_out"] and c["relation"] != self.spin_relation]
+
+    def contains_spin(self, period_s, alternatives: bool = False) -> bool:
+        """True when ``period_s`` lies in the 99 % interval of the stated spin period
+        (``alternatives``: or of one of :attr:`spin_alternatives`)."""
+        ivs = [self.spin_interval_99_s]
+        if alternatives:
+            ivs += [c["interval_99_s"] for c in self.spin_alternatives]
+        return any(lo <= period_s <= hi for lo, hi in ivs)
+
+    @property
     def ambiguous(self) -> bool:
         """True when another period cannot be ruled out (ΔBIC ≤ :data:`INDISTINGUISHABLE_DBIC`)."""
         return len(self.candidates) > 1
@@ -279,7 +408,9 @@ class PeriodResult:
         return (f"PeriodResult(period_s={self.period_s:.4g} ± {self.period_sigma_s:.2g}, "
                 f"H={self.n_harmonics}, 99% sidereal [{self.interval_99_s[0]:.4g}, "
                 f"{self.interval_99_s[1]:.4g}] s, FAP={self.false_alarm_probability:.2g}, "
-                f"{len(self.aliases)} aliases)")
+                f"{len(self.aliases)} aliases; spin {self.spin_period_s:.4g} s "
+                f"({self.spin_relation}) 99% [{self.spin_interval_99_s[0]:.4g}, "
+                f"{self.spin_interval_99_s[1]:.4g}] s)")
 
     def summary(self) -> dict:
         """JSON-ready summary (no arrays)."""
@@ -293,6 +424,11 @@ class PeriodResult:
                                for c in self.candidates],
                 "spin_candidates": [dict(c, interval_99_s=list(c["interval_99_s"]))
                                     for c in self.spin_candidates],
+                "spin_period_s": self.spin_period_s,
+                "spin_interval_99_s": list(self.spin_interval_99_s),
+                "spin_relation": self.spin_relation,
+                "spin_turn_correlation": [dict(c, interval_99_s=list(c["interval_99_s"]))
+                                          for c in self.spin_turn_correlation],
                 "ls_period_s": self.ls_period_s, "pdm_period_s": self.pdm_period_s,
                 "pab_rate_deg_s": math.degrees(self.pab_rate_rad_s),
                 "n_points": self.n_points, "span_s": self.span_s, "n_clipped": self.n_clipped,
@@ -301,7 +437,11 @@ class PeriodResult:
     def rate_candidates(self, max_delta_bic=10.0, multiples=(2,), multiple_weight=0.25):
         """Spin-rate magnitude candidates for a rate prior, list of dicts.
 
-        Each: ``omega_rad_s`` (2π/P), ``halfwidth_rad_s`` (the synodic bound in rate),
+        Each: ``omega_rad_s`` (2π/P), ``halfwidth_rad_s`` (2π × the best period's synodic bound
+        / P², i.e. the bisector's rate ω_PAB at the best period and ω_PAB (P_best/P)² at
+        another candidate — narrower than the rate bound ω_PAB itself, which is the same for
+        every candidate; a sampler-efficiency choice kept because the prior with ω_PAB for every
+        candidate made the rocket body's first sampler attempts miss, docs/acquisition.md),
         ``sigma_rad_s`` (statistical 1σ in rate), ``weight`` (normalised) and ``relation``.
         The best period and every alias with ΔBIC ≤ ``max_delta_bic`` (weights ∝ e^{−ΔBIC/2});
         ``multiples`` adds k × the best period with ``multiple_weight`` × the best's weight
@@ -613,6 +753,37 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
     rest = [a for a in aliases if a["relation"] not in SPIN_MULTIPLE_RELATIONS]
     aliases = sorted(mult + rest[:max(0, 8 - len(mult))], key=lambda a: a["delta_bic"])
 
+    # --- 6. spin period: turn-to-turn rank correlation over the candidates ---------------
+    spin = []
+    cands6 = [("best", P_best, (float(lo), float(hi)))] + [
+        (a["relation"], a["period_s"], tuple(a["interval_99_s"])) for a in aliases
+        if a["delta_bic"] <= INDISTINGUISHABLE_DBIC or a["relation"] in SPIN_MULTIPLE_RELATIONS]
+    for rel_, P, iv in cands6:
+        if P > 0.5 * span:          # fewer than two turns in the window: no turn-to-turn test
+            continue
+        tau, rho, npair = turn_correlation(t, resid, site, max(iv[0], dt_med), iv[1], dt_med)
+        if npair:
+            spin.append({"relation": rel_, "period_s": float(P), "interval_99_s": iv,
+                         "lag_s": tau, "rho": rho, "n_pairs": npair})
+    spin_rel, spin_P, spin_iv = "best", P_best, (float(lo), float(hi))
+    if spin and spin[0]["relation"] == "best":
+        b6 = spin[0]
+        for c in spin:
+            c["z"] = _fisher_z_gain(c["rho"], c["n_pairs"], b6["rho"], b6["n_pairs"])
+        b6["z_repeat"] = _fisher_z_gain(b6["rho"], b6["n_pairs"], 0.0, None)
+        top = max(spin, key=lambda c: c["rho"])
+        chosen = top if (b6["z_repeat"] <= Z_ONE_SIDED_01 and top["z"] > Z_ONE_SIDED_01) \
+            else b6
+        for c in spin:
+            c["z_below_chosen"] = _fisher_z_gain(chosen["rho"], chosen["n_pairs"], c["rho"],
+                                                 c["n_pairs"])
+            c["not_ruled_out"] = bool(c["z_below_chosen"] <= Z_ONE_SIDED_01)
+        spin_rel, spin_P, spin_iv = chosen["relation"], chosen["period_s"], chosen["interval_99_s"]
+    else:                            # the best period itself cannot be tested: it stays
+        for c in spin:
+            c["z"] = c["z_below_chosen"] = float("nan")
+            c["not_ruled_out"] = True
+
     # folded data and model for the plot
     Xb = np.column_stack([T, _harmonic_columns(t, f_best, H0)])
     _, cb = _wls_chi2(Xb, y, w)
@@ -631,4 +802,6 @@ def analyse_period(curve, *, min_period_s=None, max_period_s=None, max_harmonics
         pdm_period_s=float(1.0 / freqs[int(np.argmin(theta))]),
         pab_rate_rad_s=float(pab), n_points=int(n), span_s=span, n_clipped=n_clipped,
         frequency_hz=freqs,
-        power_ls=p_ls, theta_pdm=theta, fold=fold)
+        power_ls=p_ls, theta_pdm=theta, fold=fold, spin_period_s=float(spin_P),
+        spin_interval_99_s=(float(spin_iv[0]), float(spin_iv[1])), spin_relation=spin_rel,
+        spin_turn_correlation=spin)

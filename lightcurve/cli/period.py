@@ -15,7 +15,8 @@ def _cmd_period(args) -> int:
     periodograms of the distance-reduced, detrended magnitudes, a multi-harmonic least-squares
     fit choosing the period and the number of harmonics by BIC, the period's 1-sigma, the
     aliases that also fit, and the 99 % interval of the sidereal spin period including the
-    synodic correction for the moving phase-angle bisector. With -o DIR writes
+    synodic correction for the moving phase-angle bisector; then the spin period among the
+    best period and its 2-4x multiples by the turn-to-turn rank correlation of the lightcurve. With -o DIR writes
     DIR/STEM.period.json and a periodogram PNG. The result seeds the rate prior of 'invert
     --initial global'.
     """
@@ -76,6 +77,12 @@ def _print_details(args, res, lo, hi) -> None:
                         f"{c['interval_99_s'][0]:.5g}-{c['interval_99_s'][1]:.5g})"
                         for c in res.candidates[1:])
         print(f"AMBIGUOUS: these periods fit about as well (delta BIC <= 6): {alt}")
+    if res.spin_turn_correlation:
+        lo_s, hi_s = res.spin_interval_99_s
+        alt = "; ".join(f"{c['period_s']:.5g} s ({c['relation']})" for c in res.spin_alternatives)
+        print(f"spin period (turn-to-turn repetition) {res.spin_period_s:.5g} s "
+              f"({res.spin_relation}), 99 %: {lo_s:.5g} to {hi_s:.5g} s"
+              + (f"; not ruled out: {alt}" if alt else ""))
     if res.n_clipped:
         print(f"{res.n_clipped} glint(s) winsorised at {args.clip_mad:g} robust sigma "
               "(--clip-mad 0 keeps them)")

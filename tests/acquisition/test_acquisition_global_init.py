@@ -208,3 +208,47 @@ def test_rejected_heaviest_mode_is_replaced_by_the_consistent_candidates(sym_cub
     res = global_initialise(lc, prob, run, seed=1, config=cfg, period="none")
     assert res.ambiguous and "ambiguous" in res.statement
     assert res.modes[0].weight == pytest.approx(res.modes[1].weight)
+
+
+def test_restarts_use_restart_factor_times_the_particles_and_stop_at_the_limit(sym_cube_library):
+    """Every started filter rejected (stub): the search runs 1 + ``restarts`` independent
+    samplers, the restarts with ``restart_factor`` × ``particles``, keeps one of them, and says
+    that the data reject the result; a bad ``restart_factor`` is one clear error."""
+    import lightcurve
+    from lightcurve.acquisition.global_init import global_initialise
+    from lightcurve.errors import InputError
+    from lightcurve.filters.config import ProblemConfig
+    from lightcurve.filters.invert import build_problem
+    from lightcurve.studies.scenario import parse_scenario
+
+    scen = parse_scenario(SCENARIO.replace('name = "sym_cube"', 'name = "cube_1u"'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lc = lightcurve.simulate(scen, seed=3)
+    prob = build_problem(lc, ProblemConfig(initial="given", initial_q=(1.0, 0, 0, 0),
+                                           initial_omega=(0.0, 0, 0)))
+    sizes = []
+
+    def run_filter(q0, w0, st, sw):
+        return _FakeEstimate(q0, w0, False, 1.0)
+
+    def progress(line):
+        if line.startswith("stage 1:") or "restarting with" in line:
+            sizes.append(line)
+
+    for factor, expect in ((1.0, {400}), (1.5, {400, 600})):
+        cfg = GlobalInitConfig(particles=400, moves=1, window_epochs=20, refine_modes=0,
+                               restarts=2, restart_factor=factor)
+        res = global_initialise(lc, prob, run_filter, seed=1, config=cfg, period="none",
+                                progress=progress)
+        assert res.attempts == 3
+        assert res.particles in expect
+        assert "not consistent with the data" in res.statement
+    starts = [x for x in sizes if x.startswith("stage 1:")]
+    assert len(starts) == 6                      # 2 × (1 + 2) samplers started
+    restarts = [x for x in sizes if "restarting with" in x]
+    assert restarts == ["no started filter is consistent with the data: restarting with 400 "
+                        "particles"] * 2 + ["no started filter is consistent with the data: "
+                                            "restarting with 600 particles"] * 2
+    with pytest.raises(InputError, match="restart_factor"):
+        GlobalInitConfig(restart_factor=0.5)

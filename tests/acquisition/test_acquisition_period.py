@@ -229,3 +229,92 @@ def test_period_cli_quiet_prints_one_line_with_the_period(tmp_path, capsys):
     assert lo <= P <= hi
     assert main(["period", str(path)]) == 0
     assert len(capsys.readouterr().out.strip().splitlines()) > 3
+
+
+def test_table_9_2_cube_spin_period_is_the_3x_multiple_by_turn_to_turn_correlation(
+        thesis_fast_spin):
+    """Bernard §9.3.3 fast spin with the Table 9.2 cube: the harmonic fit prefers P/3, but the
+    brightness does not repeat after P/3 (turn-to-turn rank correlation not significantly
+    positive, one-sided 1 %) and repeats after one turn (McQuillan et al. 2013 ACF criterion,
+    module docstring step 6), so the stated spin period is the 3× candidate and its 99 %
+    interval holds P = 360/|ω| = 84.95 s, for each of 3 seeds."""
+    from lightcurve.acquisition.period import Z_ONE_SIDED_01
+
+    P = 360.0 / math.sqrt(2.0**2 + 1.0**2 + 3.6**2)
+    for seed in range(3):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import lightcurve
+
+            lc = lightcurve.simulate(thesis_fast_spin, seed=seed)
+        res = analyse_period(lc)
+        assert not res.contains(P)                       # the fit alone misses it
+        assert res.spin_relation == "3x best", (seed, res)
+        assert res.contains_spin(P), (seed, res)
+        by = {c["relation"]: c for c in res.spin_turn_correlation}
+        assert by["best"]["z_repeat"] <= Z_ONE_SIDED_01
+        assert by["3x best"]["z"] > Z_ONE_SIDED_01
+        lo, hi = res.spin_interval_99_s
+        assert lo <= by["3x best"]["lag_s"] <= hi
+        assert abs(by["3x best"]["lag_s"] - P) < 2 * 5.0         # within two cadences
+
+
+def test_periodic_signals_keep_their_period_as_the_spin_period():
+    """Strictly periodic three-harmonic signals (random shapes, P 25–60 s, sampled every 4 s,
+    i.e. 6–15 samples per turn, σ = 0.05 mag): the stated spin period must stay the fitted
+    period, not a multiple. A multiple is stated only if the period's own turn-to-turn
+    correlation is not significant at 1 % — for these signals a false alarm at most at that
+    rate; allowing 1 of 12 (binomial p = 0.01: P(≥ 2 of 12) = 0.006, the test's false-alarm
+    rate)."""
+    wrong = 0
+    for seed in range(12):
+        rng = np.random.default_rng(500 + seed)
+        P = rng.uniform(25.0, 60.0)
+        t = np.arange(0.0, 400.0, 4.0)
+        amps = tuple((rng.normal(0, 0.3), rng.normal(0, 0.3)) for _ in range(3))
+        res = analyse_period(fixed_geometry_curve(harmonic_signal(t, P, rng, 0.05, amps=amps),
+                                                  t, 0.05))
+        wrong += not (res.spin_relation == "best" and res.contains_spin(P))
+    assert wrong <= 1
+
+
+def test_rocket_body_states_twice_its_brightness_period_as_not_ruled_out():
+    """The 10-sided rocket body tumbling (pipelines/acquisition): its brightness repeats twice per
+    precession period (the prism looks the same end over end), so the stated spin period is the
+    brightness period (≈ 64.9 s) and the true precession period 2π I_t/|H| (≈ 129.8 s) must be in
+    the interval of a stated alternative (2× best, turn-to-turn correlation not significantly
+    lower), for each of 2 seeds."""
+    from lightcurve._paths import data_dir
+    from lightcurve.acquisition.period import truth_spin_period_s
+    from lightcurve.photometry import load_shape
+
+    case = data_dir("pipelines") / "acquisition" / "rocket-body-tumbling-1site.toml"
+    for seed in range(2):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import lightcurve
+
+            lc = lightcurve.simulate(case, seed=seed)
+        Pt = truth_spin_period_s(lc, load_shape(lc.attrs["shape"]).inertia_kg_m2)
+        res = analyse_period(lc)
+        assert res.spin_relation == "best"
+        assert res.spin_period_s == pytest.approx(Pt / 2, rel=0.05)
+        assert not res.contains_spin(Pt)
+        assert "2x best" in [c["relation"] for c in res.spin_alternatives]
+        assert res.contains_spin(Pt, alternatives=True)
+
+
+def test_lag_pairs_interpolate_within_one_site_and_stop_at_gaps():
+    """On r = t the interpolated partner of tᵢ at lag τ is exactly tᵢ + τ; no pair crosses a gap
+    wider than two cadences or another site's samples."""
+    from lightcurve.acquisition.period import _lag_pairs
+
+    t = np.r_[np.arange(0.0, 50.0, 5.0), np.arange(100.0, 150.0, 5.0)]
+    site = np.zeros(t.size, int)
+    a, b = _lag_pairs(t, t.copy(), site, 7.5, 10.0)
+    assert np.allclose(b - a, 7.5)
+    assert a.size == 16                     # 8 per block: no partner across the 50 s gap
+    site2 = np.r_[np.zeros(10, int), np.ones(10, int)]
+    a2, b2 = _lag_pairs(t, t.copy(), site2, 60.0, 10.0)
+    assert a2.size == 0                     # t + 60 lands only in the other site's series
+
