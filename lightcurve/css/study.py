@@ -672,12 +672,12 @@ def load_css_study(path) -> StudySpec:
         spec = replace(spec, simulation=d)
     tf = doc.section("thesis_filter", None)
     if tf is not None:
-        d = {}
+        d, keys = {}, _thesis_filter_keys()
         for k in list(tf.data):
-            if k not in _THESIS_FILTER_KEYS:
+            if k not in keys:
                 raise InputError("unknown thesis-filter parameter", file=path,
                                  field=f"thesis_filter.{k}", value=tf.data[k],
-                                 allowed=", ".join(_THESIS_FILTER_KEYS))
+                                 allowed=", ".join(keys))
             d[k] = tf.float(k, min=0.0)
         tf.check_unknown()
         spec = replace(spec, thesis_filter=d)
@@ -685,11 +685,12 @@ def load_css_study(path) -> StudySpec:
     return spec
 
 
-# sun-line thesis-filter parameters a study may override (sunline_thesis.THESIS_PRM; "kind"
-# excluded: it selects the filter)
-_THESIS_FILTER_KEYS = ("sigma_v", "sigma_s", "sigma_w", "sigma_wd", "sigma_wr", "strong_frac",
-                       "strong_factor", "shadow_level", "cons_sigmas", "sigma_mis",
-                       "sigma_valpha", "sigma_ck", "sdd_x", "sdd_y", "sdd_z", "p0", "shadow_frac")
+def _thesis_filter_keys():
+    """The sun-line thesis-filter parameters a study may override: ``sunline_thesis.THESIS_PRM``
+    without "kind" (it selects the filter)."""
+    from .sunline_thesis import THESIS_PRM
+
+    return tuple(k for k in THESIS_PRM if k != "kind")
 
 _SIM_KEYS = ("altitude_km", "inclination_deg", "raan_deg", "epoch_utc", "perturbations",
              "css_rate_hz", "gyro_rate_hz", "fov_half_angle_deg", "noise_sigma",

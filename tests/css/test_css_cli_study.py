@@ -195,11 +195,16 @@ def test_study_thesis_filter_bad(tmp_path, extra, field):
     assert field in str(e.value)
 
 
-def test_thesis_filter_keys_are_filter_parameters():
-    from lightcurve.css.study import _THESIS_FILTER_KEYS
+def test_every_thesis_filter_parameter_can_be_overridden(tmp_path):
+    # every sun-line thesis-filter parameter except the filter selector "kind" is accepted
     from lightcurve.css.sunline_thesis import THESIS_PRM
 
-    assert set(_THESIS_FILTER_KEYS) == set(THESIS_PRM) - {"kind"}
+    for k in THESIS_PRM:
+        if k == "kind":
+            continue
+        p = _study_toml(tmp_path)
+        p.write_text(p.read_text() + f"\n[thesis_filter]\n{k} = 0.5\n")
+        assert load_css_study(p).thesis_filter == {k: 0.5}, k
 
 
 def test_bundled_ablation_files_differ_by_one_switch():
