@@ -74,6 +74,11 @@ Method
    which lies in that interval by construction, is listed beside it (its precision is about one
    cadence: the correlation of a sharply varying curve is highest where the lag falls on
    samples).
+   The stated 99 % set of the spin period (``spin_set_99_s``) is the union of the chosen
+   candidate's interval and the intervals of the candidates not ruled out: the set of periods
+   the test does not reject at 1 % (a confidence set by test inversion). A prism tumbling end
+   over end looks the same after half a turn, so its set holds both the brightness period and
+   twice it, and no lightcurve can shrink it to one.
 
 Validity: a period between ``min_period_s`` (default 2.5 × the median cadence) and
 ``max_period_s`` (default the span / 1.5); several turns in the window make the estimate
@@ -380,12 +385,29 @@ class PeriodResult:
         return [c for c in self.spin_turn_correlation
                 if c["not_ruled_out"] and c["relation"] != self.spin_relation]
 
+    @property
+    def spin_set_99_s(self) -> list:
+        """The stated 99 % set of the spin period, s: the union of the chosen spin period's
+        99 % interval and those of the :attr:`spin_alternatives` (the candidates the turn-to-turn
+        test does not rule out at 1 %), as sorted, merged ``(lo, hi)`` pairs. A confidence set
+        by test inversion: every candidate the data do not reject at the 1 % level keeps its
+        interval. One pair when nothing else is left standing; several when the lightcurve
+        cannot tell the periods apart (a body that looks the same after half a turn)."""
+        ivs = sorted([tuple(self.spin_interval_99_s)]
+                     + [tuple(c["interval_99_s"]) for c in self.spin_alternatives])
+        out = []
+        for lo, hi in ivs:
+            if out and lo <= out[-1][1]:
+                out[-1] = (out[-1][0], max(out[-1][1], hi))
+            else:
+                out.append((float(lo), float(hi)))
+        return out
+
     def contains_spin(self, period_s, alternatives: bool = False) -> bool:
         """True when ``period_s`` lies in the 99 % interval of the stated spin period
-        (``alternatives``: or of one of :attr:`spin_alternatives`)."""
-        ivs = [self.spin_interval_99_s]
-        if alternatives:
-            ivs += [c["interval_99_s"] for c in self.spin_alternatives]
+        (``alternatives``: in the 99 % set :attr:`spin_set_99_s`, which adds the intervals of
+        the :attr:`spin_alternatives`)."""
+        ivs = self.spin_set_99_s if alternatives else [self.spin_interval_99_s]
         return any(lo <= period_s <= hi for lo, hi in ivs)
 
     @property
@@ -426,6 +448,7 @@ class PeriodResult:
                                     for c in self.spin_candidates],
                 "spin_period_s": self.spin_period_s,
                 "spin_interval_99_s": list(self.spin_interval_99_s),
+                "spin_set_99_s": [list(iv) for iv in self.spin_set_99_s],
                 "spin_relation": self.spin_relation,
                 "spin_turn_correlation": [dict(c, interval_99_s=list(c["interval_99_s"]))
                                           for c in self.spin_turn_correlation],

@@ -83,6 +83,9 @@ def _print_details(args, res, lo, hi) -> None:
         print(f"spin period (turn-to-turn repetition) {res.spin_period_s:.5g} s "
               f"({res.spin_relation}), 99 %: {lo_s:.5g} to {hi_s:.5g} s"
               + (f"; not ruled out: {alt}" if alt else ""))
+        if alt:
+            ivs = " or ".join(f"{a:.5g}-{b:.5g}" for a, b in res.spin_set_99_s)
+            print(f"spin period 99 % set (the lightcurve cannot tell these apart): {ivs} s")
     if res.n_clipped:
         print(f"{res.n_clipped} glint(s) winsorised at {args.clip_mad:g} robust sigma "
               "(--clip-mad 0 keeps them)")

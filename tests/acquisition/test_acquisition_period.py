@@ -275,6 +275,8 @@ def test_periodic_signals_keep_their_period_as_the_spin_period():
         res = analyse_period(fixed_geometry_curve(harmonic_signal(t, P, rng, 0.05, amps=amps),
                                                   t, 0.05))
         wrong += not (res.spin_relation == "best" and res.contains_spin(P))
+        if not res.spin_alternatives:   # nothing else left standing: the set is the interval
+            assert res.spin_set_99_s == [tuple(res.spin_interval_99_s)]
     assert wrong <= 1
 
 
@@ -302,6 +304,12 @@ def test_rocket_body_states_twice_its_brightness_period_as_not_ruled_out():
         assert not res.contains_spin(Pt)
         assert "2x best" in [c["relation"] for c in res.spin_alternatives]
         assert res.contains_spin(Pt, alternatives=True)
+        # the stated 99 % set: two disjoint intervals, the brightness period's and twice it
+        sset = res.spin_set_99_s
+        assert len(sset) == 2 and sset[0][1] < sset[1][0]
+        assert sset[0][0] <= res.spin_period_s <= sset[0][1]
+        assert sset[1][0] <= Pt <= sset[1][1]
+        assert res.summary()["spin_set_99_s"] == [list(iv) for iv in sset]
 
 
 def test_lag_pairs_interpolate_within_one_site_and_stop_at_gaps():
