@@ -8,6 +8,10 @@ Results do not depend on the thread count: every output element of those kernels
 its own.
 """
 
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numba
@@ -34,3 +38,45 @@ def _numba_one_thread_where_small(request):
     numba.set_num_threads(1)
     yield
     numba.set_num_threads(n)
+
+
+# --- compiling the slowest kernels on a second core -----------------------------------------
+# With a cold numba cache about a third of the suite's time is compilation, most of it in a few
+# large kernels, while the tests themselves mostly run on one core. At session start a second
+# process (tests/_precompile.py, one numba thread) compiles those kernels into numba's on-disk
+# cache; a test that needs one later loads it instead of compiling it. Results are unchanged (the
+# cache holds the same machine code either process would compile). Off with
+# LIGHTCURVE_TEST_PRECOMPILE=0, and on a machine with fewer than two usable cores.
+_PRECOMPILE = []
+
+
+def _usable_cores():
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def pytest_sessionstart(session):
+    if os.environ.get("LIGHTCURVE_TEST_PRECOMPILE", "1") == "0" or _usable_cores() < 2:
+        return
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    import lightcurve
+
+    pkg_parent = str(Path(lightcurve.__file__).resolve().parents[1])
+    env = dict(os.environ, NUMBA_NUM_THREADS="1", LIGHTCURVE_PRECOMPILE_PATH=pkg_parent)
+    _PRECOMPILE.append(subprocess.Popen(
+        [sys.executable, str(_HERE / "_precompile.py")], stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True))
+
+
+def pytest_sessionfinish(session, exitstatus):
+    for p in _PRECOMPILE:
+        if p.poll() is None:  # still compiling what the suite no longer needs
+            try:
+                os.killpg(p.pid, signal.SIGTERM)
+                p.wait(timeout=10)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                p.kill()
+    _PRECOMPILE.clear()
