@@ -1,13 +1,13 @@
 """Compile the suite's slowest numba kernels into numba's on-disk cache, in a second process.
 
-Started by tests/conftest.py at the start of a test session (one numba thread, its own process
-group; stopped when the session ends). Each step calls the package the way the tests do, on tiny
-inputs, so that the kernel signatures are the ones the tests use; the test process then loads
-those kernels from the cache instead of compiling them. Order: the largest kernels the suite
-needs soonest first: the suite reaches the CSS tests before the particle-filter tests (measured
-cold: the closed CSS loop ≈ 60 s, the CSS calibration and sun-line filters ≈ 35 s, the particle
-filter ≈ 45 s in all). A step that fails is skipped: this
-process never decides a test's outcome, it only fills the cache.
+Started by tests/conftest.py once a session of many tests is collected (one numba thread, its
+own process group; stopped when the session ends). Each step calls the package the way the tests
+do, on tiny inputs, so that the kernel signatures are the ones the tests use; the test process
+then loads those kernels from the cache instead of compiling them. Order: the largest kernels
+the suite needs soonest first: the suite reaches the CSS tests before the particle-filter tests
+(measured cold: the closed CSS loop ≈ 60 s, the CSS calibration and sun-line filters ≈ 35 s, the
+particle filter ≈ 45 s in all). A step that fails is skipped: this process never decides a
+test's outcome, it only fills the cache.
 """
 
 from __future__ import annotations

@@ -41,13 +41,15 @@ def _numba_one_thread_where_small(request):
 
 
 # --- compiling the slowest kernels on a second core -----------------------------------------
-# With a cold numba cache about a third of the suite's time is compilation, most of it in a few
-# large kernels, while the tests themselves mostly run on one core. At session start a second
-# process (tests/_precompile.py, one numba thread) compiles those kernels into numba's on-disk
-# cache; a test that needs one later loads it instead of compiling it. Results are unchanged (the
-# cache holds the same machine code either process would compile). Off with
+# With a cold numba cache about 40 % of the suite's time is compilation, most of it in a few large
+# kernels, while the tests themselves mostly run on one core. Once a session has collected its
+# tests, a second process (tests/_precompile.py, one numba thread) compiles those kernels into
+# numba's on-disk cache; a test that needs one later loads it instead of compiling it. Results are
+# unchanged (the cache holds the same machine code either process would compile). Only for
+# sessions of at least PRECOMPILE_MIN_TESTS tests (a few tests need few kernels); off with
 # LIGHTCURVE_TEST_PRECOMPILE=0, and on a machine with fewer than two usable cores.
 _PRECOMPILE = []
+PRECOMPILE_MIN_TESTS = 200
 
 
 def _usable_cores():
@@ -57,8 +59,10 @@ def _usable_cores():
         return os.cpu_count() or 1
 
 
-def pytest_sessionstart(session):
+def pytest_collection_finish(session):
     if os.environ.get("LIGHTCURVE_TEST_PRECOMPILE", "1") == "0" or _usable_cores() < 2:
+        return
+    if len(session.items) < PRECOMPILE_MIN_TESTS or _PRECOMPILE:
         return
     if os.environ.get("PYTEST_XDIST_WORKER"):
         return
