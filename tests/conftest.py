@@ -52,15 +52,10 @@ _PRECOMPILE = []
 PRECOMPILE_MIN_TESTS = 200
 
 
-def _usable_cores():
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 def pytest_collection_finish(session):
-    if os.environ.get("LIGHTCURVE_TEST_PRECOMPILE", "1") == "0" or _usable_cores() < 2:
+    from lightcurve.threads import available_cores
+
+    if os.environ.get("LIGHTCURVE_TEST_PRECOMPILE", "1") == "0" or available_cores() < 2:
         return
     if len(session.items) < PRECOMPILE_MIN_TESTS or _PRECOMPILE:
         return

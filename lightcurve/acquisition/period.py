@@ -239,16 +239,27 @@ def _pdm_theta(t, r, freqs, nbins=10):
     return theta
 
 
+def _site_series(t, r, site):
+    """(t, r) of each site with at least two samples, in site order (``t`` sorted)."""
+    out = []
+    for s in np.unique(site):
+        m = site == s
+        if int(m.sum()) >= 2:
+            out.append((t[m], r[m]))
+    return out
+
+
 def _lag_pairs(t, r, site, tau, max_gap):
     """Pairs (r(tᵢ), r(tᵢ + τ)) of one lag τ, s: r(tᵢ + τ) linearly interpolated within tᵢ's own
     site between two samples at most ``max_gap`` s apart (no pair across a larger gap or past the
     end). ``t`` sorted; returns two arrays."""
+    return _lag_pairs_split(_site_series(t, r, site), tau, max_gap)
+
+
+def _lag_pairs_split(series, tau, max_gap):
+    """:func:`_lag_pairs` on the per-site series of :func:`_site_series`."""
     a_out, b_out = [], []
-    for s in np.unique(site):
-        m = site == s
-        ts, rs = t[m], r[m]
-        if ts.size < 2:
-            continue
+    for ts, rs in series:
         tq = ts + tau
         j = np.searchsorted(ts, tq, side="right")
         ok = (j > 0) & (j < ts.size)
@@ -284,8 +295,9 @@ def turn_correlation(t, r, site, lo_s, hi_s, cadence_s):
     step = cadence_s / 20.0
     n_lag = int(min(401, max(1, math.floor((hi_s - lo_s) / step) + 1)))
     best = (float("nan"), float("nan"), 0)
+    series = _site_series(t, r, site)
     for tau in np.linspace(lo_s, hi_s, n_lag) if n_lag > 1 else [0.5 * (lo_s + hi_s)]:
-        a, b = _lag_pairs(t, r, site, float(tau), 2.0 * cadence_s)
+        a, b = _lag_pairs_split(series, float(tau), 2.0 * cadence_s)
         if a.size < 10:
             continue
         rho = _spearman(a, b)

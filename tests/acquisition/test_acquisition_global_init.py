@@ -161,14 +161,10 @@ class _FakeEstimate:
         return {"flags": list(self._flags), "consistent": not self._flags}
 
 
-def test_rejected_heaviest_mode_is_replaced_by_the_consistent_candidates(sym_cube_library):
-    """The filter from the heaviest mode is rejected (stub): the result must start the filter
-    from ``refine_modes`` more candidates, report only the accepted ones, weigh them by the
-    filters' evidence Σ −½(ν²/S + ln 2πS) (here 10 updates, ν = 0: the weight ratio of two
-    accepted starts with S = 1 and S = e is e^{10/2}), and state the ambiguity only when a second
-    accepted mode holds ≥ ``report_weight``."""
+def _cube_1u_problem():
+    """The SCENARIO pass with the one-material cube (seed 3) and a filter problem on it whose
+    initial estimate is never used (the global initialisation replaces it)."""
     import lightcurve
-    from lightcurve.acquisition.global_init import global_initialise
     from lightcurve.filters.config import ProblemConfig
     from lightcurve.filters.invert import build_problem
     from lightcurve.studies.scenario import parse_scenario
@@ -177,8 +173,19 @@ def test_rejected_heaviest_mode_is_replaced_by_the_consistent_candidates(sym_cub
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         lc = lightcurve.simulate(scen, seed=3)
-    prob = build_problem(lc, ProblemConfig(initial="given", initial_q=(1.0, 0, 0, 0),
-                                           initial_omega=(0.0, 0, 0)))
+    return lc, build_problem(lc, ProblemConfig(initial="given", initial_q=(1.0, 0, 0, 0),
+                                               initial_omega=(0.0, 0, 0)))
+
+
+def test_rejected_heaviest_mode_is_replaced_by_the_consistent_candidates(sym_cube_library):
+    """The filter from the heaviest mode is rejected (stub): the result must start the filter
+    from ``refine_modes`` more candidates, report only the accepted ones, weigh them by the
+    filters' evidence Σ −½(ν²/S + ln 2πS) (here 10 updates, ν = 0: the weight ratio of two
+    accepted starts with S = 1 and S = e is e^{10/2}), and state the ambiguity only when a second
+    accepted mode holds ≥ ``report_weight``."""
+    from lightcurve.acquisition.global_init import global_initialise
+
+    lc, prob = _cube_1u_problem()
     cfg = GlobalInitConfig(particles=600, moves=1, window_epochs=20, refine_modes=3,
                            restarts=0)
 
@@ -214,19 +221,10 @@ def test_restarts_use_restart_factor_times_the_particles_and_stop_at_the_limit(s
     """Every started filter rejected (stub): the search runs 1 + ``restarts`` independent
     samplers, the restarts with ``restart_factor`` × ``particles``, keeps one of them, and says
     that the data reject the result; a bad ``restart_factor`` is one clear error."""
-    import lightcurve
     from lightcurve.acquisition.global_init import global_initialise
     from lightcurve.errors import InputError
-    from lightcurve.filters.config import ProblemConfig
-    from lightcurve.filters.invert import build_problem
-    from lightcurve.studies.scenario import parse_scenario
 
-    scen = parse_scenario(SCENARIO.replace('name = "sym_cube"', 'name = "cube_1u"'))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        lc = lightcurve.simulate(scen, seed=3)
-    prob = build_problem(lc, ProblemConfig(initial="given", initial_q=(1.0, 0, 0, 0),
-                                           initial_omega=(0.0, 0, 0)))
+    lc, prob = _cube_1u_problem()
     sizes = []
 
     def run_filter(q0, w0, st, sw):

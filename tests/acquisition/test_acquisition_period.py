@@ -40,6 +40,16 @@ def harmonic_signal(t, P, rng, sigma, amps=((0.4, 0.3), (0.25, -0.1), (0.0, 0.15
     return y + sigma * rng.standard_normal(t.size)
 
 
+def _simulate_quiet(case, seed):
+    """``lightcurve.simulate(case, seed=seed)`` without its warnings (the thesis cases ignore the
+    eclipse on purpose and say so)."""
+    import lightcurve
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return lightcurve.simulate(case, seed=seed)
+
+
 def test_recovers_a_known_multi_harmonic_period():
     """Three harmonics of P = 37.3 s, 2 s cadence over 600 s, σ = 0.02 mag: the estimate is within
     3σ of P, σ is below 0.2 % of P, the model uses ≥ 3 harmonics, the 99 % interval holds P, and
@@ -112,11 +122,7 @@ def test_thesis_fast_spin_sidereal_period_inside_the_99_interval(thesis_fast_spi
     case.write_text(text.replace('name = "cube_1u"', 'name = "cube_1u_mixed"'))
     P = 360.0 / math.sqrt(2.0**2 + 1.0**2 + 3.6**2)
     for seed in range(5):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import lightcurve
-
-            lc = lightcurve.simulate(case, seed=seed)
+        lc = _simulate_quiet(case, seed)
         res = analyse_period(lc)
         assert res.significant
         assert res.interval_99_s[0] <= P <= res.interval_99_s[1], (seed, res)
@@ -133,11 +139,7 @@ def test_table_9_2_cube_lists_the_spin_period_as_the_3x_multiple(thesis_fast_spi
     so the docs' statement is checked too)."""
     P = 360.0 / math.sqrt(2.0**2 + 1.0**2 + 3.6**2)
     for seed in range(3):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import lightcurve
-
-            lc = lightcurve.simulate(thesis_fast_spin, seed=seed)
+        lc = _simulate_quiet(thesis_fast_spin, seed)
         res = analyse_period(lc)
         rel = {c["relation"]: c for c in res.spin_candidates}
         assert {"2x best", "3x best", "4x best"} <= set(rel), (seed, list(rel))
@@ -168,11 +170,7 @@ def test_glints_are_winsorised_and_do_not_hide_the_period():
 
 def test_pab_rate_matches_a_finite_difference(thesis_fast_spin):
     """The bisector rate equals the mean angle swept per second, computed independently."""
-    import lightcurve
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        lc = lightcurve.simulate(thesis_fast_spin, seed=0)
+    lc = _simulate_quiet(thesis_fast_spin, 0)
     s = lc.r_sun_eci_m - lc.r_obj_eci_m
     o = lc.r_site_eci_m - lc.r_obj_eci_m
     b = s / np.linalg.norm(s, axis=1, keepdims=True) + o / np.linalg.norm(o, axis=1, keepdims=True)
@@ -242,11 +240,7 @@ def test_table_9_2_cube_spin_period_is_the_3x_multiple_by_turn_to_turn_correlati
 
     P = 360.0 / math.sqrt(2.0**2 + 1.0**2 + 3.6**2)
     for seed in range(3):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import lightcurve
-
-            lc = lightcurve.simulate(thesis_fast_spin, seed=seed)
+        lc = _simulate_quiet(thesis_fast_spin, seed)
         res = analyse_period(lc)
         assert not res.contains(P)                       # the fit alone misses it
         assert res.spin_relation == "3x best", (seed, res)
@@ -292,11 +286,7 @@ def test_rocket_body_states_twice_its_brightness_period_as_not_ruled_out():
 
     case = data_dir("pipelines") / "acquisition" / "rocket-body-tumbling-1site.toml"
     for seed in range(2):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import lightcurve
-
-            lc = lightcurve.simulate(case, seed=seed)
+        lc = _simulate_quiet(case, seed)
         Pt = truth_spin_period_s(lc, load_shape(lc.attrs["shape"]).inertia_kg_m2)
         res = analyse_period(lc)
         assert res.spin_relation == "best"
