@@ -55,7 +55,7 @@ def main(argv=None):
                     acc[f].append(tab[f])
             out[f"{conf}_mc_mean"] = {
                 f: {k: [float(np.mean([r[k][0] for r in v])), float(np.mean([r[k][1] for r in v]))]
-                    for k in ("c", "theta_deg", "phi_deg")} | {
+                    for k in ("c", "theta_deg", "phi_deg", "mean_theta_phi_deg")} | {
                     "inside_3sigma": float(np.mean([r["inside_3sigma"] for r in v]))}
                 for f, v in acc.items()}
     print_with_machine(out, t0)

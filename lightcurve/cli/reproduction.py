@@ -20,7 +20,7 @@ def _cmd_reproduction(args) -> int:
     sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
                 css_section(list(args.css or []), timing=args.css_timing,
                             tables4=args.css_tables4, sun_models=args.css_sun_models,
-                            table44=args.css_table44)]
+                            table44=args.css_table44, faults=list(args.css_faults or []))]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
     n_css = len(args.css or [])
@@ -44,6 +44,9 @@ def register(sub) -> None:
                    help="output of python benchmarks/css_tables_4.py (O'Keefe Tables 4.1-4.3)")
     p.add_argument("--css-table44", default=None, metavar="FILE",
                    help="output of python benchmarks/css_table_4_4.py (O'Keefe Table 4.4)")
+    p.add_argument("--css-faults", action="append", metavar="FILE",
+                   help="JSON of 'lightcurve css faults --experiment table5_1|table5_2 -o FILE' "
+                   "(O'Keefe Tables 5.1-5.2; repeatable)")
     p.add_argument("--css-sun-models", default=None, metavar="FILE",
                    help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",

@@ -241,6 +241,14 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     """O'Keefe §4.2-4.3 measurement update (see :func:`calibration_update_nb`)."""
     N = az0.shape[0]
     sig_v, floor_y, init_thr = prm[0], prm[18], prm[19]
+    floor_pred = prm.shape[0] > 20 and prm[20] > 0.5
+    edge = prm[13]
+    if prm.shape[0] > 21 and prm[21] > 0.5 and lit <= 0.0:   # no CSS update in the shadow
+        for k in range(N):
+            nu_out[k] = np.nan
+            s_out[k] = np.nan
+            u_out[k] = np.nan
+        return 0, np.nan, 1.0
     h, H, D, A, cosd, _ = calibration_measurement_nb(
         x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
         lat_c, nlat, nlon, lon_w0, dlon, dlat_max, np.zeros(N))
@@ -269,8 +277,10 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
                 init[k] = 1.0
             else:
                 continue
-        if y[k] <= floor_y:
+        if y[k] <= floor_y and not (floor_pred and h[k] > floor_y):
             continue
+        if edge > 0.0 and lit > 0.0 and abs(cosd[k] - cos_fov[k]) < edge:
+            continue   # Sun within ``edge`` (cosine) of the FOV cut-off (not in the thesis)
         idx[m] = k
         m += 1
     Hm, nu = _gather_rows(idx, m, H, y, h)
@@ -306,12 +316,14 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     Returns (m used, NIS of the used set (NaN if none), inflation factor).
 
     With ``prm`` of :meth:`CalibrationParams.thesis_full` / ``thesis_reduced`` (thesis flag
-    set) the update is O'Keefe's §4.2-4.3 as written instead: no FOV-edge margin, gates or
-    inflation; ``M = diag(Ĉ)`` so ``R = Ĉ_i² σ_V²`` plus, for the full filter, the albedo
+    set) the update is O'Keefe's §4.2-4.3 as written instead: no gates or inflation, no
+    FOV-edge margin unless ``prm`` sets one, updates in the shadow unless ``skip_in_shadow``; ``M = diag(Ĉ)`` so ``R = Ĉ_i² σ_V²`` plus, for the full filter, the albedo
     coefficient uncertainty ``M_α R_α M_αᵀ`` of eq. 4.30 (:func:`albedo_coefficient_cov_nb`
     with ``cells_sig`` = σ_j A_j of the filter's TOMS grid, full N×N); a sensor is processed
     once it has been initialised (an output above ``init_threshold`` once, §5.2; ``init`` (N,)
-    flags, updated here) and while its output is above the noise floor (§4.2).
+    flags, updated here) and while its output — or, with ``floor_on_prediction``, its output
+    or its predicted output — is above the noise floor (§4.2; see
+    :class:`CalibrationParams`).
     """
     N = az0.shape[0]
     if prm.shape[0] > 17 and prm[17] > 0.5:
@@ -489,6 +501,14 @@ class CalibrationParams:
     grid added to R as 1σ = g (albedo_grid_frac · A + albedo_grid_floor) for sensors with
     modelled albedo A > 0 (0 when the filter's grid is the truth's; values for a CERES grid
     against the 1° one from :func:`albedo_grid_error`); sigma_att0_rad, sigma_bias0, sigma_scale0, sigma_mis0_rad: initial 1σ.
+    thesis: O'Keefe's §4.2-4.3 update as written (:func:`calibration_update_nb`); meas_floor:
+    its noise floor (output units); init_threshold: output a sensor must exceed once before
+    it is used (§5.2); floor_on_prediction: a sample is used when its measured or its
+    predicted output is above ``meas_floor`` (else the measured one only); skip_in_shadow:
+    no CSS update while the spacecraft is in the Earth's shadow (thesis update only; chapters
+    4-5 do not say, the ch. 3 filters of eq. 3.1/3.31 update only outside it). The thesis
+    update uses ``fov_edge_margin`` too (0 in :meth:`thesis_full`: the text has no FOV-edge
+    rule); both switches exist for ablations.
     """
 
     sigma_css: float = 0.017
@@ -516,19 +536,29 @@ class CalibrationParams:
     thesis: bool = False
     meas_floor: float = 0.0
     init_threshold: float = 0.0
+    floor_on_prediction: bool = False
+    skip_in_shadow: bool = False
 
     @classmethod
     def thesis_full(cls, grid: str = "1p25x1", **kw) -> "CalibrationParams":
         """O'Keefe §4.2 full filter (``variant = "thesis"``): σ_V = 0.05 + {0.01, 0.1, 0.4}
         for the {1°×1.25°, 5°×5°, 10°×10°} grid (§4.4.3), noise floor 2 × 0.05 (§4.2),
         initialisation above 0.4 (§5.2), initial 3σ 0.9 and 3° (tables 4.1-4.3), no
-        considered albedo bias (the albedo model's coefficient uncertainty enters R)."""
+        considered albedo bias (the albedo model's coefficient uncertainty enters R).
+
+        The noise floor: §4.2 drops "CSS measurement values" below it, while §5.2.1 has a
+        failed sensor flagged "once the expected observations for the failed sensor rise
+        above the noise floor", and tables 5.1-5.2 detect every initialised sensor that
+        fails off (output 0, below any floor). Both hold when a sample is used while its
+        measured *or* its expected output is above the floor (``floor_on_prediction``);
+        the thesis variant uses that reading everywhere (chapters 4 and 5)."""
         from .okeefe2015 import CALIBRATION, CSS_SIM
 
         base = dict(thesis=True, sigma_css=CSS_SIM["noise_sigma"]
                     + CALIBRATION["sigma_v_increase"][grid],
                     meas_floor=CALIBRATION["noise_floor_sigmas"] * CSS_SIM["noise_sigma"],
                     init_threshold=CALIBRATION["init_threshold"], use_albedo=True,
+                    floor_on_prediction=True, fov_edge_margin=0.0, skip_in_shadow=False,
                     consider_sigma=0.0, consider_tau_s=0.0, q_param=0.0,
                     sigma_scale0=CALIBRATION["scale_sigma"],
                     sigma_mis0_rad=float(np.radians(CALIBRATION["misalignment_sigma_deg"])))
@@ -561,7 +591,8 @@ class CalibrationParams:
                          self.sigma_st_rad, self.fov_edge_margin,
                          self.fov_edge_sigmas, self.albedo_grid_frac,
                          self.albedo_grid_floor, float(self.thesis), self.meas_floor,
-                         self.init_threshold], dtype=float)
+                         self.init_threshold, float(self.floor_on_prediction),
+                         float(self.skip_in_shadow)], dtype=float)
 
     def for_gyro(self, spec) -> "CalibrationParams":
         """A copy with the ARW/RRW of a :class:`~lightcurve.css.gyro.GyroSpec`."""
@@ -896,18 +927,24 @@ def params_dict(p: CalibrationParams) -> dict:
 # ---------------------------------------------------------------------------------------
 def simulate_thesis_calibration_case(rng, configuration="dual_pyramid", *, duration_s=None,
                                      albedo="toms", star_period_s=10.0,
-                                     sigma_st_rad=float(np.radians(0.02))) -> CalibrationCase:
+                                     sigma_st_rad=float(np.radians(0.02)),
+                                     controlled=False) -> CalibrationCase:
     """§4.4: one orbit (92.5 min, §2.4) of the uncontrolled tumbling spacecraft of §2.4 with
     individual scale factors N(1, 0.3²) ("distributed by 30%", no common error — the filter
     estimates each sensor's total factor), misalignments N(0, 1°²), CSS noise 0.05 at 2 Hz,
     the intermediate gyro at 10 Hz, TOMS 1°×1.25° albedo with its spread; the star tracker's
-    rate and accuracy are left open by §4.1-4.2 (our choice: every 10 s, 0.02° per axis)."""
+    rate and accuracy are left open by §4.1-4.2 (our choice: every 10 s, 0.02° per axis).
+
+    ``controlled``: the spacecraft of §5.2.2 instead, keeping its +Z axis on the Sun with the
+    control law of §3.3.2 (eq. 3.64); which Sun estimate drives the controller §5.2.2 leaves
+    open: the thesis-variant sun-line EKF of ch. 3 (the most accurate of §3.3.2)."""
     from .experiments import thesis_scenario
     from .okeefe2015 import CALIBRATION, ORBIT
 
     g = as_generator(rng)
     g_truth, g_st = g.spawn(2)
-    sc = thesis_scenario(configuration, "wavg", variant="thesis", gyro="intermediate",
+    sc = thesis_scenario(configuration, "ekf" if controlled else "wavg", variant="thesis",
+                         gyro="intermediate", controlled=bool(controlled),
                          duration_s=ORBIT["period_s_quoted"] if duration_s is None else duration_s,
                          albedo=albedo,
                          sim={"scale_individual_sigma": CALIBRATION["scale_sigma"],
@@ -930,6 +967,9 @@ def simulate_thesis_calibration_case(rng, configuration="dual_pyramid", *, durat
                            {"spec": None, **r.info})
 
 
+_SETUPS: dict = {}
+
+
 def thesis_filter_setup(name: str, albedo_dir=None):
     """Parameters and albedo input of one thesis-variant calibration filter of §4.4 (tables
     4.1-4.4): ``name`` "1p25x1", "5x5" or "10x10" — the full filter with that TOMS grid
@@ -938,11 +978,39 @@ def thesis_filter_setup(name: str, albedo_dir=None):
     from .albedo import load_toms
     from .gyro import gyro_grade
 
-    if name == "reduced":
-        prm, alb = CalibrationParams.thesis_reduced(), "builtin"
-    else:
-        prm, alb = CalibrationParams.thesis_full(name), load_toms(name, albedo_dir)
-    return prm.for_gyro(gyro_grade("intermediate")), alb
+    key = ("thesis", name, None if albedo_dir is None else str(albedo_dir))
+    if key not in _SETUPS:   # one map object per grid: run_calibration caches its cells by map
+        if name == "reduced":
+            prm, alb = CalibrationParams.thesis_reduced(), "builtin"
+        else:
+            prm, alb = CalibrationParams.thesis_full(name), load_toms(name, albedo_dir)
+        _SETUPS[key] = (prm.for_gyro(gyro_grade("intermediate")), alb)
+    return _SETUPS[key]
+
+
+
+def robust_filter_setup(name: str, albedo_dir=None):
+    """Our calibration filter (``variant = "robust"``) on the §4.4 thesis case with the full
+    filter's TOMS grid ``name`` ("1p25x1", "5x5", "10x10"; the mean map only): the CSS noise
+    of §2.4 (0.05), the intermediate gyro, and for the coarse grids the representation error
+    of :func:`albedo_grid_error` against the 1°×1.25° grid (60° FOV, §2.1.3).  Returns
+    ``(CalibrationParams, AlbedoMap)`` for :func:`run_calibration`."""
+    from .albedo import load_toms
+    from .gyro import gyro_grade
+    from .okeefe2015 import CSS_SIM
+
+    key = ("robust", name, None if albedo_dir is None else str(albedo_dir))
+    if key not in _SETUPS:
+        mean = load_toms(name, albedo_dir)[0]
+        k, a = 0.0, 0.0
+        if name != "1p25x1":
+            fine = load_toms("1p25x1", albedo_dir)[0]
+            k, a = albedo_grid_error(AlbedoCells.from_map(mean), AlbedoCells.from_map(fine),
+                                     fov_half_angle_deg=60.0)
+        prm = CalibrationParams(sigma_css=CSS_SIM["noise_sigma"], albedo_grid_frac=k,
+                                albedo_grid_floor=a)
+        _SETUPS[key] = (prm.for_gyro(gyro_grade("intermediate")), mean)
+    return _SETUPS[key]
 
 
 def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "10x10", "reduced"),
@@ -950,7 +1018,8 @@ def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "1
     """Tables 4.1-4.3 for one case: for each filter (the full filter with the TOMS grid named,
     or "reduced"), the largest and smallest final 3σ of the scale factor C and of the
     misalignments θ (azimuth) and φ (elevation) over the sensors that were initialised
-    (an output above 0.4 once, §5.2), and the fraction of final errors inside 3σ."""
+    (an output above 0.4 once, §5.2), the mean misalignment 3σ over them
+    (``mean_theta_phi_deg``), and the fraction of final errors inside 3σ."""
     out = {}
     for f in filters:
         prm, alb = thesis_filter_setup(f, albedo_dir)
@@ -965,6 +1034,7 @@ def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "1
         out[f] = {"c": (float(c3.max()), float(c3.min())),
                   "theta_deg": (float(m3[:, 0].max()), float(m3[:, 0].min())),
                   "phi_deg": (float(m3[:, 1].max()), float(m3[:, 1].min())),
+                  "mean_theta_phi_deg": (float(m3[:, 0].mean()), float(m3[:, 1].mean())),
                   "initialised": int(init.sum()),
                   "inside_3sigma": float(np.mean(np.concatenate([err_c <= c3,
                                                                  (err_m <= m3).ravel()])))}

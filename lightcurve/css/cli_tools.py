@@ -67,8 +67,97 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def _fault_tables(args) -> int:
+    """``css faults --experiment table5_1|table5_2``: O'Keefe's tables beside ours."""
+    from ..cli._args import progress_bar
+    from ..errors import InputError
+    from .fault_tables import THESIS_GRIDS, fault_table_study, plot_fault_nis
+
+    ours_only = {"window": 50, "prob": 0.999999, "start_s": 600.0, "fail_s": 1950.0,
+                 "no_dark": False, "star_period_s": 10.0}
+    for k, dflt in ours_only.items():
+        if getattr(args, k, dflt) != dflt:
+            raise InputError("applies to --experiment ours only (the tables use the thesis's "
+                             "detector and our default one)", field="--" + k.replace("_", "-"),
+                             value=getattr(args, k), allowed=str(dflt))
+    grids = tuple(g.strip() for g in args.grids.split(",") if g.strip())
+    bad = [g for g in grids if g not in THESIS_GRIDS]
+    if bad or not grids:
+        raise InputError("unknown TOMS grid", field="--grids", value=args.grids,
+                         allowed=", ".join(THESIS_GRIDS))
+    variants = ("thesis", "robust") if args.variant is None else (args.variant,)
+    tf = {}
+    for item in args.thesis_filter or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise InputError("expected NAME=VALUE", field="--thesis-filter", value=item)
+        tf[name.strip()] = value.strip()
+    from .fault_tables import thesis_filter_overrides
+
+    tf = thesis_filter_overrides(tf)      # checked before any work
+    runs = 500 if args.runs is None else args.runs
+    with progress_bar(total=runs, desc=f"css faults {args.experiment}", quiet=args.quiet,
+                      unit="run") as bar:
+        out = fault_table_study(args.experiment, runs, seed=args.seed, workers=args.workers,
+                                grids=grids, variants=variants, progress=bar.update,
+                                thesis_filter=tf)
+    th = out["thesis_results"]
+    print(f"O'Keefe {args.experiment.replace('table', 'table ').replace('_', '.')} "
+          f"({'controlled' if out['controlled'] else 'tumbling'}), CSS {out['failed_sensor']} "
+          f"failing at {out['t_fail_s']:g} s, {out['runs']} runs (thesis: 500)"
+          + ("; thesis filter changed: " + ", ".join(f"{k} = {v}" for k, v in
+                                                     out["thesis_filter"].items())
+             if out["thesis_filter"] else ""))
+    print("false detections / initialised sensors; correct detections / runs with CSS 1 "
+          "initialised; median time to detection from the failure (s)")
+    head = f"{'grid':7s} {'mode':7s} {'thesis':>24s}"
+    for v in variants:
+        head += f" | {v + ' variant':>34s}"
+    print(head)
+    for g in grids:
+        for m in out["modes"]:
+            t = th.get(g, {}).get(m)
+            line = f"{g:7s} {m:7s} "
+            line += (f"{t[0]:4d}/{t[1]:<5d} {t[2]:4d}/{t[3]:<4d} ({100 * t[2] / t[3]:5.1f}%)"
+                     if t else f"{'-':>24s}")
+            for v in variants:
+                r = out["tables"][v][g][m]
+                pc = 100.0 * r["correct"] / r["total"] if r["total"] else float("nan")
+                ttd = r["ttd_s"]["p50"] if r["ttd_s"] else float("nan")
+                line += (f" | {r['false']:4d}/{r['false_total']:<5d} {r['correct']:4d}/"
+                         f"{r['total']:<4d} ({pc:5.1f}%) {ttd:6.0f}")
+            print(line)
+    if args.output:
+        _write_json(args.output, out)
+    if args.plot:
+        from pathlib import Path
+
+        png = Path(args.output).with_suffix(".png") if args.output else Path("css-faults.png")
+        plot_fault_nis(out, png)
+        print(f"wrote {png}")
+    return 0
+
+
 def cmd_faults(args) -> int:
     """Fault-detection Monte Carlo (tables 5.1-5.2)."""
+    if getattr(args, "experiment", "ours") != "ours":
+        return _fault_tables(args)
+    if getattr(args, "plot", False):
+        from ..errors import InputError
+
+        raise InputError("applies to --experiment table5_1 / table5_2 only", field="--plot",
+                         value=True)
+    if getattr(args, "thesis_filter", None):
+        from ..errors import InputError
+
+        raise InputError("applies to --experiment table5_1 / table5_2 only",
+                         field="--thesis-filter", value=args.thesis_filter[0])
+    if getattr(args, "variant", None) is not None:
+        from ..errors import InputError
+
+        raise InputError("applies to --experiment table5_1 / table5_2 only",
+                         field="--variant", value=args.variant)
+    args.runs = 300 if args.runs is None else args.runs
     from .fault import AveragedNISDetector, DarkSensorDetector, fault_study
 
     det = AveragedNISDetector(window=args.window, prob=args.prob, t_start_s=args.start_s)

@@ -105,19 +105,23 @@ class AveragedNISDetector:
             return float(self.threshold)
         return chi2_interval(1, self.prob, self.window)[1]
 
-    def flags(self, t, nis_kn) -> np.ndarray:
-        """Boolean (K,N): sensor flagged at sample k (full window, average above the limit,
-        t ≥ t_start_s)."""
+    def averages(self, nis_kn) -> np.ndarray:
+        """(K,N) averaged NIS of the last ``window`` valid values, at the samples that bring
+        a new value once the window is full; NaN elsewhere."""
         nis_kn = np.asarray(nis_kn, dtype=float)
-        t = np.asarray(t, dtype=float)
-        lim = self.limit()
-        out = np.zeros(nis_kn.shape, dtype=bool)
+        out = np.full(nis_kn.shape, np.nan)
         for j in range(nis_kn.shape[1]):
             avg, cnt = windowed_average(nis_kn[:, j], self.window)
-            out[:, j] = (cnt >= self.window) & (avg > lim) & (t >= self.t_start_s)
-            # a sample without a new value keeps the previous decision only if it had one
-            out[:, j] &= np.isfinite(nis_kn[:, j])
+            ok = (cnt >= self.window) & np.isfinite(nis_kn[:, j])
+            out[ok, j] = avg[ok]
         return out
+
+    def flags(self, t, nis_kn) -> np.ndarray:
+        """Boolean (K,N): sensor flagged at sample k (a new value, full window, average above
+        the limit, t ≥ t_start_s)."""
+        t = np.asarray(t, dtype=float)
+        with np.errstate(invalid="ignore"):
+            return (self.averages(nis_kn) > self.limit()) & (t >= self.t_start_s)[:, None]
 
 
 @dataclass(frozen=True)
@@ -336,28 +340,9 @@ def fault_study(n_runs=300, modes=FAULT_MODES + (None,), *, seed=0, workers=1,
     for mi, m in enumerate(modes):
         for i in range(int(n_runs)):
             jobs.append((np.random.SeedSequence([int(seed), mi, i]), m, kw))
-    if workers > 1:
-        from ..process import stop_pool
-        from ..studies.runner import process_pool
+    from ..studies.runner import map_in_pool
 
-        # the package's pool: workers die with this process, stopped at once if interrupted
-        ex = process_pool(workers)
-        try:
-            runs = []
-            for r in ex.map(_worker, jobs, chunksize=4):
-                runs.append(r)
-                if progress is not None:
-                    progress()
-        except BaseException:
-            stop_pool(ex)
-            raise
-        ex.shutdown(wait=True)
-    else:
-        runs = []
-        for j in jobs:
-            runs.append(_worker(j))
-            if progress is not None:
-                progress()
+    runs = map_in_pool(_worker, jobs, workers, progress, chunksize=4)
     det = kw.get("detector", AveragedNISDetector())
     dk = kw.get("dark", DarkSensorDetector())
     out = {"detector": {"window": det.window, "prob": det.prob, "threshold": det.limit(),

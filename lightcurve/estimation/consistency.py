@@ -208,7 +208,8 @@ def chi2_consistency(values, dof, n_avg, prob=0.95):
 
 
 def windowed_average(values, window):
-    """Trailing average of the last ``window`` *finite* values at each index.
+    """Trailing average of the last ``window`` *finite* values at each index (the averaged
+    NIS of O'Keefe 2015 eq. 5.11 over a running window of samples, §5.1).
 
     NaN marks a step without a statistic (no measurement, refused update) and is skipped, so
     each average is over up to ``window`` valid values. Returns ``(avg, count)``, both (T,);

@@ -340,6 +340,32 @@ def process_pool(workers: int):
                                initargs=(os.getpid(), nt))
 
 
+def map_in_pool(fn, items, workers: int, progress=None, chunksize: int = 1) -> list:
+    """``[fn(x) for x in items]`` in input order, in :func:`process_pool` workers when
+    ``workers`` > 1 (stopped at once if interrupted), else in this process; ``progress``: a
+    callable called with no argument after each result (a progress bar), or None."""
+    out = []
+    if workers <= 1:
+        for x in items:
+            out.append(fn(x))
+            if progress is not None:
+                progress()
+        return out
+    from ..process import stop_pool
+
+    ex = process_pool(workers)
+    try:
+        for r in ex.map(fn, items, chunksize=chunksize):
+            out.append(r)
+            if progress is not None:
+                progress()
+    except BaseException:
+        stop_pool(ex)
+        raise
+    ex.shutdown(wait=True)
+    return out
+
+
 class _ThreadLimited:
     """``fn(task)`` run with at most n numba threads in the calling thread (Dask tasks run in
     the worker's executor threads, where a limit set at worker start does not apply). ``n``

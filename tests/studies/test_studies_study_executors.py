@@ -94,3 +94,15 @@ def test_missing_distributed_is_a_clear_error(tmp_path, study_file, monkeypatch)
         run_study(load_study(study_file), tmp_path / "o", dask_local=2, progress=False)
     with pytest.raises(InputError, match="choose one executor"):
         run_study(load_study(study_file), tmp_path / "o", dask_local=2, workers=2, progress=False)
+
+
+def test_map_in_pool_keeps_the_order_and_counts_progress():
+    # the CSS Monte Carlo loops (fault studies) use it: results in input order whatever the
+    # completion order, one progress call per item, the same list in one process
+    from lightcurve.studies.runner import map_in_pool
+
+    calls = []
+    xs = [-5, 3, -1, 0, 7, -2]
+    assert map_in_pool(abs, xs, 2, progress=lambda: calls.append(1)) == [5, 3, 1, 0, 7, 2]
+    assert len(calls) == len(xs)
+    assert map_in_pool(abs, xs, 1) == [abs(x) for x in xs]
