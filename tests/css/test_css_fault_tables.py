@@ -168,3 +168,16 @@ def test_thesis_filter_ablation_switches():
     near = np.abs(c - 0.5) < 0.15
     assert ev.sum() > 50 and not (ev & near).any()
     assert (np.isfinite(base) & (lit[:, None] > 0) & near).any()   # the margin removed some
+
+
+def test_fig_5_5_plot_is_written(tmp_path):
+    from lightcurve.css.fault_tables import plot_fault_nis, summarise
+
+    runs = [_rec([True, True, True], [], True, 2.0), _rec([True, True, False], [1], True, 3.0)]
+    t = summarise(runs, grids=("5x5",), modes=("off",), variants=("thesis",))
+    s = {"experiment": "table5_1", "runs": 2, "variants": ["thesis"], "grids": ["5x5"],
+         "modes": ["off"], "tables": t,
+         "detectors": {"thesis": {"5x5": {"threshold": 1.2, "window": 100}}}}
+    png = tmp_path / "f.png"
+    plot_fault_nis(s, png)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
