@@ -1014,19 +1014,35 @@ def robust_filter_setup(name: str, albedo_dir=None):
 
 
 def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "10x10", "reduced"),
-                             *, albedo_dir=None) -> dict:
+                             *, albedo_dir=None, variant="thesis") -> dict:
     """Tables 4.1-4.3 for one case: for each filter (the full filter with the TOMS grid named,
     or "reduced"), the largest and smallest final 3σ of the scale factor C and of the
     misalignments θ (azimuth) and φ (elevation) over the sensors that were initialised
     (an output above 0.4 once, §5.2), the mean misalignment 3σ over them
-    (``mean_theta_phi_deg``), and the fraction of final errors inside 3σ."""
+    (``mean_theta_phi_deg``), and the fraction of final errors inside 3σ.
+
+    ``variant``: "thesis" (:func:`thesis_filter_setup`) or "robust" (our filters on the same
+    case: :func:`robust_filter_setup`, and :meth:`CalibrationParams.reduced` with the §2.4
+    CSS noise for "reduced"); the same sensors count as initialised in both."""
+    from .gyro import gyro_grade
+    from .okeefe2015 import CALIBRATION, CSS_SIM
+
+    if variant not in ("thesis", "robust"):
+        raise ValueError(f"variant must be 'thesis' or 'robust', got {variant!r}")
+    init = np.any(case.Y > CALIBRATION["init_threshold"], axis=0)
     out = {}
     for f in filters:
-        prm, alb = thesis_filter_setup(f, albedo_dir)
+        if variant == "thesis":
+            prm, alb = thesis_filter_setup(f, albedo_dir)
+        elif f == "reduced":
+            prm = CalibrationParams.reduced(sigma_css=CSS_SIM["noise_sigma"]).for_gyro(
+                gyro_grade("intermediate"))
+            alb = "builtin"
+        else:
+            prm, alb = robust_filter_setup(f, albedo_dir)
         res = run_calibration(case.css_nominal, case.t, case.Y, case.gyro, case.sun_N, case.lit,
                               case.r_I_m, case.epoch_utc, params=prm, albedo=alb,
                               q_star=case.q_star, star_valid=case.star_valid)
-        init = np.any(case.Y > prm.init_threshold, axis=0)
         c3 = res.sigma3_scale()[-1][init]
         m3 = np.degrees(res.sigma3_misalignment_rad()[-1][init])
         err_c = np.abs(case.scale_true - res.scale()[-1])[init]

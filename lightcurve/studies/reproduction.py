@@ -534,7 +534,7 @@ def _tables4_section(b) -> list[str]:
         return out + ["Not run (`python benchmarks/css_tables_4.py`).", ""]
     th = b["thesis"]
     out += [f"`benchmarks/css_tables_4.py` (seed {b['seed']}; one case, like the tables; thesis "
-            f"variant of §4.2-4.3). Thesis / ours.", "",
+            f"variant of §4.2-4.3, then our robust filters on the same case). Thesis / ours.", "",
             "| table | filter | 3σ C | 3σ θ (deg) | 3σ φ (deg) | errors inside 3σ |",
             "|---|---|---|---|---|---|"]
 
@@ -547,19 +547,22 @@ def _tables4_section(b) -> list[str]:
             cells.append(f"{rt} / {o[0]:.3g}/{o[1]:.3g}")
         return f"| {tab} | {name} | " + " | ".join(cells) + f" | {ours['inside_3sigma']:.2f} |"
 
-    dp = b.get("dual_pyramid_case", {})
-    cu = b.get("cube_case", {})
-    if "1p25x1" in dp:
-        out.append(row("4.1", "full, 1°×1.25°", th["table4_1"]["full"], dp["1p25x1"]))
-    if "reduced" in dp:
-        out.append(row("4.1/4.3", "reduced", th["table4_3"]["reduced"], dp["reduced"]))
-    if "1p25x1" in cu:
-        out.append(row("4.2", "full, 1°×1.25° (cube)", th["table4_2"]["full"], cu["1p25x1"]))
-    if "reduced" in cu:
-        out.append(row("4.2", "reduced (cube)", None, cu["reduced"]))
-    for g, lab in (("5x5", "5°×5°"), ("10x10", "10°×10°")):
-        if g in dp:
-            out.append(row("4.3", f"full, {lab}", th["table4_3"][g], dp[g]))
+    for suffix, tag in (("", ""), ("_robust", " — robust variant")):
+        dp = b.get(f"dual_pyramid_case{suffix}", {})
+        cu = b.get(f"cube_case{suffix}", {})
+        if "1p25x1" in dp:
+            out.append(row("4.1", f"full, 1°×1.25°{tag}", th["table4_1"]["full"], dp["1p25x1"]))
+        if "reduced" in dp:
+            out.append(row("4.1/4.3", f"reduced{tag}", th["table4_3"]["reduced"],
+                           dp["reduced"]))
+        if "1p25x1" in cu:
+            out.append(row("4.2", f"full, 1°×1.25° (cube){tag}", th["table4_2"]["full"],
+                           cu["1p25x1"]))
+        if "reduced" in cu:
+            out.append(row("4.2", f"reduced (cube){tag}", None, cu["reduced"]))
+        for g, lab in (("5x5", "5°×5°"), ("10x10", "10°×10°")):
+            if g in dp:
+                out.append(row("4.3", f"full, {lab}{tag}", th["table4_3"][g], dp[g]))
     out += ["", "The reduced-filter columns of tables 4.1 and 4.2 are missing from the text we "
             "have (table 4.3 gives the dual pyramid's).", ""]
     if b.get("runs", 0) > 0:
@@ -572,14 +575,17 @@ def _tables4_section(b) -> list[str]:
                 "thesis / ours | errors inside 3σ |",
                 "|---|---|---|---|---|---|---|"]
         quoted = {("dual_pyramid", "1p25x1"): "1.05 / 0.9", ("cube", "1p25x1"): "1.66 / 0.93"}
-        for conf, lab in (("dual_pyramid", "dual pyramid"), ("cube", "cube")):
-            mc = b.get(f"{conf}_mc_mean", {})
+        for (conf, lab), (suffix, tag) in ((c, v) for v in (("", ""), ("_robust",
+                                                                 " — robust variant"))
+                                            for c in (("dual_pyramid", "dual pyramid"),
+                                                      ("cube", "cube"))):
+            mc = b.get(f"{conf}_mc_mean{suffix}", {})
             for f in ("1p25x1", "5x5", "10x10", "reduced"):
                 if f not in mc:
                     continue
                 r = mc[f]
-                name = "reduced" if f == "reduced" else "full, " + {
-                    "1p25x1": "1°×1.25°", "5x5": "5°×5°", "10x10": "10°×10°"}[f]
+                name = ("reduced" if f == "reduced" else "full, " + {
+                    "1p25x1": "1°×1.25°", "5x5": "5°×5°", "10x10": "10°×10°"}[f]) + tag
                 mm = r.get("mean_theta_phi_deg")
                 ours = "–" if mm is None else f"{mm[0]:.3g} / {mm[1]:.3g}"
                 out.append(f"| {lab} | {name} | {r['c'][0]:.3g}/{r['c'][1]:.3g} | "
