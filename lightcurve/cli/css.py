@@ -304,7 +304,7 @@ def register(sub) -> None:
     fa.add_argument("--thesis-filter", action="append", default=[], metavar="NAME=VALUE",
                     help="with --experiment table5_*: change one setting of the thesis filter "
                     "(an ablation, recorded in the output; repeatable), e.g. "
-                    "fov_edge_margin=0.03 or skip_in_shadow=true")
+                    "fov_edge_margin=0.05, skip_in_shadow=true or floor_rule=predicted")
     fa.add_argument("--grids", default="1p25x1,5x5,10x10",
                     help="with --experiment table5_*: comma-separated TOMS grids of the full "
                     "filter (default 1p25x1,5x5,10x10)")

@@ -241,7 +241,7 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     """O'Keefe §4.2-4.3 measurement update (see :func:`calibration_update_nb`)."""
     N = az0.shape[0]
     sig_v, floor_y, init_thr = prm[0], prm[18], prm[19]
-    floor_pred = prm.shape[0] > 20 and prm[20] > 0.5
+    floor_rule = int(prm[20]) if prm.shape[0] > 20 else 0   # FLOOR_RULES index
     edge = prm[13]
     if prm.shape[0] > 21 and prm[21] > 0.5 and lit <= 0.0:   # no CSS update in the shadow
         for k in range(N):
@@ -277,7 +277,10 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
                 init[k] = 1.0
             else:
                 continue
-        if y[k] <= floor_y and not (floor_pred and h[k] > floor_y):
+        if floor_rule == 2:
+            if h[k] <= floor_y:
+                continue
+        elif y[k] <= floor_y and not (floor_rule == 1 and h[k] > floor_y):
             continue
         if edge > 0.0 and lit > 0.0 and abs(cosd[k] - cos_fov[k]) < edge:
             continue   # Sun within ``edge`` (cosine) of the FOV cut-off (not in the thesis)
@@ -321,8 +324,8 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     coefficient uncertainty ``M_α R_α M_αᵀ`` of eq. 4.30 (:func:`albedo_coefficient_cov_nb`
     with ``cells_sig`` = σ_j A_j of the filter's TOMS grid, full N×N); a sensor is processed
     once it has been initialised (an output above ``init_threshold`` once, §5.2; ``init`` (N,)
-    flags, updated here) and while its output — or, with ``floor_on_prediction``, its output
-    or its predicted output — is above the noise floor (§4.2; see
+    flags, updated here) and while its measured output, its measured or predicted output, or
+    its predicted output is above the noise floor (``floor_rule``, §4.2; see
     :class:`CalibrationParams`).
     """
     N = az0.shape[0]
@@ -482,6 +485,10 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
 # ---------------------------------------------------------------------------------------
 # object layer
 # ---------------------------------------------------------------------------------------
+FLOOR_RULES = ("measured", "either", "predicted")
+"""Noise-floor rules of the thesis update (:attr:`CalibrationParams.floor_rule`)."""
+
+
 @dataclass(frozen=True)
 class CalibrationParams:
     """Tuning of the calibration filter (dimensionless outputs, SI otherwise).
@@ -503,8 +510,9 @@ class CalibrationParams:
     against the 1° one from :func:`albedo_grid_error`); sigma_att0_rad, sigma_bias0, sigma_scale0, sigma_mis0_rad: initial 1σ.
     thesis: O'Keefe's §4.2-4.3 update as written (:func:`calibration_update_nb`); meas_floor:
     its noise floor (output units); init_threshold: output a sensor must exceed once before
-    it is used (§5.2); floor_on_prediction: a sample is used when its measured or its
-    predicted output is above ``meas_floor`` (else the measured one only); skip_in_shadow:
+    it is used (§5.2); floor_rule: a sample is used when its "measured" output, its
+    measured or predicted output ("either"), or its "predicted" output is above
+    ``meas_floor``; skip_in_shadow:
     no CSS update while the spacecraft is in the Earth's shadow (thesis update only; chapters
     4-5 do not say, the ch. 3 filters of eq. 3.1/3.31 update only outside it). The thesis
     update uses ``fov_edge_margin`` too (0 in :meth:`thesis_full`: the text has no FOV-edge
@@ -536,7 +544,7 @@ class CalibrationParams:
     thesis: bool = False
     meas_floor: float = 0.0
     init_threshold: float = 0.0
-    floor_on_prediction: bool = False
+    floor_rule: str = "measured"
     skip_in_shadow: bool = False
 
     @classmethod
@@ -549,16 +557,19 @@ class CalibrationParams:
         The noise floor: §4.2 drops "CSS measurement values" below it, while §5.2.1 has a
         failed sensor flagged "once the expected observations for the failed sensor rise
         above the noise floor", and tables 5.1-5.2 detect every initialised sensor that
-        fails off (output 0, below any floor). Both hold when a sample is used while its
-        measured *or* its expected output is above the floor (``floor_on_prediction``);
-        the thesis variant uses that reading everywhere (chapters 4 and 5)."""
+        fails off (output 0, below any floor). The thesis variant applies the floor to the
+        expected (predicted) output (``floor_rule = "predicted"``), in chapters 4 and 5
+        alike. Selecting on the measured output instead ("measured", or "either": measured
+        or predicted) keeps only the upper tail of the noise where the prediction is below
+        the floor (in the Earth's shadow, on unlit sensors), which biases the normalised
+        innovations upwards; both stay selectable for ablations (docs/measurements.md)."""
         from .okeefe2015 import CALIBRATION, CSS_SIM
 
         base = dict(thesis=True, sigma_css=CSS_SIM["noise_sigma"]
                     + CALIBRATION["sigma_v_increase"][grid],
                     meas_floor=CALIBRATION["noise_floor_sigmas"] * CSS_SIM["noise_sigma"],
                     init_threshold=CALIBRATION["init_threshold"], use_albedo=True,
-                    floor_on_prediction=True, fov_edge_margin=0.0, skip_in_shadow=False,
+                    floor_rule="predicted", fov_edge_margin=0.0, skip_in_shadow=False,
                     consider_sigma=0.0, consider_tau_s=0.0, q_param=0.0,
                     sigma_scale0=CALIBRATION["scale_sigma"],
                     sigma_mis0_rad=float(np.radians(CALIBRATION["misalignment_sigma_deg"])))
@@ -585,13 +596,16 @@ class CalibrationParams:
         return cls(**base)
 
     def as_array(self) -> np.ndarray:
+        if self.floor_rule not in FLOOR_RULES:
+            raise ValueError(f"floor_rule must be one of {', '.join(FLOOR_RULES)}, got "
+                             f"{self.floor_rule!r}")
         return np.array([self.sigma_css, self.noise_floor, self.albedo_frac, self.threshold,
                          self.gate, self.inflate_max, self.gate_sensor, self.arw, self.rrw,
                          self.q_param, self.consider_tau_s, self.consider_sigma,
                          self.sigma_st_rad, self.fov_edge_margin,
                          self.fov_edge_sigmas, self.albedo_grid_frac,
                          self.albedo_grid_floor, float(self.thesis), self.meas_floor,
-                         self.init_threshold, float(self.floor_on_prediction),
+                         self.init_threshold, float(FLOOR_RULES.index(self.floor_rule)),
                          float(self.skip_in_shadow)], dtype=float)
 
     def for_gyro(self, spec) -> "CalibrationParams":

@@ -80,7 +80,8 @@ def _max_or_nan(v) -> float:
 def thesis_filter_overrides(overrides) -> dict:
     """Check ``overrides`` (name → value) against the fields of
     :class:`~lightcurve.css.calibration.CalibrationParams` (an ablation of the thesis
-    filter, e.g. ``{"fov_edge_margin": 0.03}`` or ``{"skip_in_shadow": True}``); returns
+    filter, e.g. ``{"fov_edge_margin": 0.03}``, ``{"skip_in_shadow": True}`` or
+    ``{"floor_rule": "predicted"}``); returns
     them with the fields' types."""
     from dataclasses import fields
 
@@ -93,7 +94,14 @@ def thesis_filter_overrides(overrides) -> dict:
         if k not in types or k == "thesis":
             raise InputError("not a calibration-filter setting", field="thesis_filter",
                              value=k, allowed=", ".join(n for n in types if n != "thesis"))
-        if types[k] in (bool, "bool"):
+        if k == "floor_rule":
+            from .calibration import FLOOR_RULES
+
+            if v not in FLOOR_RULES:
+                raise InputError("unknown noise-floor rule", field=f"thesis_filter.{k}",
+                                 value=v, allowed=", ".join(FLOOR_RULES))
+            out[k] = str(v)
+        elif types[k] in (bool, "bool"):
             if isinstance(v, str):
                 if v.lower() not in ("true", "false", "1", "0"):
                     raise InputError("not a boolean", field=f"thesis_filter.{k}", value=v,

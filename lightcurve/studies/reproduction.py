@@ -262,6 +262,26 @@ def _pc(a, b):
     return f"{a}/{b} ({100.0 * a / b:.2f} %)" if b else f"{a}/{b}"
 
 
+def _merge_variants(a: dict, b: dict, path) -> dict:
+    """Two outputs of one fault table with different ``--variant`` (same runs, seed, grids
+    and failure modes: the same simulated spacecraft) as one, thesis variant first."""
+    from ..errors import InputError
+
+    for k in ("runs", "seed", "grids", "modes"):
+        if a.get(k) != b.get(k):
+            raise InputError(f"a second output of {a['experiment']} with another {k}: the "
+                             "variants of one table must come from the same runs",
+                             file=path, field=k, value=b.get(k), allowed=str(a.get(k)))
+    if set(a["variants"]) & set(b["variants"]):
+        raise InputError(f"two outputs of {a['experiment']} with the same variant",
+                         file=path, field="variants", value=b["variants"])
+    out = dict(a)
+    out["variants"] = [v for v in ("thesis", "robust") if v in a["variants"] + b["variants"]]
+    out["tables"] = {**a["tables"], **b["tables"]}
+    out["detectors"] = {**a["detectors"], **b["detectors"]}
+    return out
+
+
 def _faults_section(faults) -> list[str]:
     """Tables 5.1-5.2 and fig. 5.5 from the JSON of ``lightcurve css faults --experiment
     table5_1|table5_2 -o FILE`` (a dict experiment → summary; empty: not run)."""
@@ -620,6 +640,8 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
                              value=d.get("experiment"), allowed=", ".join(_FAULT_TITLE))
         if d.get("thesis_filter"):
             faults.setdefault("ablations", []).append(d)
+        elif d["experiment"] in faults:
+            faults[d["experiment"]] = _merge_variants(faults[d["experiment"]], d, f)
         else:
             faults[d["experiment"]] = d
     timing = _json_line(timing)

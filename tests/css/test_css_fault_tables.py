@@ -34,8 +34,8 @@ def test_averaged_nis_needs_a_full_window_and_a_new_value():
 
 def test_thesis_noise_floor_on_the_prediction_exposes_an_off_sensor():
     """§4.2 drops measurements below the noise floor, but §5.2.1 flags a failed sensor "once
-    the expected observations ... rise above the noise floor": with the thesis variant's
-    reading (measured or predicted output above the floor) a sensor that reads 0 while
+    the expected observations ... rise above the noise floor": with the floor on the
+    predicted output (the thesis variant) or on either output, a sensor that reads 0 while
     predicted lit is evaluated, and its innovations are many σ; with the measured output
     alone it is never evaluated."""
     from dataclasses import replace
@@ -46,7 +46,7 @@ def test_thesis_noise_floor_on_the_prediction_exposes_an_off_sensor():
 
     case = simulate_thesis_calibration_case(5, duration_s=240.0, albedo="builtin")
     prm, alb = thesis_filter_setup("reduced")
-    assert prm.floor_on_prediction
+    assert prm.floor_rule == "predicted"
     t_fail = 120.0
     after = case.t >= t_fail
     lit_before = np.sum(case.Y[~after] > 0.4, axis=0)
@@ -61,11 +61,14 @@ def test_thesis_noise_floor_on_the_prediction_exposes_an_off_sensor():
                             q_star=case.q_star, star_valid=case.star_valid)
         return sensor_nis(r.innov, r.innov_var)
 
-    on = nis_of(prm)[after, s]
-    off = nis_of(replace(prm, floor_on_prediction=False))[after, s]
+    on = nis_of(replace(prm, floor_rule="either"))[after, s]
+    off = nis_of(replace(prm, floor_rule="measured"))[after, s]
+    pred = nis_of(prm)[after, s]
     assert np.isnan(off).all()
     v = on[np.isfinite(on)]
     assert v.size >= 5 and np.median(v[:5]) > 25.0   # 5σ innovations at least
+    # the predicted-output rule evaluates the off sensor too: at the same first samples
+    assert np.array_equal(np.isfinite(pred)[:20], np.isfinite(on)[:20])
 
 
 def _rec(init, false, detected, ttd=None):
@@ -133,7 +136,8 @@ def test_cli_table_options_are_checked_and_the_generator_reads_the_output(tmp_pa
 
 def test_thesis_filter_ablation_switches():
     """The two switches the fault-table ablations use, off in the thesis variant: with
-    ``skip_in_shadow`` no sensor is evaluated at a sample the truth marks as shadow; with a
+    ``skip_in_shadow`` no sensor is evaluated at a sample the truth marks as shadow (where
+    the floor on the measured output would admit noise above it); with a
     FOV-edge margin of 0.2 (cosine) no evaluated sample has the Sun within ≈ 0.15 of the
     60° cut-off (cos 0.5) — the estimated normals are within ≈ 3° of the true ones here."""
     from dataclasses import replace
@@ -156,9 +160,11 @@ def test_thesis_filter_ablation_switches():
                             q_star=case.q_star, star_valid=case.star_valid)
         return sensor_nis(r.innov, r.innov_var)
 
-    base = nis_of(prm)
-    assert np.isfinite(base[shade]).any()             # the thesis variant updates in shadow
-    sk = nis_of(replace(prm, skip_in_shadow=True))
+    # with the floor on the measured output the thesis update runs in the shadow too
+    pe = replace(prm, floor_rule="either")
+    base = nis_of(pe)
+    assert np.isfinite(base[shade]).any()
+    sk = nis_of(replace(pe, skip_in_shadow=True))
     assert not np.isfinite(sk[shade]).any() and np.isfinite(sk[~shade]).any()
     ed = nis_of(replace(prm, fov_edge_margin=0.2))
     true_css = case.css_nominal.with_errors(scale_individual=case.scale_true,
