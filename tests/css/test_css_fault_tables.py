@@ -124,6 +124,24 @@ def test_cli_table_options_are_checked_and_the_generator_reads_the_output(tmp_pa
             "90/100 (90.00 %) | 12.0 / 1.5 |") in txt
     assert "stuck failures nearly undetectable (Table 5.2: 0–10 %): ours 1°×1.25° 5 %" in txt
     assert "| thesis | 1°×1.25° | 3.00 | 1.00 / 2.50 | 20.00 / 40.00 |" in txt
+    # the robust variant of the same runs, from a second output, is merged beside it; a
+    # second output from other runs is refused
+    rob = tmp_path / "r.json"
+    rsum = {**summ, "variants": ["robust"],
+            "tables": {"robust": {"1p25x1": {m: {**row, "false": 7} for m in
+                                             ("off", "stuck", "random")} | {
+                "nis_healthy": [], "healthy_max_avg": {"p50": 1.0, "p99": 2.0}}}},
+            "detectors": {"robust": {"threshold": 2.3}}}
+    rob.write_text(json.dumps(rsum))
+    txt2 = css_section([], faults=[out, rob])
+    assert ("90/100 (90.00 %) | 12.0 / 1.5 | 7/800 (0.88 %) | 90/100 (90.00 %) | 12.0 / 1.5 |"
+            in txt2)
+    other = tmp_path / "o.json"
+    other.write_text(json.dumps({**rsum, "runs": 50}))
+    from lightcurve.errors import InputError
+
+    with pytest.raises(InputError, match="runs"):
+        css_section([], faults=[out, other])
     # an ablation of the thesis filter (same runs and seed) is shown against the table
     abl = tmp_path / "a.json"
     summ["thesis_filter"] = {"skip_in_shadow": True}
