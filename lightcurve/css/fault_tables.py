@@ -299,7 +299,7 @@ def plot_fault_nis(summary: dict, png) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io.atomic import atomic_write_bytes
+    from ..io.atomic import atomic_path
 
     variants = summary["variants"]
     grids = summary["grids"]
@@ -335,9 +335,8 @@ def plot_fault_nis(summary: dict, png) -> None:
     fig.suptitle(f"{summary['experiment']}: largest averaged NIS, healthy sensors vs failed "
                  f"CSS 1 ({summary['runs']} runs)", fontsize=10)
     fig.tight_layout()
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    atomic_write_bytes(png, buf.getvalue())
+    try:
+        with atomic_path(png) as tmp:
+            fig.savefig(tmp, format="png", dpi=110)
+    finally:
+        plt.close(fig)
