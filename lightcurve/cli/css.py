@@ -310,17 +310,17 @@ def register(sub) -> None:
                     "filter (default 1p25x1,5x5,10x10)")
     add_workers(fa, default=1, help="local worker processes (default 1)")
     add_seed(fa, default=0)
-    fa.add_argument("--window", type=number(1, 100000, integer=True), default=50,
+    fa.add_argument("--window", type=number(1, 100000, integer=True), default=None,
                     help="averaging window, valid samples (default 50)")
-    fa.add_argument("--prob", type=number(0.0, 1.0, lo_open=True, hi_open=True), default=0.999999,
+    fa.add_argument("--prob", type=number(0.0, 1.0, lo_open=True, hi_open=True), default=None,
                     help="probability of the chi-square interval (default 1-1e-6)")
-    fa.add_argument("--start-s", type=number(0.0), default=600.0,
+    fa.add_argument("--start-s", type=number(0.0), default=None,
                     help="no decision before this time, s (default 600)")
-    fa.add_argument("--fail-s", type=number(0.0), default=1950.0, help="failure time, s (default 1950)")
-    fa.add_argument("--no-dark", action="store_true",
+    fa.add_argument("--fail-s", type=number(0.0), default=None, help="failure time, s (default 1950)")
+    fa.add_argument("--no-dark", action="store_true", default=None,
                     help="averaged NIS only: switch off the dark-sensor test (a lit sensor whose "
                     "output stays at zero; catches off failures of never-calibrated sensors)")
-    fa.add_argument("--star-period-s", type=number(0.0, 3600.0), default=10.0,
+    fa.add_argument("--star-period-s", type=number(0.0, 3600.0), default=None,
                     help="star-tracker period, s; 0 for none (default 10)")
     _output(fa, "write the summary to this JSON file")
     add_plot(fa, help="with --experiment table5_*: also write fig. 5.5's comparison (OUTPUT "

@@ -320,7 +320,8 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
 
     With ``prm`` of :meth:`CalibrationParams.thesis_full` / ``thesis_reduced`` (thesis flag
     set) the update is O'Keefe's §4.2-4.3 as written instead: no gates or inflation, no
-    FOV-edge margin unless ``prm`` sets one, updates in the shadow unless ``skip_in_shadow``; ``M = diag(Ĉ)`` so ``R = Ĉ_i² σ_V²`` plus, for the full filter, the albedo
+    FOV-edge margin unless ``prm`` sets one, updates in the shadow unless
+    ``skip_in_shadow``; ``M = diag(Ĉ)`` so ``R = Ĉ_i² σ_V²`` plus, for the full filter, the albedo
     coefficient uncertainty ``M_α R_α M_αᵀ`` of eq. 4.30 (:func:`albedo_coefficient_cov_nb`
     with ``cells_sig`` = σ_j A_j of the filter's TOMS grid, full N×N); a sensor is processed
     once it has been initialised (an output above ``init_threshold`` once, §5.2; ``init`` (N,)
@@ -1002,29 +1003,42 @@ def thesis_filter_setup(name: str, albedo_dir=None):
     return _SETUPS[key]
 
 
-
 def robust_filter_setup(name: str, albedo_dir=None):
-    """Our calibration filter (``variant = "robust"``) on the §4.4 thesis case with the full
-    filter's TOMS grid ``name`` ("1p25x1", "5x5", "10x10"; the mean map only): the CSS noise
-    of §2.4 (0.05), the intermediate gyro, and for the coarse grids the representation error
-    of :func:`albedo_grid_error` against the 1°×1.25° grid (60° FOV, §2.1.3).  Returns
-    ``(CalibrationParams, AlbedoMap)`` for :func:`run_calibration`."""
+    """Our calibration filter (``variant = "robust"``) on the §4.4 thesis case, with the CSS
+    noise of §2.4 (0.05) and the intermediate gyro: ``name`` "1p25x1", "5x5" or "10x10" —
+    the full filter with that TOMS grid (the mean map only; for the coarse grids the
+    representation error of :func:`albedo_grid_error` against the 1°×1.25° grid, 60° FOV,
+    §2.1.3) — or "reduced" (:meth:`CalibrationParams.reduced`).  Returns
+    ``(CalibrationParams, albedo)`` for :func:`run_calibration`."""
     from .albedo import load_toms
     from .gyro import gyro_grade
     from .okeefe2015 import CSS_SIM
 
     key = ("robust", name, None if albedo_dir is None else str(albedo_dir))
     if key not in _SETUPS:
-        mean = load_toms(name, albedo_dir)[0]
-        k, a = 0.0, 0.0
-        if name != "1p25x1":
-            fine = load_toms("1p25x1", albedo_dir)[0]
-            k, a = albedo_grid_error(AlbedoCells.from_map(mean), AlbedoCells.from_map(fine),
-                                     fov_half_angle_deg=60.0)
-        prm = CalibrationParams(sigma_css=CSS_SIM["noise_sigma"], albedo_grid_frac=k,
-                                albedo_grid_floor=a)
-        _SETUPS[key] = (prm.for_gyro(gyro_grade("intermediate")), mean)
+        if name == "reduced":
+            prm, alb = CalibrationParams.reduced(sigma_css=CSS_SIM["noise_sigma"]), "builtin"
+        else:
+            cells = AlbedoCells.from_map(load_toms(name, albedo_dir)[0])
+            k, a = 0.0, 0.0
+            if name != "1p25x1":
+                fine = AlbedoCells.from_map(load_toms("1p25x1", albedo_dir)[0])
+                k, a = albedo_grid_error(cells, fine, fov_half_angle_deg=60.0)
+            prm = CalibrationParams(sigma_css=CSS_SIM["noise_sigma"], albedo_grid_frac=k,
+                                    albedo_grid_floor=a)
+            alb = cells
+        _SETUPS[key] = (prm.for_gyro(gyro_grade("intermediate")), alb)
     return _SETUPS[key]
+
+
+def calibration_filter_setup(variant: str, name: str, albedo_dir=None):
+    """:func:`thesis_filter_setup` (``variant`` "thesis") or :func:`robust_filter_setup`
+    ("robust") of the filter ``name``."""
+    if variant == "thesis":
+        return thesis_filter_setup(name, albedo_dir)
+    if variant == "robust":
+        return robust_filter_setup(name, albedo_dir)
+    raise ValueError(f"variant must be 'thesis' or 'robust', got {variant!r}")
 
 
 def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "10x10", "reduced"),
@@ -1035,25 +1049,14 @@ def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "1
     (an output above 0.4 once, §5.2), the mean misalignment 3σ over them
     (``mean_theta_phi_deg``), and the fraction of final errors inside 3σ.
 
-    ``variant``: "thesis" (:func:`thesis_filter_setup`) or "robust" (our filters on the same
-    case: :func:`robust_filter_setup`, and :meth:`CalibrationParams.reduced` with the §2.4
-    CSS noise for "reduced"); the same sensors count as initialised in both."""
-    from .gyro import gyro_grade
-    from .okeefe2015 import CALIBRATION, CSS_SIM
+    ``variant``: "thesis" or "robust" (our filters on the same case,
+    :func:`calibration_filter_setup`); the same sensors count as initialised in both."""
+    from .okeefe2015 import CALIBRATION
 
-    if variant not in ("thesis", "robust"):
-        raise ValueError(f"variant must be 'thesis' or 'robust', got {variant!r}")
     init = np.any(case.Y > CALIBRATION["init_threshold"], axis=0)
     out = {}
     for f in filters:
-        if variant == "thesis":
-            prm, alb = thesis_filter_setup(f, albedo_dir)
-        elif f == "reduced":
-            prm = CalibrationParams.reduced(sigma_css=CSS_SIM["noise_sigma"]).for_gyro(
-                gyro_grade("intermediate"))
-            alb = "builtin"
-        else:
-            prm, alb = robust_filter_setup(f, albedo_dir)
+        prm, alb = calibration_filter_setup(variant, f, albedo_dir)
         res = run_calibration(case.css_nominal, case.t, case.Y, case.gyro, case.sun_N, case.lit,
                               case.r_I_m, case.epoch_utc, params=prm, albedo=alb,
                               q_star=case.q_star, star_valid=case.star_valid)

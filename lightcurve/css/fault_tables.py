@@ -134,8 +134,8 @@ def fault_table_run(seed, *, controlled=False, grids=THESIS_GRIDS, modes=FAULT_M
     averaged NIS of CSS 1 after the failure, "healthy_max_avg": [largest averaged NIS of each
     initialised CSS 2-N]}`` (NaN where none).
     """
-    from .calibration import (robust_filter_setup, run_calibration,
-                              simulate_thesis_calibration_case, thesis_filter_setup)
+    from .calibration import (calibration_filter_setup, run_calibration,
+                              simulate_thesis_calibration_case)
     from .okeefe2015 import CALIBRATION, FAULT
 
     g = as_generator(seed)
@@ -157,13 +157,12 @@ def fault_table_run(seed, *, controlled=False, grids=THESIS_GRIDS, modes=FAULT_M
     for v in variants:
         out[v] = {}
         for grid in grids:
+            prm, alb = calibration_filter_setup(v, grid, albedo_dir)
             if v == "thesis":
-                prm, alb = thesis_filter_setup(grid, albedo_dir)
                 if thesis_filter:
                     prm = replace(prm, **thesis_filter)
                 det, dark = thesis_detector(grid), None
             else:
-                prm, alb = robust_filter_setup(grid, albedo_dir)
                 det, dark = robust_detectors()
             out[v][grid] = {}
             for m in modes:
@@ -275,8 +274,8 @@ def fault_table_study(experiment="table5_1", n_runs=500, *, seed=0, workers=1,
         "thesis_filter": tf,
         "t_fail_s": float(FAULT["t_fail_s"]),
         "detectors": {
-            "thesis": {g: {"window": thesis_detector(g).window,
-                           "threshold": thesis_detector(g).limit()} for g in grids},
+            "thesis": {g: {"window": d.window, "threshold": d.limit()}
+                       for g, d in ((g, thesis_detector(g)) for g in grids)},
             "robust": {"window": det_r.window, "threshold": det_r.limit(),
                        "t_start_s": det_r.t_start_s, "dark_g_min": dark_r.limit(),
                        "dark_window": dark_r.window}},
