@@ -226,3 +226,21 @@ def test_tables_4_section_shows_both_variants_and_the_quoted_means(tmp_path):
     assert "| 4.1 | full, 1°×1.25° — robust variant | 0.018/0.0036 / 0.02/0.004 |" in txt
     assert "| dual pyramid | full, 1°×1.25° | 0.02/0.004 | 1/0.6 | 1.5/0.5 | 1.05 / 0.9 / 1.1 / 0.8 |" in txt
     assert "Mean over 3 Monte Carlo cases" in txt
+
+
+def test_one_run_of_table_5_1_end_to_end():
+    # the whole path on a short run (failure at 1950 s, 150 s after it): both variants on the
+    # same truth, the counts tied to the sensors initialised in that run
+    from lightcurve.css.fault_tables import fault_table_run, fault_table_study
+
+    kw = dict(grids=("10x10",), modes=("random",), duration_s=2100.0)
+    o = fault_table_study("table5_1", 1, seed=3, **kw)
+    r = fault_table_run(np.random.SeedSequence([3, 0]), **kw)
+    n_init = sum(r["initialised"]["random"])
+    for v in ("thesis", "robust"):
+        row = o["tables"][v]["10x10"]["random"]
+        assert row["false_total"] == n_init
+        assert row["total"] == int(r["initialised"]["random"][0])
+        assert row["false"] == len(r[v]["10x10"]["random"]["false"])
+    assert o["detectors"]["thesis"]["10x10"] == {"window": 100, "threshold": 1.2}
+    assert o["variants"] == ["thesis", "robust"] and o["failed_sensor"] == 1
