@@ -14,6 +14,10 @@ numba) is its own; the peak of traced Python/NumPy allocations (tracemalloc) is 
 after: the "under load" mode of the acceptance (K = 2 on 2 cores). ``--layer`` picks numba's
 threading layer (workqueue, omp, tbb; each measured in its own subprocess).
 
+``numba_threads`` is the thread count the configuration asks for; ``filter_threads`` the
+threads the filter runs on (:func:`lightcurve.filters.bpf.bpf_threads`: a small cloud runs on
+fewer).
+
 Prints ONE JSON line: per configuration particle·steps per second (particles × epochs / filter
 run time), run time and process CPU time, peak RSS (MB), traced peak (MB), final RSS attitude
 error, speed-up over the NumPy run of the same size and mode (``speedup_vs_numpy``) and over
@@ -45,6 +49,7 @@ from lightcurve._paths import data_dir
 from lightcurve.studies.scenario import load_scenario
 from lightcurve.studies.simulate import simulate
 from lightcurve.filters import build_problem, run_bpf, run_bpf_numpy
+from lightcurve.filters.bpf import bpf_threads
 
 backend, N, prog = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
 sc = load_scenario(data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-controlled-1site.toml")
@@ -63,6 +68,8 @@ tracemalloc.stop()
 rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 print(json.dumps({"backend": backend, "particles": N, "progressive": prog, "epochs": len(est),
                   "numba_threads": numba.get_num_threads(),
+                  "filter_threads": (min(numba.get_num_threads(), bpf_threads(N))
+                                     if backend == "numba" else 1),
                   "threading_layer": numba.threading_layer() if backend == "numba" else None,
                   "runtime_s": dt, "cpu_s": cpu, "particle_steps_per_s": N * len(est) / dt,
                   "peak_rss_mb": rss_mb, "traced_peak_mb": traced / 2**20,

@@ -278,6 +278,19 @@ def _flat(buf, n, r):
     return buf[:n * r].reshape(n, r)
 
 
+PARTICLES_PER_THREAD = 16384
+"""Smallest share of the cloud worth a numba thread of its own (see :func:`bpf_threads`)."""
+
+
+def bpf_threads(particles: int) -> int:
+    """Most numba threads the CPU filter uses for a cloud of ``particles``: one per
+    :data:`PARTICLES_PER_THREAD` particles (at least one). A smaller share costs more in waking
+    and joining the idle threads at each of the epoch's parallel stages than it saves, most of
+    all on a busy machine (measurements: docs/bpf.md). The results do not depend on it: every
+    draw and every reduction is fixed by the particle count alone."""
+    return max(1, -(-int(particles) // PARTICLES_PER_THREAD))
+
+
 def run_bpf(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0, bias=None,
             facets=None, attitude="estimate", keep_clouds=None, cloud_size=None,
             initial_cloud=None, **overrides) -> Estimate:
@@ -315,9 +328,7 @@ def run_bpf(problem: FilterProblem, config: BPFConfig | None = None, *, seed=0, 
     backend = "numba" if problem.model.kernel_ok else "numpy"
     run = _Run(problem, cfg, seed, backend, bias, facets, attitude, cfg.keep_clouds,
                cfg.cloud_size, initial_cloud)
-    # one chunk of particles per thread at most: a small cloud runs on fewer threads (waking
-    # idle threads costs more than its work, most of all on a busy machine)
-    with limited_threads(CP.n_chunks(cfg.particles)):
+    with limited_threads(bpf_threads(cfg.particles)):
         return run.run()
 
 

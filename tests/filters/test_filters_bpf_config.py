@@ -15,6 +15,7 @@ from lightcurve import threads
 from lightcurve.core import particles as CP
 from lightcurve.filters import FLAG_INFLATED, build_problem, run_bpf
 from lightcurve.filters import _bpf_kernels as BK
+from lightcurve.filters import bpf as bpf_mod
 from lightcurve.filters.bpf import BPFConfig
 
 
@@ -94,7 +95,16 @@ def test_thesis_variant_is_the_plain_filter(easy):
     assert s2["final_att_error_rss_deg"] < 3.0 * np.sqrt(3.0)
 
 
-def test_runs_are_reproducible_and_thread_count_independent(easy):
+def test_thread_count_follows_the_cloud_size():
+    # one thread per PARTICLES_PER_THREAD particles, at least one
+    n = bpf_mod.PARTICLES_PER_THREAD
+    assert [bpf_mod.bpf_threads(k) for k in (1, n, n + 1, 10 * n)] == [1, 1, 2, 10]
+
+
+def test_runs_are_reproducible_and_thread_count_independent(easy, monkeypatch):
+    # a small share per thread, so that this small cloud runs on several threads
+    monkeypatch.setattr(bpf_mod, "PARTICLES_PER_THREAD", 1024)
+    assert bpf_mod.bpf_threads(3000) == 3
     a = run_bpf(easy, particles=3000, seed=4)
     b = run_bpf(easy, particles=3000, seed=4)
     np.testing.assert_array_equal(a.q, b.q)
