@@ -13,9 +13,11 @@ Top-level API (imported lazily so that ``import lightcurve`` stays fast):
 """
 
 from .errors import ConvergenceError, InputError
+from .numba_cache import install_when_imported
 from .threads import configure_threading
 
 configure_threading()
+install_when_imported()   # numba's cache keyed by the whole package (numba_cache.py)
 
 __version__ = "0.1.0"
 
