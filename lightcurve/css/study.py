@@ -20,6 +20,8 @@ A study TOML (``pipelines/css/okeefe2015/*.toml``)::
     [thesis_filter]                   # optional, for measured ablations: overrides of the thesis
     sigma_valpha = 0.2                # sun-line EKF/ECKF parameters (sunline_thesis.THESIS_PRM
                                       # names, SI units) in both thesis filters
+    [robust_filter]                   # optional, likewise for the robust sun-line filters
+    fov_model = true                  # (sunline_ekf.FilterParams fields)
 
 Every case (estimator × variant × gyro) flies the same dispersed spacecraft for run ``i``
 (seed ``[seed, i]``, common random numbers; :func:`lightcurve.css.truth.simulate_css_cases`).
@@ -134,6 +136,7 @@ class StudySpec:
     thresholds_deg: tuple = (15.0, 30.0)
     simulation: dict = field(default_factory=dict)
     thesis_filter: dict = field(default_factory=dict)
+    robust_filter: dict = field(default_factory=dict)
     text: str = ""
     source: str = ""
 
@@ -143,8 +146,9 @@ class StudySpec:
         d.pop("runs")
         d.pop("text")
         d.pop("source")
-        if not d["thesis_filter"]:      # no override: the hash of a study without the section
-            d.pop("thesis_filter")
+        for k in ("thesis_filter", "robust_filter"):
+            if not d[k]:                # no override: the hash of a study without the section
+                d.pop(k)
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()
 
     def cases(self):
@@ -175,6 +179,8 @@ def scenario_for(spec: StudySpec, estimator, variant, gyro):
         for k, v in spec.thesis_filter.items():
             p[THESIS_PRM.index(k)] = float(v)
         sc.thesis_params = p
+    if spec.robust_filter and variant == "robust":
+        sc.filter_params = replace(sc.filter_params, **spec.robust_filter)
     return sc
 
 
@@ -493,7 +499,7 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
                "configuration": spec.configuration, "controlled": spec.controlled,
                "albedo": spec.albedo, "settle_s": spec.settle_s,
                "simulation": dict(spec.simulation), "thesis_filter": dict(spec.thesis_filter),
-               "tau_step_s": TAU_STEP_S, "cases": cases, "open_choices": ok.OPEN_CHOICES,
+               "robust_filter": dict(spec.robust_filter), "tau_step_s": TAU_STEP_S, "cases": cases, "open_choices": ok.OPEN_CHOICES,
                "verdict": _verdict(spec, cases)}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float) + "\n")
     atomic_write_text(out / "envelopes.json", json.dumps(envelopes) + "\n")
@@ -681,8 +687,37 @@ def load_css_study(path) -> StudySpec:
             d[k] = tf.float(k, min=0.0)
         tf.check_unknown()
         spec = replace(spec, thesis_filter=d)
+    rf = doc.section("robust_filter", None)
+    if rf is not None:
+        spec = replace(spec, robust_filter=_robust_filter_overrides(rf, path))
     doc.check_unknown()
     return spec
+
+
+def _robust_filter_overrides(sec, path) -> dict:
+    """The ``[robust_filter]`` section: fields of
+    :class:`~lightcurve.css.sunline_ekf.FilterParams` with their types (booleans, integers,
+    non-negative numbers)."""
+    from dataclasses import fields
+
+    from .sunline_ekf import FilterParams
+
+    types = {f.name: f.type for f in fields(FilterParams)}
+    out = {}
+    for k in list(sec.data):
+        if k not in types:
+            raise InputError("unknown robust-filter parameter", file=path,
+                             field=f"robust_filter.{k}", value=sec.data[k],
+                             allowed=", ".join(types))
+        t = types[k]
+        if t in (bool, "bool"):
+            out[k] = sec.bool(k)
+        elif t in (int, "int"):
+            out[k] = sec.int(k, min=1)
+        else:
+            out[k] = sec.float(k, min=0.0)
+    sec.check_unknown()
+    return out
 
 
 def _thesis_filter_keys():

@@ -119,7 +119,11 @@ class FilterParams:
     with a uniform prior); albedo_sigma: noise σ of those readings (full scale 1);
     albedo_phi_mix: fraction of uniform weight mixed in per step (lets the φ estimate move
     and recover); albedo_dark_margin: a sensor is "dark" when n̂·ŝ < cos ψ − margin;
-    albedo_phi_temper: exponent (≤ 1) on the φ likelihood (1: none).
+    albedo_phi_temper: exponent (≤ 1) on the φ likelihood (1: none);
+    fov_model: the sensors' field of view and structure horizon in the measurement model
+    (the direct term is zero while the predicted Sun is out of a sensor's view; see
+    :func:`_update_core`), in the runs that pass the sensors' view
+    (:func:`filter_step_albedo_nb`).
     """
 
     sigma_meas: float = 0.3
@@ -145,6 +149,7 @@ class FilterParams:
     albedo_phi_mix: float = 1e-3
     albedo_dark_margin: float = 0.1
     albedo_phi_temper: float = 1.0
+    fov_model: bool = False
 
     def as_array(self) -> np.ndarray:
         """Parameters packed for the numba kernels (order of the fields; the FOV as its
@@ -246,12 +251,14 @@ def ekf_update_albedo_nb(d, P, y, normals, sigma, threshold, gate, inflate_max, 
     ``R_κ = σ² + |d|² (var_κ + (alb_rel ā_κ)²)``).  Returns (m, NIS, inflation)."""
     dummy = np.zeros((3, 3))
     return _update_core(d, P, dummy, y, normals, sigma, threshold, gate, inflate_max, p_floor,
-                        False, 0.0, False, 0.0, alb_mean, alb_var, alb_rel)
+                        False, 0.0, False, 0.0, alb_mean, alb_var, alb_rel, np.zeros(0),
+                        np.zeros((0, 3)))
 
 
 @numba.njit(cache=True)
 def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_floor, consider,
-                 norm_sigma, use_predicted, cos_fov, alb_mean, alb_var, alb_rel):
+                 norm_sigma, use_predicted, cos_fov, alb_mean, alb_var, alb_rel, view_cos,
+                 view_horizon):
     """Shared EKF / consider update; returns (m, NIS, inflation).
 
     ``alb_mean``/``alb_var`` (N,) are the expected albedo on each sensor and its variance
@@ -260,14 +267,34 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
     ``h_κ(d) = n̂_κ·d + |d| ā_κ`` (the common scale |d| multiplies the albedo exactly as it
     multiplies the direct term), ``H_κ = n̂_κ + ā_κ d/|d|`` (ā's slow dependence on the
     direction is neglected) and ``R_κ = σ² + |d|² (var_κ + (alb_rel ā_κ)²)``.
+
+    ``view_cos`` (N,) (the sensors' nominal FOV cosines; empty: off) reads the sensors' field of
+    view from the outputs, as eq. 2.21 bounds them: a directly lit sensor reads at least
+    ``|d| cos ψ_κ`` (the Sun at its FOV edge; |d| the common scale), so an active sensor that
+    reads less sees no direct Sun and measures albedo alone (``h = |d| ā_κ``, ``H = ā_κ d/|d|``;
+    without the albedo model it is not used). Without it, a sensor made active by albedo alone
+    (Earth in view, Sun outside the FOV: up to ≈ 0.27 of full scale at 400 km, times a common
+    scale factor above 1) is read as a direct Sun measurement. ``view_horizon`` is unused.
     """
     idx = _active(y, threshold, d, normals, use_predicted, cos_fov)
+    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    use_alb = alb_mean.shape[0] == normals.shape[0] and nd > 1e-9
+    direct = np.ones(idx.shape[0], dtype=np.bool_)
+    if view_cos.shape[0] == normals.shape[0] and nd > 1e-9:
+        keep = 0
+        for i in range(idx.shape[0]):
+            k = idx[i]
+            inside = y[k] >= view_cos[k] * nd
+            if inside or use_alb:
+                idx[keep] = k
+                direct[keep] = inside
+                keep += 1
+        idx = idx[:keep]
+        direct = direct[:keep]
     m_css = idx.shape[0]
     if m_css == 0:
         return 0, 0.0, 1.0
-    nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     use_norm = norm_sigma > 0.0 and nd > 1e-9
-    use_alb = alb_mean.shape[0] == normals.shape[0] and nd > 1e-9
     m = m_css + (1 if use_norm else 0)
     H = np.empty((m, 3))
     nu = np.empty(m)
@@ -283,6 +310,10 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
         if use_alb:
             a = alb_mean[k]
             h, Hr = albedo_measurement_nb(d, normals[k], a)
+            if not direct[i]:      # predicted Sun out of view: albedo alone
+                h -= normals[k, 0] * d[0] + normals[k, 1] * d[1] + normals[k, 2] * d[2]
+                for j in range(3):
+                    Hr[j] -= normals[k, j]
             nu[i] = y[k] - h
             for j in range(3):
                 H[i, j] = Hr[j]
@@ -335,7 +366,8 @@ def ekf_update_nb(d, P, y, normals, sigma, threshold, gate, inflate_max, p_floor
     inflation, inflation factor)."""
     dummy = np.zeros((3, 3))
     return _update_core(d, P, dummy, y, normals, sigma, threshold, gate, inflate_max, p_floor,
-                        False, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0)
+                        False, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0,
+                        np.zeros(0), np.zeros((0, 3)))
 
 
 @numba.njit(cache=True)
@@ -379,7 +411,8 @@ def eckf_update_nb(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max,
                    norm_sigma, use_predicted, cos_fov):
     """Schmidt consider update in place; returns (m, NIS, inflation)."""
     return _update_core(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_floor,
-                        True, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0)
+                        True, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0,
+                        np.zeros(0), np.zeros((0, 3)))
 
 
 @numba.njit(cache=True)
@@ -581,8 +614,13 @@ def filter_step_albedo_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset,
                 a_var = np.zeros(n_s)
                 expected_albedo_nb(alb_coords, alb_ratio, alb_m, d / nd, normals, cos_fov_s,
                                    horizon, int(prm[17]), a_mean, a_var)
+    if prm.shape[0] > 23 and prm[23] > 0.5:
+        return _update_core(d, P, Pxc, y, normals, sigma, thr, gate, infl_max, p_floor,
+                            kind == 1, norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16],
+                            cos_fov_s, horizon)
     return _update_core(d, P, Pxc, y, normals, sigma, thr, gate, infl_max, p_floor, kind == 1,
-                        norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16])
+                        norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16], np.zeros(0),
+                        np.zeros((0, 3)))
 
 
 @numba.njit(cache=True)

@@ -670,7 +670,7 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
     if extra:
         lines += ["### Ablations", "", "Studies that change one thing of an experiment, with "
                   "its seeds (run i flies the same spacecraft); the change is in their study "
-                  "file (study.json), the truth albedo and thesis-filter overrides are repeated "
+                  "file (study.json), the truth albedo and filter overrides are repeated "
                   "here. Compare with a reference of the same runs where one is listed.", ""]
         for k in extra:
             s = studies[k]
@@ -678,6 +678,11 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
             over = (", thesis-filter overrides " + ", ".join(f"`{n} = {v:g}`"
                                                             for n, v in tf.items())
                     if tf else ", no thesis-filter override")
+            rf = s.get("robust_filter") or {}
+            if rf:
+                over += ", robust-filter overrides " + ", ".join(
+                    f"`{n} = {str(v).lower() if isinstance(v, bool) else f'{v:g}'}`"
+                    for n, v in rf.items())
             lines += [f"#### {k}", "", f"{s['runs']} runs per case of experiment "
                       f"`{s.get('experiment', '–')}`, truth albedo `{s['albedo']}`{over}.", ""]
             lines += _table(s)

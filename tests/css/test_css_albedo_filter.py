@@ -23,7 +23,7 @@ from lightcurve.css.albedo import (albedo_on_sensors_nb, albedo_phi_nb, albedo_s
                                    builtin_albedo_map, expected_albedo_nb, sun_nadir_axis_nb)
 from lightcurve.css.configurations import dual_pyramid
 from lightcurve.css.study import direction_nees
-from lightcurve.css.sunline_ekf import (FilterParams, albedo_measurement_nb,
+from lightcurve.css.sunline_ekf import (FilterParams, _update_core, albedo_measurement_nb,
                                         ekf_update_albedo_nb, filter_step_albedo_nb,
                                         phi_state_size)
 
@@ -201,3 +201,75 @@ def test_direction_nees_matches_an_inline_chi_square():
         e = np.linalg.norm(d[k]) * B.T @ s[k]
         assert got[k] == pytest.approx(e @ np.linalg.solve(B.T @ P[k] @ B, e), rel=1e-9)
     assert np.isnan(direction_nees(np.zeros((1, 3)), np.eye(3)[None], np.eye(3)[:1]))[0]
+
+
+def test_field_of_view_model_matches_inline_update():
+    # eq. 2.21 with a field of view: a directly lit sensor reads at least |d| cos ψ (the Sun at
+    # its FOV edge), so an active sensor reading less sees albedo alone (h = |d| a,
+    # H = a d/|d|), or is left out without an albedo model; inline Joseph update as reference.
+    # The thesis's dual pyramid (60° FOV, O'Keefe §2.1.3), common scale 1-1.5 (§2.4).
+    from lightcurve.css.experiments import thesis_css
+
+    css = thesis_css("dual_pyramid")
+    normals, cos_fov, _, horizon = css.kernel_args()
+    rng = np.random.default_rng(7)
+    seen_albedo_only = 0
+    for trial in range(60):
+        s = rng.normal(size=3)
+        s /= np.linalg.norm(s)
+        C = rng.uniform(1.0, 1.5)
+        alb = rng.uniform(0.0, 0.45, 8)
+        y = C * (css.signals(s) + alb) + rng.normal(0, 0.01, 8)
+        d = C * s + rng.normal(0, 0.08, 3)
+        nd = np.linalg.norm(d)
+        act = y > 0.5
+        direct = y >= cos_fov * nd
+        B = rng.normal(size=(3, 3)) * 0.1
+        P = B @ B.T + 1e-3 * np.eye(3)
+        sig = 0.05
+        for with_alb in (True, False):
+            use = act if with_alb else act & direct
+            if not use.any():
+                continue
+            a = alb if with_alb else np.zeros(8)
+            dirm = direct[use].astype(float)[:, None]
+            H = dirm * normals[use] + a[use, None] * d / nd
+            nu = y[use] - (dirm[:, 0] * (normals[use] @ d) + nd * a[use])
+            R = sig ** 2 * np.eye(use.sum())
+            S = H @ P @ H.T + R
+            K = P @ H.T @ np.linalg.inv(S)
+            IKH = np.eye(3) - K @ H
+            d2, P2 = d.copy(), P.copy()
+            m, nis, _ = _update_core(d2, P2, np.zeros((3, 3)), y, normals, sig, 0.5, 1e12, 1.0,
+                                     0.0, False, 0.0, False, 0.0,
+                                     alb if with_alb else np.zeros(0), np.zeros(8), 0.0,
+                                     cos_fov, horizon)
+            assert m == use.sum()
+            assert nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-9)
+            assert np.allclose(d2, d + K @ nu, atol=1e-12)
+            assert np.allclose(P2, IKH @ P @ IKH.T + K @ R @ K.T, atol=1e-12)
+            seen_albedo_only += int(np.sum(act & ~direct))
+    # the cases exercise active sensors that read less than the direct-light floor
+    assert seen_albedo_only >= 20
+
+
+def test_field_of_view_model_off_is_the_plain_update():
+    css = dual_pyramid()
+    normals, cos_fov, _, horizon = css.kernel_args()
+    rng = np.random.default_rng(8)
+    for _ in range(10):
+        s = rng.normal(size=3)
+        s /= np.linalg.norm(s)
+        y = 1.2 * (css.signals(s) + 0.2) + rng.normal(0, 0.01, 8)
+        d = 1.2 * s + rng.normal(0, 0.05, 3)
+        P = 0.01 * np.eye(3)
+        a1, b1 = d.copy(), P.copy()
+        a2, b2 = d.copy(), P.copy()
+        r1 = ekf_update_albedo_nb(a1, b1, y, normals, 0.05, 0.5, 9.0, 100.0, 1e-5,
+                                  np.full(8, 0.2), np.zeros(8), 0.3)
+        r2 = _update_core(a2, b2, np.zeros((3, 3)), y, normals, 0.05, 0.5, 9.0, 100.0, 1e-5,
+                          False, 0.0, False, 0.0, np.full(8, 0.2), np.zeros(8), 0.3,
+                          np.zeros(0), np.zeros((0, 3)))
+        assert r1 == r2
+        np.testing.assert_array_equal(a1, a2)
+        np.testing.assert_array_equal(b1, b2)

@@ -176,7 +176,7 @@ def test_study_thesis_filter_override(tmp_path):
     from dataclasses import asdict
 
     d = asdict(base)
-    for k in ("runs", "text", "source", "thesis_filter"):
+    for k in ("runs", "text", "source", "thesis_filter", "robust_filter"):
         d.pop(k)
     assert base.hash == hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()
                                        ).hexdigest()
@@ -221,8 +221,9 @@ def test_bundled_ablation_files_differ_by_one_switch():
         assert (a.seed, a.settle_s, a.configuration, a.controlled, a.duration_s, a.gyros) == (
             ref.seed, ref.settle_s, ref.configuration, ref.controlled, ref.duration_s, ref.gyros)
         assert a.simulation == ref.simulation
-        changes = (a.albedo != ref.albedo) + bool(a.thesis_filter)
+        changes = (a.albedo != ref.albedo) + bool(a.thesis_filter) + bool(a.robust_filter)
         assert changes == 1, f.name
+        assert len(a.thesis_filter) + len(a.robust_filter) <= 1, f.name
 
 
 def test_run_task_interruption_inside_kernel_is_not_a_failed_run(tmp_path, monkeypatch):
@@ -250,3 +251,34 @@ def test_run_task_interruption_inside_kernel_is_not_a_failed_run(tmp_path, monke
     monkeypatch.setattr(truth, "simulate_css_cases", broken)
     res = run_task(task)
     assert res["status"] == "failed" and "some other failure" in res["error"]
+
+
+def test_study_robust_filter_override(tmp_path):
+    # [robust_filter]: FilterParams fields of our sun-line filters, with their types; they reach
+    # the robust variant only and change the study hash
+    from lightcurve.css.study import scenario_for
+
+    base = load_css_study(_study_toml(tmp_path))
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + "\n[robust_filter]\nfov_model = true\nalbedo_n_phi = 24\n"
+                 "albedo_sigma = 0.05\n")
+    spec = load_css_study(p)
+    assert spec.robust_filter == {"fov_model": True, "albedo_n_phi": 24, "albedo_sigma": 0.05}
+    assert base.robust_filter == {} and spec.hash != base.hash
+    rob = scenario_for(spec, "ekf", "robust", "intermediate").filter_params
+    assert rob.fov_model is True and rob.albedo_n_phi == 24 and rob.albedo_sigma == 0.05
+    assert scenario_for(base, "ekf", "robust", "intermediate").filter_params.fov_model is False
+    assert scenario_for(spec, "ekf", "thesis", "intermediate").filter_params.fov_model is False
+
+
+@pytest.mark.parametrize("extra,field", [
+    ("fov_modell = true", "robust_filter.fov_modell"),
+    ("fov_model = 1.5", "robust_filter.fov_model"),
+    ("albedo_sigma = -0.1", "robust_filter.albedo_sigma"),
+])
+def test_study_robust_filter_bad(tmp_path, extra, field):
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + f"\n[robust_filter]\n{extra}\n")
+    with pytest.raises(InputError) as e:
+        load_css_study(p)
+    assert field in str(e.value)
