@@ -182,14 +182,17 @@ def test_study_thesis_filter_override(tmp_path):
                                        ).hexdigest()
 
 
-@pytest.mark.parametrize("extra,field", [
-    ("sigma_valfa = 0.2", "thesis_filter.sigma_valfa"),
-    ("kind = 1.0", "thesis_filter.kind"),
-    ("sigma_valpha = -0.1", "thesis_filter.sigma_valpha"),
+@pytest.mark.parametrize("section,extra,field", [
+    ("thesis_filter", "sigma_valfa = 0.2", "thesis_filter.sigma_valfa"),
+    ("thesis_filter", "kind = 1.0", "thesis_filter.kind"),
+    ("thesis_filter", "sigma_valpha = -0.1", "thesis_filter.sigma_valpha"),
+    ("robust_filter", "fov_modell = true", "robust_filter.fov_modell"),
+    ("robust_filter", "fov_model = 1.5", "robust_filter.fov_model"),
+    ("robust_filter", "albedo_sigma = -0.1", "robust_filter.albedo_sigma"),
 ])
-def test_study_thesis_filter_bad(tmp_path, extra, field):
+def test_study_filter_overrides_bad(tmp_path, section, extra, field):
     p = _study_toml(tmp_path)
-    p.write_text(p.read_text() + f"\n[thesis_filter]\n{extra}\n")
+    p.write_text(p.read_text() + f"\n[{section}]\n{extra}\n")
     with pytest.raises(InputError) as e:
         load_css_study(p)
     assert field in str(e.value)
@@ -269,16 +272,3 @@ def test_study_robust_filter_override(tmp_path):
     assert rob.fov_model is True and rob.albedo_n_phi == 24 and rob.albedo_sigma == 0.05
     assert scenario_for(base, "ekf", "robust", "intermediate").filter_params.fov_model is False
     assert scenario_for(spec, "ekf", "thesis", "intermediate").filter_params.fov_model is False
-
-
-@pytest.mark.parametrize("extra,field", [
-    ("fov_modell = true", "robust_filter.fov_modell"),
-    ("fov_model = 1.5", "robust_filter.fov_model"),
-    ("albedo_sigma = -0.1", "robust_filter.albedo_sigma"),
-])
-def test_study_robust_filter_bad(tmp_path, extra, field):
-    p = _study_toml(tmp_path)
-    p.write_text(p.read_text() + f"\n[robust_filter]\n{extra}\n")
-    with pytest.raises(InputError) as e:
-        load_css_study(p)
-    assert field in str(e.value)
