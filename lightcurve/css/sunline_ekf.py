@@ -120,10 +120,9 @@ class FilterParams:
     albedo_phi_mix: fraction of uniform weight mixed in per step (lets the φ estimate move
     and recover); albedo_dark_margin: a sensor is "dark" when n̂·ŝ < cos ψ − margin;
     albedo_phi_temper: exponent (≤ 1) on the φ likelihood (1: none);
-    fov_model: the sensors' field of view and structure horizon in the measurement model
-    (the direct term is zero while the predicted Sun is out of a sensor's view; see
-    :func:`_update_core`), in the runs that pass the sensors' view
-    (:func:`filter_step_albedo_nb`).
+    fov_model: read the sensors' field of view from the outputs: an active sensor reading
+    below ``|d| cos ψ`` (the smallest direct reading, the Sun at its FOV edge) is modelled as
+    albedo alone (see :func:`_update_core`; used by :func:`filter_step_albedo_nb`).
     """
 
     sigma_meas: float = 0.3
@@ -251,14 +250,13 @@ def ekf_update_albedo_nb(d, P, y, normals, sigma, threshold, gate, inflate_max, 
     ``R_κ = σ² + |d|² (var_κ + (alb_rel ā_κ)²)``).  Returns (m, NIS, inflation)."""
     dummy = np.zeros((3, 3))
     return _update_core(d, P, dummy, y, normals, sigma, threshold, gate, inflate_max, p_floor,
-                        False, 0.0, False, 0.0, alb_mean, alb_var, alb_rel, np.zeros(0),
-                        np.zeros((0, 3)))
+                        False, 0.0, False, 0.0, alb_mean, alb_var, alb_rel,
+                        np.zeros(0))
 
 
 @numba.njit(cache=True)
 def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_floor, consider,
-                 norm_sigma, use_predicted, cos_fov, alb_mean, alb_var, alb_rel, view_cos,
-                 view_horizon):
+                 norm_sigma, use_predicted, cos_fov, alb_mean, alb_var, alb_rel, view_cos):
     """Shared EKF / consider update; returns (m, NIS, inflation).
 
     ``alb_mean``/``alb_var`` (N,) are the expected albedo on each sensor and its variance
@@ -274,7 +272,7 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
     reads less sees no direct Sun and measures albedo alone (``h = |d| ā_κ``, ``H = ā_κ d/|d|``;
     without the albedo model it is not used). Without it, a sensor made active by albedo alone
     (Earth in view, Sun outside the FOV: up to ≈ 0.27 of full scale at 400 km, times a common
-    scale factor above 1) is read as a direct Sun measurement. ``view_horizon`` is unused.
+    scale factor above 1) is read as a direct Sun measurement.
     """
     idx = _active(y, threshold, d, normals, use_predicted, cos_fov)
     nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
@@ -367,7 +365,7 @@ def ekf_update_nb(d, P, y, normals, sigma, threshold, gate, inflate_max, p_floor
     dummy = np.zeros((3, 3))
     return _update_core(d, P, dummy, y, normals, sigma, threshold, gate, inflate_max, p_floor,
                         False, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0,
-                        np.zeros(0), np.zeros((0, 3)))
+                        np.zeros(0))
 
 
 @numba.njit(cache=True)
@@ -412,7 +410,7 @@ def eckf_update_nb(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max,
     """Schmidt consider update in place; returns (m, NIS, inflation)."""
     return _update_core(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_floor,
                         True, norm_sigma, use_predicted, cos_fov, np.zeros(0), np.zeros(0), 0.0,
-                        np.zeros(0), np.zeros((0, 3)))
+                        np.zeros(0))
 
 
 @numba.njit(cache=True)
@@ -617,10 +615,10 @@ def filter_step_albedo_nb(kind, d, P, Pxc, omega, dt, y, normals, prm, reset,
     if prm.shape[0] > 23 and prm[23] > 0.5:
         return _update_core(d, P, Pxc, y, normals, sigma, thr, gate, infl_max, p_floor,
                             kind == 1, norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16],
-                            cos_fov_s, horizon)
+                            cos_fov_s)
     return _update_core(d, P, Pxc, y, normals, sigma, thr, gate, infl_max, p_floor, kind == 1,
-                        norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16], np.zeros(0),
-                        np.zeros((0, 3)))
+                        norm_sigma, use_pred, cos_fov, a_mean, a_var, prm[16],
+                        np.zeros(0))
 
 
 @numba.njit(cache=True)

@@ -211,7 +211,7 @@ def test_field_of_view_model_matches_inline_update():
     from lightcurve.css.experiments import thesis_css
 
     css = thesis_css("dual_pyramid")
-    normals, cos_fov, _, horizon = css.kernel_args()
+    normals, cos_fov, _, _ = css.kernel_args()
     rng = np.random.default_rng(7)
     seen_albedo_only = 0
     for trial in range(60):
@@ -243,7 +243,7 @@ def test_field_of_view_model_matches_inline_update():
             m, nis, _ = _update_core(d2, P2, np.zeros((3, 3)), y, normals, sig, 0.5, 1e12, 1.0,
                                      0.0, False, 0.0, False, 0.0,
                                      alb if with_alb else np.zeros(0), np.zeros(8), 0.0,
-                                     cos_fov, horizon)
+                                     cos_fov)
             assert m == use.sum()
             assert nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-9)
             assert np.allclose(d2, d + K @ nu, atol=1e-12)
@@ -255,7 +255,7 @@ def test_field_of_view_model_matches_inline_update():
 
 def test_field_of_view_model_off_is_the_plain_update():
     css = dual_pyramid()
-    normals, cos_fov, _, horizon = css.kernel_args()
+    normals, cos_fov, _, _ = css.kernel_args()
     rng = np.random.default_rng(8)
     for _ in range(10):
         s = rng.normal(size=3)
@@ -269,7 +269,7 @@ def test_field_of_view_model_off_is_the_plain_update():
                                   np.full(8, 0.2), np.zeros(8), 0.3)
         r2 = _update_core(a2, b2, np.zeros((3, 3)), y, normals, 0.05, 0.5, 9.0, 100.0, 1e-5,
                           False, 0.0, False, 0.0, np.full(8, 0.2), np.zeros(8), 0.3,
-                          np.zeros(0), np.zeros((0, 3)))
+                          np.zeros(0))
         assert r1 == r2
         np.testing.assert_array_equal(a1, a2)
         np.testing.assert_array_equal(b1, b2)
