@@ -270,7 +270,8 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
     view from the outputs, as eq. 2.21 bounds them: a directly lit sensor reads at least
     ``|d| cos ψ_κ`` (the Sun at its FOV edge; |d| the common scale), so an active sensor that
     reads less sees no direct Sun and measures albedo alone (``h = |d| ā_κ``, ``H = ā_κ d/|d|``;
-    without the albedo model it is not used). Without it, a sensor made active by albedo alone
+    without the albedo model it is not used); the brightest active sensor is always read as
+    direct. Without it, a sensor made active by albedo alone
     (Earth in view, Sun outside the FOV: up to ≈ 0.27 of full scale at 400 km, times a common
     scale factor above 1) is read as a direct Sun measurement.
     """
@@ -278,11 +279,18 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
     nd = np.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     use_alb = alb_mean.shape[0] == normals.shape[0] and nd > 1e-9
     direct = np.ones(idx.shape[0], dtype=np.bool_)
-    if view_cos.shape[0] == normals.shape[0] and nd > 1e-9:
+    if view_cos.shape[0] == normals.shape[0] and nd > 1e-9 and idx.shape[0] > 0:
+        # the brightest active sensor stays a direct measurement: were every reading below
+        # the floor, the floor (|d| too large) would be the error, and explaining the
+        # readings by albedo would only scale |d| up further
+        kb = idx[0]
+        for i in range(idx.shape[0]):
+            if y[idx[i]] > y[kb]:
+                kb = idx[i]
         keep = 0
         for i in range(idx.shape[0]):
             k = idx[i]
-            inside = y[k] >= view_cos[k] * nd
+            inside = y[k] >= view_cos[k] * nd or k == kb
             if inside or use_alb:
                 idx[keep] = k
                 direct[keep] = inside

@@ -206,7 +206,8 @@ def test_direction_nees_matches_an_inline_chi_square():
 def test_field_of_view_model_matches_inline_update():
     # eq. 2.21 with a field of view: a directly lit sensor reads at least |d| cos ψ (the Sun at
     # its FOV edge), so an active sensor reading less sees albedo alone (h = |d| a,
-    # H = a d/|d|), or is left out without an albedo model; inline Joseph update as reference.
+    # H = a d/|d|), or is left out without an albedo model; the brightest active sensor stays
+    # direct (else a too large |d| would feed itself). Inline Joseph update as reference.
     # The thesis's dual pyramid (60° FOV, O'Keefe §2.1.3), common scale 1-1.5 (§2.4).
     from lightcurve.css.experiments import thesis_css
 
@@ -224,6 +225,8 @@ def test_field_of_view_model_matches_inline_update():
         nd = np.linalg.norm(d)
         act = y > 0.5
         direct = y >= cos_fov * nd
+        if act.any():                     # the brightest active sensor is always direct
+            direct[np.flatnonzero(act)[np.argmax(y[act])]] = True
         B = rng.normal(size=(3, 3)) * 0.1
         P = B @ B.T + 1e-3 * np.eye(3)
         sig = 0.05
@@ -251,6 +254,21 @@ def test_field_of_view_model_matches_inline_update():
             seen_albedo_only += int(np.sum(act & ~direct))
     # the cases exercise active sensors that read less than the direct-light floor
     assert seen_albedo_only >= 20
+    # |d| three times too large: every reading is below the floor |d| cos ψ; the brightest
+    # sensor stays direct and the update pulls |d| down (explaining all readings by albedo
+    # would push it up: a run of the fig. 3.9 study ran away to |d| ≈ 2400 that way)
+    s = normals[0] + normals[1]
+    s /= np.linalg.norm(s)
+    y = css.signals(s) + 0.05
+    d = 3.0 * s
+    assert np.all(y < cos_fov * 3.0) and np.sum(y > 0.5) >= 2
+    fp = FilterParams()                    # the filter's own tuning and initial variance
+    d2, P2 = d.copy(), fp.p0 * np.eye(3)
+    m, _, _ = _update_core(d2, P2, np.zeros((3, 3)), y, normals, fp.sigma_meas, fp.threshold,
+                           fp.gate, fp.inflate_max, fp.p_floor, False, 0.0, False, 0.0,
+                           np.full(8, 0.05), np.zeros(8), fp.albedo_rel_sigma, cos_fov)
+    assert m == np.sum(y > 0.5)
+    assert np.linalg.norm(d2) < 0.8 * np.linalg.norm(d)
 
 
 def test_field_of_view_model_off_is_the_plain_update():
