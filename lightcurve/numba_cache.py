@@ -103,8 +103,9 @@ def installed() -> bool:
 
 
 class _AfterNumbaImport(importlib.abc.MetaPathFinder):
-    """Finds nothing itself; wraps the loader of the top-level ``numba`` package so that
-    :func:`install` runs as soon as numba has been imported."""
+    """Finds nothing itself: on the first import of the top-level ``numba`` package it takes
+    numba's own spec and makes that loader instance's ``exec_module`` run :func:`install`
+    when numba has been executed, then leaves the finder list."""
 
     def find_spec(self, name, path=None, target=None):
         if name != "numba":

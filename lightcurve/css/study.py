@@ -499,7 +499,8 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
                "configuration": spec.configuration, "controlled": spec.controlled,
                "albedo": spec.albedo, "settle_s": spec.settle_s,
                "simulation": dict(spec.simulation), "thesis_filter": dict(spec.thesis_filter),
-               "robust_filter": dict(spec.robust_filter), "tau_step_s": TAU_STEP_S, "cases": cases, "open_choices": ok.OPEN_CHOICES,
+               "robust_filter": dict(spec.robust_filter), "tau_step_s": TAU_STEP_S,
+               "cases": cases, "open_choices": ok.OPEN_CHOICES,
                "verdict": _verdict(spec, cases)}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float) + "\n")
     atomic_write_text(out / "envelopes.json", json.dumps(envelopes) + "\n")

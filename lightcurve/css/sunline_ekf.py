@@ -316,7 +316,7 @@ def _update_core(d, P, Pxc, y, normals, sigma, threshold, gate, inflate_max, p_f
         if use_alb:
             a = alb_mean[k]
             h, Hr = albedo_measurement_nb(d, normals[k], a)
-            if not direct[i]:      # predicted Sun out of view: albedo alone
+            if not direct[i]:      # reads below the direct-light floor: albedo alone
                 h -= normals[k, 0] * d[0] + normals[k, 1] * d[1] + normals[k, 2] * d[2]
                 for j in range(3):
                     Hr[j] -= normals[k, j]
