@@ -94,8 +94,12 @@ class FilterParams:
     sensor at 400 km) treated as measurement noise — a high activity threshold (0.5)
     keeps albedo-dominated sensors out and σ = 0.3 lets the tumbling average the remaining
     albedo bias.  They were kept when the albedo model (``albedo_model``, on by default
-    where position and Sun are known; see the module docstring) was added.  The optional scale pseudo-measurement and dark-sensor updates are off by
-    default (both made the albedo/misalignment case worse in that study).
+    where position and Sun are known; see the module docstring) was added.  The optional scale
+    pseudo-measurement and dark-sensor updates are off by default (both made the
+    albedo/misalignment case worse in that study).  The field-of-view reading (``fov_model``)
+    is on by default: without it an albedo-lit sensor whose scale error lifts it over the
+    activity threshold is read as direct Sun (docs/measurements.md has the fig. 3.9–3.13
+    comparison with it off).
 
     sigma_meas: CSS output noise σ used in R; q_proc: process noise density (1/s) on d;
     threshold: activity threshold on the outputs; p0: initial variance of d;
@@ -148,7 +152,7 @@ class FilterParams:
     albedo_phi_mix: float = 1e-3
     albedo_dark_margin: float = 0.1
     albedo_phi_temper: float = 1.0
-    fov_model: bool = False
+    fov_model: bool = True
 
     def as_array(self) -> np.ndarray:
         """Parameters packed for the numba kernels (order of the fields; the FOV as its

@@ -263,12 +263,12 @@ def test_study_robust_filter_override(tmp_path):
 
     base = load_css_study(_study_toml(tmp_path))
     p = _study_toml(tmp_path)
-    p.write_text(p.read_text() + "\n[robust_filter]\nfov_model = true\nalbedo_n_phi = 24\n"
+    p.write_text(p.read_text() + "\n[robust_filter]\nfov_model = false\nalbedo_n_phi = 24\n"
                  "albedo_sigma = 0.05\n")
     spec = load_css_study(p)
-    assert spec.robust_filter == {"fov_model": True, "albedo_n_phi": 24, "albedo_sigma": 0.05}
+    assert spec.robust_filter == {"fov_model": False, "albedo_n_phi": 24, "albedo_sigma": 0.05}
     assert base.robust_filter == {} and spec.hash != base.hash
     rob = scenario_for(spec, "ekf", "robust", "intermediate").filter_params
-    assert rob.fov_model is True and rob.albedo_n_phi == 24 and rob.albedo_sigma == 0.05
-    assert scenario_for(base, "ekf", "robust", "intermediate").filter_params.fov_model is False
-    assert scenario_for(spec, "ekf", "thesis", "intermediate").filter_params.fov_model is False
+    assert rob.fov_model is False and rob.albedo_n_phi == 24 and rob.albedo_sigma == 0.05
+    assert scenario_for(base, "ekf", "robust", "intermediate").filter_params.fov_model is True
+    assert scenario_for(spec, "ekf", "thesis", "intermediate").filter_params.fov_model is True
