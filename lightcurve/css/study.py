@@ -21,7 +21,7 @@ A study TOML (``pipelines/css/okeefe2015/*.toml``)::
     sigma_valpha = 0.2                # sun-line EKF/ECKF parameters (sunline_thesis.THESIS_PRM
                                       # names, SI units) in both thesis filters
     [robust_filter]                   # optional, likewise for the robust sun-line filters
-    fov_model = true                  # (sunline_ekf.FilterParams fields)
+    fov_model = false                 # (sunline_ekf.FilterParams fields)
 
 Every case (estimator × variant × gyro) flies the same dispersed spacecraft for run ``i``
 (seed ``[seed, i]``, common random numbers; :func:`lightcurve.css.truth.simulate_css_cases`).
