@@ -28,26 +28,25 @@ import os
 import numpy as np
 from emcee.autocorr import integrated_time
 
-from lightcurve.css.calibration import (calibration_filter_setup, run_calibration,
-                                        simulate_thesis_calibration_case)
+from lightcurve.css.calibration import (calibration_filter_setup, initialised_sensors,
+                                        run_calibration)
 from lightcurve.css.fault import sensor_nis
-from lightcurve.css.fault_tables import THESIS_GRIDS, robust_detectors, thesis_detector
-from lightcurve.css.okeefe2015 import CALIBRATION
-from lightcurve.estimation.rng import as_generator
+from lightcurve.css.fault_tables import (THESIS_GRIDS, fault_table_case, robust_detectors,
+                                         thesis_detector)
 
 
 def sensor_stats(t, nis, init, det, t_start_s=600.0):
     """(mean, τ, largest window average) of each initialised sensor's NIS after
     ``t_start_s``; ``det`` supplies the window (:class:`AveragedNISDetector`)."""
-    avg = det.averages(nis)
+    after = t >= t_start_s
+    avg = det.averages(nis)[after]
     out = []
     for j in np.flatnonzero(init):
-        ok = np.isfinite(nis[:, j]) & (t >= t_start_s)
-        x = nis[ok, j]
+        x = nis[after & np.isfinite(nis[:, j]), j]
         if x.size < 5 * det.window:
             continue
         tau = float(integrated_time(x, c=5, tol=0, quiet=True)[0])
-        a = avg[(t >= t_start_s), j]
+        a = avg[:, j]
         out.append((float(x.mean()), tau, float(np.nanmax(a))))
     return out
 
@@ -61,9 +60,8 @@ def main():
     load = os.getloadavg()
     rows = {}
     for seed in range(a.seed, a.seed + a.runs):
-        g_case, _ = as_generator(seed).spawn(2)       # the case of fault_table_run(seed)
-        case = simulate_thesis_calibration_case(g_case, controlled=a.controlled)
-        init = np.any(case.Y > CALIBRATION["init_threshold"], axis=0)
+        case, _ = fault_table_case(seed, controlled=a.controlled)
+        init = initialised_sensors(case.Y)
         for v in ("thesis", "robust"):
             for grid in THESIS_GRIDS:
                 prm, alb = calibration_filter_setup(v, grid, None)

@@ -77,7 +77,7 @@ from .sensors import CSSArray, normal_to_azel
 __all__ = ["AlbedoCells", "CalibrationParams", "CalibrationResult", "run_calibration",
            "calibration_measurement_nb", "calibration_update_nb", "albedo_vectors_nb",
            "CalibrationCase", "simulate_calibration_case", "state_layout", "acceptance_summary",
-           "albedo_grid_error"]
+           "albedo_grid_error", "initialised_sensors"]
 
 
 # ---------------------------------------------------------------------------------------
@@ -1041,6 +1041,15 @@ def calibration_filter_setup(variant: str, name: str, albedo_dir=None):
     raise ValueError(f"variant must be 'thesis' or 'robust', got {variant!r}")
 
 
+def initialised_sensors(Y) -> np.ndarray:
+    """(N,) bool: the sensors whose output (Y (K,N), full scale 1) exceeded
+    ``CALIBRATION["init_threshold"]`` (0.4) at least once — O'Keefe §5.2's rule for a sensor
+    being initialised in the filter; only those count in tables 4.1-4.3 and 5.1-5.2."""
+    from .okeefe2015 import CALIBRATION
+
+    return np.any(np.asarray(Y) > CALIBRATION["init_threshold"], axis=0)
+
+
 def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "10x10", "reduced"),
                              *, albedo_dir=None, variant="thesis") -> dict:
     """Tables 4.1-4.3 for one case: for each filter (the full filter with the TOMS grid named,
@@ -1051,9 +1060,7 @@ def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "1
 
     ``variant``: "thesis" or "robust" (our filters on the same case,
     :func:`calibration_filter_setup`); the same sensors count as initialised in both."""
-    from .okeefe2015 import CALIBRATION
-
-    init = np.any(case.Y > CALIBRATION["init_threshold"], axis=0)
+    init = initialised_sensors(case.Y)
     out = {}
     for f in filters:
         prm, alb = calibration_filter_setup(variant, f, albedo_dir)

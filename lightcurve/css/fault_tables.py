@@ -42,7 +42,7 @@ from .fault import (FAULT_MODES, AveragedNISDetector, DarkSensorDetector, inject
                     sensor_nis)
 
 __all__ = ["THESIS_GRIDS", "EXPERIMENTS", "VARIANTS", "thesis_detector", "robust_detectors",
-           "thesis_filter_overrides", "fault_table_run", "fault_table_study", "summarise",
+           "thesis_filter_overrides", "fault_table_case", "fault_table_run", "fault_table_study", "summarise",
            "plot_fault_nis"]
 
 THESIS_GRIDS = ("1p25x1", "5x5", "10x10")
@@ -120,6 +120,18 @@ def thesis_filter_overrides(overrides) -> dict:
     return out
 
 
+def fault_table_case(seed, *, controlled=False, duration_s=None):
+    """The simulated §4.4.3 case of :func:`fault_table_run` for ``seed`` (table 5.1:
+    ``controlled`` False, 5.2: True) and the generator that draws its failures; the case is
+    the same for every variant, grid and failure mode of that run."""
+    from .calibration import simulate_thesis_calibration_case
+
+    g_case, g_fail = as_generator(seed).spawn(2)
+    case = simulate_thesis_calibration_case(g_case, duration_s=duration_s,
+                                            controlled=controlled)
+    return case, g_fail
+
+
 def fault_table_run(seed, *, controlled=False, grids=THESIS_GRIDS, modes=FAULT_MODES,
                     variants=VARIANTS, duration_s=None, albedo_dir=None,
                     thesis_filter=None) -> dict:
@@ -134,14 +146,10 @@ def fault_table_run(seed, *, controlled=False, grids=THESIS_GRIDS, modes=FAULT_M
     averaged NIS of CSS 1 after the failure, "healthy_max_avg": [largest averaged NIS of each
     initialised CSS 2-N]}`` (NaN where none).
     """
-    from .calibration import (calibration_filter_setup, run_calibration,
-                              simulate_thesis_calibration_case)
-    from .okeefe2015 import CALIBRATION, FAULT
+    from .calibration import calibration_filter_setup, initialised_sensors, run_calibration
+    from .okeefe2015 import FAULT
 
-    g = as_generator(seed)
-    g_case, g_fail = g.spawn(2)
-    case = simulate_thesis_calibration_case(g_case, duration_s=duration_s,
-                                            controlled=controlled)
+    case, g_fail = fault_table_case(seed, controlled=controlled, duration_s=duration_s)
     s = int(FAULT["sensor"])
     t_fail = float(FAULT["t_fail_s"])
     after = case.t >= t_fail
@@ -151,7 +159,7 @@ def fault_table_run(seed, *, controlled=False, grids=THESIS_GRIDS, modes=FAULT_M
     data = {}
     for m in modes:
         Y = inject_fault(case.Y, case.t, s, m, t_fail, mode_rngs[m])
-        init = np.any(Y > CALIBRATION["init_threshold"], axis=0)
+        init = initialised_sensors(Y)
         data[m] = (Y, init)
         out["initialised"][m] = init.tolist()
     for v in variants:
