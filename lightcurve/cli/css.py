@@ -39,8 +39,7 @@ def _cmd_css_simulate(args) -> int:
     """
     from ..css.recording import write_css_recording
     from ..css.study import settled_mask
-    from ..css.sunline_ekf import gyroless_params
-    from ..css.sunline_ekf import FilterParams
+    from ..css.sunline_ekf import default_filter_params
     from ..css.truth import CSSScenario, simulate_css
 
     output_not_input(args.output, args.config, args.albedo, args.filter_albedo, option="--output")
@@ -54,7 +53,7 @@ def _cmd_css_simulate(args) -> int:
                      f"CSS simulation of {n_steps} steps", field="--duration-s/--dt-s",
                      value=n_steps)
     gyro = None if args.gyro == "none" else args.gyro
-    fp = FilterParams() if gyro else gyroless_params()
+    fp = default_filter_params(gyro)
     from dataclasses import replace as _replace
 
     fp = _replace(fp, albedo_model=args.filter_albedo != "none")
@@ -103,14 +102,13 @@ def _cmd_css_estimate(args) -> int:
     """
     from ..css.recording import read_css_recording
     from ..css.single_point import angle_deg, estimate
-    from ..css.sunline_ekf import gyroless_params
-    from ..css.sunline_ekf import FilterParams, run_filter
+    from ..css.sunline_ekf import default_filter_params, run_filter
 
     output_not_input(args.output, args.recording, option="--output")
     rec = read_css_recording(args.recording)
     gyro = None if args.no_gyro else rec["gyro"]
     if args.estimator in ("ekf", "eckf"):
-        fp = FilterParams() if gyro is not None else gyroless_params()
+        fp = default_filter_params(gyro)
         fp = fp.__class__(**{**fp.__dict__, "fov_half_angle_deg": float(np.degrees(np.max(rec["fov_half_angle_rad"])))})
         s_hat = run_filter(args.estimator, rec["t"], rec["y"], rec["normals"], gyro=gyro,
                            params=fp)["s_hat"]

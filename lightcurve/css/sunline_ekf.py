@@ -79,8 +79,8 @@ from .single_point import lsmn_nb
 
 __all__ = ["FilterParams", "FILTER_KINDS", "run_filter", "run_filter_nb", "ekf_propagate_nb",
            "ekf_update_nb", "ekf_update_albedo_nb", "albedo_measurement_nb",
-           "filter_step_albedo_nb", "phi_state_size", "eckf_propagate_nb", "eckf_update_nb", "successive_rate_nb",
-           "rotation_step_nb", "gyroless_params"]
+           "filter_step_albedo_nb", "phi_state_size", "eckf_propagate_nb", "eckf_update_nb", "successive_rate_nb", "rate_from_estimates_nb",
+           "rotation_step_nb", "gyroless_params", "default_filter_params"]
 
 FILTER_KINDS = ("ekf", "eckf")
 
@@ -426,30 +426,48 @@ def eckf_update_nb(d, Pxx, Pxc, y, normals, sigma, threshold, gate, inflate_max,
 
 
 @numba.njit(cache=True)
+def rate_from_estimates_nb(a, b, dt, rate_max, per_axis):
+    """O'Keefe (2015) eq. 3.67, the gyro-less rate from two successive Sun estimates:
+    ω̄ = (d̂_k × d̂_{k−1})/|d̂_k × d̂_{k−1}| · arccos(d̂_k·d̂_{k−1})/Δt (rad/s, body axes; the
+    angle via atan2 for accuracy at small steps).  ``a`` = d_k, ``b`` = d_{k−1} (any length,
+    not both zero), ``dt`` s.  Bounded by ``rate_max`` rad/s per axis (``per_axis``, the
+    §3.3.3 limiter) or in norm.  Only the part of ω across the Sun line is observable; zeros
+    when either estimate is zero or the two are parallel."""
+    w = np.zeros(3)
+    na = np.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
+    nb = np.sqrt(b[0] ** 2 + b[1] ** 2 + b[2] ** 2)
+    if na == 0.0 or nb == 0.0 or dt <= 0.0:
+        return w
+    ua = a / na
+    ub = b / nb
+    cx = ua[1] * ub[2] - ua[2] * ub[1]
+    cy = ua[2] * ub[0] - ua[0] * ub[2]
+    cz = ua[0] * ub[1] - ua[1] * ub[0]
+    sn = np.sqrt(cx * cx + cy * cy + cz * cz)
+    if sn < 1e-15:
+        return w
+    ang = np.arctan2(sn, ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2])
+    w[0] = cx / sn * ang / dt
+    w[1] = cy / sn * ang / dt
+    w[2] = cz / sn * ang / dt
+    if per_axis:
+        for i in range(3):
+            w[i] = min(rate_max, max(-rate_max, w[i]))
+    else:
+        nw = np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+        if nw > rate_max:
+            w *= rate_max / nw
+    return w
+
+
+@numba.njit(cache=True)
 def successive_rate_nb(d_k, d_km1, dt, omega_f, alpha, rate_max):
-    """Gyro-less rate (eq. 3.67) from successive estimates, bounded and low-pass filtered.
+    """Gyro-less rate (eq. 3.67, :func:`rate_from_estimates_nb` bounded in norm by
+    ``rate_max`` rad/s) through a first-order low-pass: α ω_f + (1 − α) ω̄.
 
     Returns the new filtered rate (3,) rad/s (body axes); ``omega_f`` is the previous one.
     """
-    na = np.sqrt(d_k[0] ** 2 + d_k[1] ** 2 + d_k[2] ** 2)
-    nb = np.sqrt(d_km1[0] ** 2 + d_km1[1] ** 2 + d_km1[2] ** 2)
-    w = np.zeros(3)
-    if na > 0 and nb > 0 and dt > 0:
-        a = d_k / na
-        b = d_km1 / nb
-        cx = a[1] * b[2] - a[2] * b[1]
-        cy = a[2] * b[0] - a[0] * b[2]
-        cz = a[0] * b[1] - a[1] * b[0]
-        sn = np.sqrt(cx * cx + cy * cy + cz * cz)
-        cs = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-        if sn > 1e-15:
-            th = np.arctan2(sn, cs)
-            w[0] = th / dt * cx / sn
-            w[1] = th / dt * cy / sn
-            w[2] = th / dt * cz / sn
-    nw = np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
-    if nw > rate_max:
-        w *= rate_max / nw
+    w = rate_from_estimates_nb(d_k, d_km1, dt, rate_max, False)
     return alpha * omega_f + (1.0 - alpha) * w
 
 
@@ -721,3 +739,12 @@ def gyroless_params(base: FilterParams | None = None) -> FilterParams:
 
     b = base or FilterParams()
     return replace(b, q_proc=1e-3, rate_alpha=0.95, sigma_meas=0.1, consider_sigma=2e-3)
+
+
+def default_filter_params(gyro) -> FilterParams:
+    """The robust filters' default tuning for a case: :class:`FilterParams` with a gyro
+    (``gyro`` a grade name, a GyroSpec or recorded rates), :func:`gyroless_params` without
+    (``gyro`` None or "none").  Every simulation, study and command line path takes its
+    default here."""
+    none = gyro is None or (isinstance(gyro, str) and gyro == "none")
+    return gyroless_params() if none else FilterParams()

@@ -58,7 +58,9 @@ from .gyro import GyroSpec, gyro_grade, gyro_step_nb
 from .okeefe2015 import SPACECRAFT, WHEEL_AXES
 from .sensors import CSSArray
 from .single_point import lsmn_nb, wavg_nb
-from .sunline_ekf import FilterParams, filter_init_nb, filter_step_albedo_nb, successive_rate_nb
+from .sunline_ekf import (FilterParams, default_filter_params, filter_init_nb,
+                          filter_step_albedo_nb, rate_from_estimates_nb,
+                          successive_rate_nb)
 from .sunline_thesis import (THESIS_PRM, thesis_init_nb, thesis_propagate_nb, thesis_sunlit_nb,
                              thesis_update_nb)
 
@@ -118,7 +120,9 @@ class CSSScenario:
     term); gyro: grade name, a GyroSpec, or None (gyro-less); controlled: run the controller;
     duration_s; dt_s: CSS sample period; substeps: propagation/gyro/control steps per CSS
     sample; albedo: an AlbedoMap, a (mean, std) pair of AlbedoMaps (drawn per run), None for
-    the built-in 10° zonal model, or False (off); filter_albedo: the albedo model of the
+    the built-in 10° zonal model, or False (off); filter_params: the robust filters' tuning
+    (None: :class:`~lightcurve.css.sunline_ekf.FilterParams` with a gyro,
+    :func:`~lightcurve.css.sunline_ekf.gyroless_params` without); filter_albedo: the albedo model of the
     robust filters, same choices except pairs; thesis_params: parameter array of the thesis
     filter (:func:`lightcurve.css.sunline_thesis.thesis_params`); thesis_control: (K, P, K_I,
     deadband rad) of eq. 3.64; noise_in_scale: eq. 2.21's noise inside the scale factors;
@@ -141,7 +145,7 @@ class CSSScenario:
     perturbations: bool = False
     spacecraft: Spacecraft = field(default_factory=Spacecraft)
     dispersions: Dispersions = field(default_factory=Dispersions)
-    filter_params: FilterParams = field(default_factory=FilterParams)
+    filter_params: FilterParams | None = None
     control: ControlParams = field(default_factory=ControlParams)
     albedo: object = None
     filter_albedo: object = None
@@ -169,6 +173,8 @@ class CSSScenario:
                              "cylindrical")
         if int(self.substeps) < 1:
             raise ValueError("substeps must be >= 1")
+        if self.filter_params is None:
+            self.filter_params = default_filter_params(self.gyro)
 
 
 @dataclass
@@ -227,33 +233,6 @@ def _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint, dw0, gai
     u = G_pinv @ rhs
     saturate_nb(u, umax)
     return u
-
-
-@numba.njit(cache=True)
-def _rate_from_estimates_nb(a, b, dt, rate_max, per_axis):
-    """Eq. 3.67: ω̄ = (d̂_k × d̂_{k−1})/|d̂_k × d̂_{k−1}| arccos(...)/Δt, bounded per axis
-    (``per_axis``, §3.3.3) or in norm."""
-    w = np.zeros(3)
-    na = np.sqrt(a[0] ** 2 + a[1] ** 2 + a[2] ** 2)
-    nb = np.sqrt(b[0] ** 2 + b[1] ** 2 + b[2] ** 2)
-    if na == 0.0 or nb == 0.0 or dt <= 0.0:
-        return w
-    ua = a / na
-    ub = b / nb
-    c = np.cross(ua, ub)
-    sn = np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
-    if sn < 1e-15:
-        return w
-    ang = np.arctan2(sn, ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2])
-    w = c / sn * ang / dt
-    if per_axis:
-        for i in range(3):
-            w[i] = min(rate_max, max(-rate_max, w[i]))
-    else:
-        nw = np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
-        if nw > rate_max:
-            w *= rate_max / nw
-    return w
 
 
 @numba.njit(cache=True)
@@ -414,7 +393,7 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                 if started:
                     if not use_gyro and not shadow:
                         if have_prev:
-                            wr = _rate_from_estimates_nb(d, d_prev, dt_c, rate_max, True)
+                            wr = rate_from_estimates_nb(d, d_prev, dt_c, rate_max, True)
                             om_f = lp_alpha * om_f + (1.0 - lp_alpha) * wr
                         d_prev[:] = d
                         have_prev = True
@@ -471,7 +450,7 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                 if not use_gyro:
                     if ok and have_prev and not (thesis and shadow):
                         if thesis:
-                            wr = _rate_from_estimates_nb(s_new, d_prev, dt_c, rate_max, True)
+                            wr = rate_from_estimates_nb(s_new, d_prev, dt_c, rate_max, True)
                             om_f = lp_alpha * om_f + (1.0 - lp_alpha) * wr
                         else:
                             om_f = successive_rate_nb(s_new, d_prev, dt_c, om_f, alpha_r, rmax_r)

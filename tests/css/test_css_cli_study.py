@@ -274,3 +274,21 @@ def test_study_robust_filter_override(tmp_path):
     assert rob.fov_model is False and rob.albedo_n_phi == 24 and rob.albedo_sigma == 0.05
     assert scenario_for(base, "ekf", "robust", "intermediate").filter_params.fov_model is True
     assert scenario_for(spec, "ekf", "thesis", "intermediate").filter_params.fov_model is True
+
+
+def test_study_gyroless_cases_take_the_gyroless_tuning(tmp_path):
+    # a robust case without gyro runs with sunline_ekf.gyroless_params (the tuning of
+    # `lightcurve css simulate --gyro none`), not the gyro tuning; [robust_filter] overrides
+    # apply on top of it
+    from lightcurve.css.study import scenario_for
+    from lightcurve.css.sunline_ekf import FilterParams, gyroless_params
+
+    base = load_css_study(_study_toml(tmp_path))
+    assert scenario_for(base, "ekf", "robust", "none").filter_params == gyroless_params()
+    assert scenario_for(base, "ekf", "robust", "intermediate").filter_params == FilterParams()
+    assert gyroless_params() != FilterParams()
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + "\n[robust_filter]\nfov_model = false\n")
+    rob = scenario_for(load_css_study(p), "ekf", "robust", "none").filter_params
+    assert rob.fov_model is False and rob.q_proc == gyroless_params().q_proc
+

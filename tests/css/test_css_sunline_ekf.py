@@ -8,7 +8,8 @@ from scipy.linalg import expm
 from lightcurve.css.configurations import dual_pyramid
 from lightcurve.css.sunline_ekf import (FilterParams, eckf_propagate_nb, ekf_propagate_nb,
                                         ekf_update_nb, eckf_update_nb, rotation_step_nb,
-                                        run_filter, successive_rate_nb)
+                                        run_filter, successive_rate_nb,
+                                        rate_from_estimates_nb)
 from lightcurve.rotations import skew
 
 
@@ -126,6 +127,10 @@ def test_successive_rate_recovers_perpendicular_rate():
     assert np.linalg.norm(est) == pytest.approx(0.01)
     est = successive_rate_nb(d1, d0, dt, np.ones(3), 0.5, 1.0)
     assert np.allclose(est, 0.5 + 0.5 * w_perp, rtol=0, atol=0.01 * np.linalg.norm(w_perp))
+    # the §3.3.3 limiter of the thesis variant bounds each axis, not the norm
+    wa = rate_from_estimates_nb(d1, d0, dt, 0.015, True)
+    assert np.allclose(wa, np.clip(w_perp, -0.015, 0.015), rtol=0, atol=0.01 * np.linalg.norm(w_perp))
+    assert np.array_equal(rate_from_estimates_nb(d0, d0, dt, 1.0, False), np.zeros(3))
 
 
 def test_run_filter_tracks_rotating_sun_noise_free():
