@@ -733,12 +733,14 @@ def run_filter(kind: str, t, Y, normals, gyro=None, params: FilterParams | None 
 
 
 def gyroless_params(base: FilterParams | None = None) -> FilterParams:
-    """Robust-filter tuning for gyro-less operation (eq. 3.67 rates): larger process noise,
-    a slower rate low-pass and a larger considered rate error."""
+    """Robust-filter tuning for gyro-less operation (eq. 3.67 rates): larger process noise
+    and considered rate error, and a light rate low-pass (α = 0.3 per 0.5 s sample, a
+    0.38 Hz corner): under control a slower one lags the controller's own action and the
+    loop loses the Sun (the choice and its measurement: docs/measurements.md)."""
     from dataclasses import replace
 
     b = base or FilterParams()
-    return replace(b, q_proc=1e-3, rate_alpha=0.95, sigma_meas=0.1, consider_sigma=2e-3)
+    return replace(b, q_proc=1e-3, rate_alpha=0.3, sigma_meas=0.1, consider_sigma=2e-3)
 
 
 def default_filter_params(gyro) -> FilterParams:

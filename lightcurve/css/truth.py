@@ -311,6 +311,7 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
     s_est = np.zeros(3)
     valid = False
     shadow = True
+    dark_r = False   # robust variant: no CSS output above its threshold at this sample
     dark = 0.0
     w_acc = np.zeros(3)
     n_acc = 0
@@ -407,11 +408,16 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                         started = True
                         d_prev[:] = d
                 else:
-                    om = w_acc / max(n_acc, 1) if use_gyro else om_f
                     lit_now = False
                     for j in range(N):
                         if Y[k, j] > thr_r:
                             lit_now = True
+                    if not use_gyro and not lit_now:
+                        # §3.3.3: without a gyro the rate comes from Sun estimates only; none
+                        # in the dark, so the filter is held (ω = 0) and the rate restarts
+                        om_f[:] = 0.0
+                        have_prev = False
+                    om = w_acc / max(n_acc, 1) if use_gyro else om_f
                     reset = lit_now and fprm[14] > 0 and dark >= fprm[14]
                     if f_alb:
                         E = euler321_to_dcm_nb(np.array([theta[k], 0.0, 0.0]))
@@ -425,9 +431,12 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                     dark = 0.0 if lit_now else dark + dt_c
                     NA[k] = m
                     NIS[k] = nis if m > 0 else np.nan
-                    if not use_gyro:
-                        om_f = successive_rate_nb(d, d_prev, dt_c, om_f, alpha_r, rmax_r)
+                    if not use_gyro and lit_now:
+                        if have_prev and not reset:
+                            om_f = successive_rate_nb(d, d_prev, dt_c, om_f, alpha_r, rmax_r)
+                        have_prev = True
                     d_prev[:] = d
+                    dark_r = not lit_now
             else:
                 yk = Y[k]
                 thr_sp = 0.0 if thesis else thr_r
@@ -447,6 +456,10 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                     if yk[j] > thr_sp:
                         cnt += 1
                 NA[k] = cnt
+                dark_r = not ok
+                if not use_gyro and not thesis and not ok:
+                    om_f[:] = 0.0     # §3.3.3, as for the robust filters above
+                    have_prev = False
                 if not use_gyro:
                     if ok and have_prev and not (thesis and shadow):
                         if thesis:
@@ -490,7 +503,9 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                 Wu[k] = w_meas if use_gyro else om_f
             w_acc += w_meas
             n_acc += 1
-            suspended = thesis and (not use_gyro) and shadow
+            # §3.3.3: without a gyro, propagation and all control effort are suspended in
+            # the dark (thesis: its shadow test; robust: no output above threshold)
+            suspended = (not use_gyro) and (shadow if thesis else dark_r)
             if kind <= 1 and kind >= 0 and thesis and started and not suspended:
                 om = w_meas if use_gyro else om_f
                 thesis_propagate_nb(d, P, Lb, Lam, Beta, om, h, tprm, sig_s_t, sig_w_t)
@@ -499,20 +514,19 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                     s_est = d / nd
             # ---- control ------------------------------------------------------------
             u[:] = 0.0
-            if controlled and kind >= 0:
+            if controlled and kind >= 0 and not suspended:
                 w_ctrl = w_meas if use_gyro else om_f
                 if thesis:
-                    if not suspended:
-                        if not ctrl_started:
-                            dw0[:] = w_ctrl
-                            ctrl_started = True
-                        h_abs = Js * (G.T @ w_ctrl + Om)
-                        u = _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint,
-                                               dw0, tgains, umax, h_axis, h)
-                        if not use_gyro and kind >= 2:
-                            # §3.3.3: wheel torques low-pass filtered for single-point methods
-                            u_f[:] = lp_alpha * u_f + (1.0 - lp_alpha) * u
-                            u = u_f.copy()
+                    if not ctrl_started:
+                        dw0[:] = w_ctrl
+                        ctrl_started = True
+                    h_abs = Js * (G.T @ w_ctrl + Om)
+                    u = _thesis_control_nb(s_est, valid, w_ctrl, I, G, G_pinv, h_abs, zint,
+                                           dw0, tgains, umax, h_axis, h)
+                    if not use_gyro and kind >= 2:
+                        # §3.3.3: wheel torques low-pass filtered for single-point methods
+                        u_f[:] = lp_alpha * u_f + (1.0 - lp_alpha) * u
+                        u = u_f.copy()
                 else:
                     h_w = Js * (G.T @ w_ctrl + Om)
                     u = mrp_control_nb(s_est, valid, w_ctrl, I, G, h_w, G_pinv, rgains[0],
