@@ -91,16 +91,24 @@ def thesis_filter_params(estimator: str, gyro) -> np.ndarray:
 _TOMS_CACHE: dict = {}
 
 
-def thesis_albedo(grid: str = "1p25x1"):
-    """The truth albedo of §2.1.2.1: TOMS mean and standard deviation (drawn per run); falls
-    back to the built-in zonal model (None) when the data folder is absent."""
+def thesis_albedo(grid: str = "1p25x1", required: bool = False):
+    """The truth albedo of §2.1.2.1: TOMS mean and standard deviation (drawn per run).  When
+    the data folder is absent: with ``required`` the :class:`~lightcurve.errors.InputError`
+    naming it is raised, otherwise a RuntimeWarning says so and None (the built-in zonal
+    model) is returned."""
+    import warnings
+
     from ..errors import InputError
     from .albedo import load_toms
 
     if grid not in _TOMS_CACHE:
         try:
             _TOMS_CACHE[grid] = load_toms(grid)
-        except InputError:
+        except InputError as e:
+            if required:
+                raise
+            warnings.warn(f"TOMS albedo grid {grid} not available ({e}); the truth uses the "
+                          "built-in 10° zonal albedo instead", RuntimeWarning, stacklevel=2)
             _TOMS_CACHE[grid] = None
     return _TOMS_CACHE[grid]
 

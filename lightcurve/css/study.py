@@ -71,6 +71,7 @@ ERR_BINS = np.concatenate([np.arange(0.0, 20.0, 0.02), np.arange(20.0, 180.5, 0.
 """Histogram bins of the pooled error (deg)."""
 _GYROS = tuple(ok.GYRO_TABLE_2_3) + ("rate", "tactical", "navigation", "none")
 _ALBEDO = ("toms", "toms5", "toms10", "builtin", "none")
+_TOMS_GRID = {"toms": "1p25x1", "toms5": "5x5", "toms10": "10x10"}   # the §2.1.2.1 grids
 
 
 def direction_nees(d_hat, P, s_true):
@@ -156,19 +157,13 @@ class StudySpec:
         return [(e, v, g) for g in self.gyros for v in self.variants for e in self.estimators]
 
 
-def _albedo_arg(name):
-    return {"toms5": "toms5", "toms10": "toms10"}.get(name, name)
-
-
 def scenario_for(spec: StudySpec, estimator, variant, gyro):
     """The :class:`~lightcurve.css.truth.CSSScenario` of one case."""
     from .experiments import thesis_albedo, thesis_scenario
 
     alb = spec.albedo
-    if alb in ("toms5", "toms10"):
-        alb = thesis_albedo("5x5" if alb == "toms5" else "10x10")
-        if alb is None:
-            alb = "builtin"
+    if alb in _TOMS_GRID:
+        alb = thesis_albedo(_TOMS_GRID[alb], required=True)
     sc = thesis_scenario(spec.configuration, estimator, variant=variant,
                          gyro=None if gyro == "none" else gyro, controlled=spec.controlled,
                          duration_s=spec.duration_s, albedo=alb, sim=dict(spec.simulation))
@@ -655,6 +650,18 @@ def load_css_study(path) -> StudySpec:
     if alb not in _ALBEDO:
         raise InputError("unknown albedo", file=path, field="scenario.albedo", value=alb,
                          allowed=", ".join(_ALBEDO))
+    if alb.startswith("toms"):
+        # a study that names the TOMS albedo runs with it or not at all (no silent fallback)
+        from .experiments import thesis_albedo
+
+        grid = _TOMS_GRID[alb]
+        try:
+            thesis_albedo(grid, required=True)
+        except InputError as e:
+            raise InputError(f"TOMS albedo data for grid {grid} not found ({e.args[0]})",
+                             file=path, field="scenario.albedo", value=alb,
+                             allowed="builtin, none, or a toms grid with ../shared/data/"
+                             "earth_albedo or $LIGHTCURVE_SHARED_DATA present") from None
     spec = replace(
         spec, configuration=conf, controlled=sc.bool("controlled", False),
         estimators=_list("estimators", spec.estimators, ESTIMATORS),

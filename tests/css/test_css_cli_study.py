@@ -292,3 +292,27 @@ def test_study_gyroless_cases_take_the_gyroless_tuning(tmp_path):
     rob = scenario_for(load_css_study(p), "ekf", "robust", "none").filter_params
     assert rob.fov_model is False and rob.q_proc == gyroless_params().q_proc
 
+
+
+def test_study_refuses_toms_albedo_without_the_data(tmp_path, monkeypatch):
+    # a study that names the §2.1.2.1 TOMS albedo must not silently run with the built-in
+    # zonal model: without the data folder the study file is refused (exit 2) before any run
+    # is written; the same file with albedo = "builtin" loads
+    from lightcurve.css import experiments
+
+    monkeypatch.setenv("LIGHTCURVE_SHARED_DATA", str(tmp_path / "absent"))
+    monkeypatch.setattr(experiments, "_TOMS_CACHE", {})
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text().replace('albedo = "builtin"', 'albedo = "toms"'))
+    with pytest.raises(InputError) as e:
+        load_css_study(p)
+    msg = str(e.value)
+    assert "scenario.albedo" in msg and "toms" in msg and str(p) in msg
+    out = tmp_path / "out"
+    assert main(["css", "study", str(p), "-q", "-o", str(out)]) == 2
+    assert not (out / "runs").exists()
+    p.write_text(p.read_text().replace('albedo = "toms"', 'albedo = "builtin"'))
+    assert load_css_study(p).albedo == "builtin"
+    # the API path warns instead
+    with pytest.warns(RuntimeWarning, match="TOMS albedo grid 1p25x1 not available"):
+        assert experiments.thesis_albedo("1p25x1") is None
