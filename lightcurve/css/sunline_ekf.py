@@ -162,13 +162,20 @@ class FilterParams:
         return a
 
     def for_gyro(self, spec) -> "FilterParams":
-        """A copy whose process noise and considered rate error cover the bias of gyro grade
-        ``spec`` (:class:`~lightcurve.css.gyro.GyroSpec`): q ≥ σ_b² × 100 s (a constant
-        bias seen as a random walk over ~100 s) and σ_c ≥ σ_b."""
+        """A copy whose process noise and considered rate error cover the rate errors of gyro
+        ``spec`` (:class:`~lightcurve.css.gyro.GyroSpec`): q ≥ σ_v² + σ_B² × 100 s and
+        σ_c ≥ σ_B, where σ_B² = σ_b² + σ_u² × 1000 s is the bias spread after the drift
+        time of the Table 2.3 grades (O'Keefe 2015 §2.4, "over 1000 s";
+        :data:`~lightcurve.css.okeefe2015.GYRO_DRIFT_TAU_S`).  The angle random walk σ_v
+        enters d as white noise; the bias, nearly constant over ~100 s, as a random walk
+        over that window."""
         from dataclasses import replace
 
-        return replace(self, q_proc=max(self.q_proc, spec.bias_sigma ** 2 * 100.0),
-                       consider_sigma=max(self.consider_sigma, spec.bias_sigma))
+        from .okeefe2015 import GYRO_DRIFT_TAU_S
+
+        sb2 = spec.bias_sigma ** 2 + spec.rrw ** 2 * GYRO_DRIFT_TAU_S
+        return replace(self, q_proc=max(self.q_proc, spec.arw ** 2 + sb2 * 100.0),
+                       consider_sigma=max(self.consider_sigma, float(np.sqrt(sb2))))
 
     def for_css(self, css) -> "FilterParams":
         """A copy with the FOV of a :class:`~lightcurve.css.sensors.CSSArray` (largest one)."""
