@@ -78,14 +78,12 @@ def _warm_css() -> None:
     step) once per estimator in the loop (sun-line EKF, ECKF, WAVG, LSMN, WLSMN), and the
     gyro-less EKF."""
     from .css.configurations import configuration_by_name
-    from .css.sunline_ekf import default_filter_params
     from .css.truth import CSSScenario, simulate_css
 
     sensors = configuration_by_name("dual_pyramid", fov_half_angle_deg=60.0)
     for est, gyro in (("ekf", "tactical"), ("eckf", "tactical"), ("wavg", "tactical"),
                       ("lsmn", "tactical"), ("wlsmn", "tactical"), ("ekf", None)):
-        fp = default_filter_params(gyro)
         sc = CSSScenario(sensors, estimator=est, gyro=gyro, controlled=False, duration_s=60.0,
                          dt_s=0.5, epoch_utc="2015-03-01T00:00:00Z", albedo=None,
-                         filter_params=fp, filter_albedo=None)
+                         filter_albedo=None)
         simulate_css(sc, 0)

@@ -20,7 +20,7 @@ from .gyro import GyroSpec, gyro_grade
 from .sunline_thesis import thesis_params
 from .truth import CSSScenario, Dispersions
 
-__all__ = ["thesis_css", "thesis_dispersions", "thesis_filter_params", "thesis_scenario",
+__all__ = ["TOMS_ALBEDO_GRIDS", "thesis_css", "thesis_dispersions", "thesis_filter_params", "thesis_scenario",
            "thesis_albedo"]
 
 
@@ -89,6 +89,8 @@ def thesis_filter_params(estimator: str, gyro) -> np.ndarray:
 
 
 _TOMS_CACHE: dict = {}
+TOMS_ALBEDO_GRIDS = {"toms": "1p25x1", "toms5": "5x5", "toms10": "10x10"}
+"""Truth-albedo names of the §2.1.2.1 TOMS grids (1°×1.25°, 5°×5°, 10°×10°)."""
 
 
 def thesis_albedo(grid: str = "1p25x1", required: bool = False):
@@ -117,7 +119,8 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
                     gyro="intermediate", controlled=False, duration_s=None, albedo="toms",
                     perturbations=True, sim=None, **kw) -> CSSScenario:
     """The §2.4 / ch. 3 simulation of one case.  ``gyro``: a Table 2.3 grade name or None;
-    ``albedo``: "toms" (TOMS 1°×1.25° with its spread, §2.1.2.1), "builtin", "none", an
+    ``albedo``: "toms" (TOMS 1°×1.25° with its spread, §2.1.2.1; "toms5", "toms10" the
+    coarser grids, :data:`TOMS_ALBEDO_GRIDS`), "builtin", "none", an
     AlbedoMap or a (mean, std) pair; ``sim``: overrides of the §2.4 values (keys
     altitude_km, inclination_deg, raan_deg, epoch_utc, perturbations, css_rate_hz,
     gyro_rate_hz, shadow_model (truth Earth shadow, default the binary one of eq. 2.21) and the
@@ -136,8 +139,8 @@ def thesis_scenario(configuration="dual_pyramid", estimator="ekf", *, variant="t
     if unknown:
         raise ValueError(f"unknown simulation keys: {', '.join(sorted(unknown))}")
     css = thesis_css(configuration, sim.get("fov_half_angle_deg"))
-    if albedo == "toms":
-        alb = thesis_albedo("1p25x1")
+    if isinstance(albedo, str) and albedo in TOMS_ALBEDO_GRIDS:
+        alb = thesis_albedo(TOMS_ALBEDO_GRIDS[albedo])
     elif albedo == "builtin":
         alb = None
     elif albedo == "none":

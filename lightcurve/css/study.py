@@ -70,8 +70,7 @@ TAU_STEP_S = 10.0
 ERR_BINS = np.concatenate([np.arange(0.0, 20.0, 0.02), np.arange(20.0, 180.5, 0.5)])
 """Histogram bins of the pooled error (deg)."""
 _GYROS = tuple(ok.GYRO_TABLE_2_3) + ("rate", "tactical", "navigation", "none")
-_ALBEDO = ("toms", "toms5", "toms10", "builtin", "none")
-_TOMS_GRID = {"toms": "1p25x1", "toms5": "5x5", "toms10": "10x10"}   # the §2.1.2.1 grids
+_ALBEDO = ("toms", "toms5", "toms10", "builtin", "none")   # TOMS names: experiments.TOMS_ALBEDO_GRIDS
 
 
 def direction_nees(d_hat, P, s_true):
@@ -159,11 +158,11 @@ class StudySpec:
 
 def scenario_for(spec: StudySpec, estimator, variant, gyro):
     """The :class:`~lightcurve.css.truth.CSSScenario` of one case."""
-    from .experiments import thesis_albedo, thesis_scenario
+    from .experiments import TOMS_ALBEDO_GRIDS, thesis_albedo, thesis_scenario
 
     alb = spec.albedo
-    if alb in _TOMS_GRID:
-        alb = thesis_albedo(_TOMS_GRID[alb], required=True)
+    if alb in TOMS_ALBEDO_GRIDS:
+        alb = thesis_albedo(TOMS_ALBEDO_GRIDS[alb], required=True)
     sc = thesis_scenario(spec.configuration, estimator, variant=variant,
                          gyro=None if gyro == "none" else gyro, controlled=spec.controlled,
                          duration_s=spec.duration_s, albedo=alb, sim=dict(spec.simulation))
@@ -652,9 +651,9 @@ def load_css_study(path) -> StudySpec:
                          allowed=", ".join(_ALBEDO))
     if alb.startswith("toms"):
         # a study that names the TOMS albedo runs with it or not at all (no silent fallback)
-        from .experiments import thesis_albedo
+        from .experiments import TOMS_ALBEDO_GRIDS, thesis_albedo
 
-        grid = _TOMS_GRID[alb]
+        grid = TOMS_ALBEDO_GRIDS[alb]
         try:
             thesis_albedo(grid, required=True)
         except InputError as e:

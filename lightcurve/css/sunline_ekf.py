@@ -79,8 +79,9 @@ from .single_point import lsmn_nb
 
 __all__ = ["FilterParams", "FILTER_KINDS", "run_filter", "run_filter_nb", "ekf_propagate_nb",
            "ekf_update_nb", "ekf_update_albedo_nb", "albedo_measurement_nb",
-           "filter_step_albedo_nb", "phi_state_size", "eckf_propagate_nb", "eckf_update_nb", "successive_rate_nb", "rate_from_estimates_nb",
-           "rotation_step_nb", "gyroless_params", "default_filter_params"]
+           "filter_step_albedo_nb", "phi_state_size", "eckf_propagate_nb", "eckf_update_nb",
+           "successive_rate_nb", "rate_from_estimates_nb", "rotation_step_nb",
+           "gyroless_params", "default_filter_params"]
 
 FILTER_KINDS = ("ekf", "eckf")
 

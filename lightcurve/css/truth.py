@@ -121,9 +121,8 @@ class CSSScenario:
     duration_s; dt_s: CSS sample period; substeps: propagation/gyro/control steps per CSS
     sample; albedo: an AlbedoMap, a (mean, std) pair of AlbedoMaps (drawn per run), None for
     the built-in 10° zonal model, or False (off); filter_params: the robust filters' tuning
-    (None: :class:`~lightcurve.css.sunline_ekf.FilterParams` with a gyro,
-    :func:`~lightcurve.css.sunline_ekf.gyroless_params` without); filter_albedo: the albedo model of the
-    robust filters, same choices except pairs; thesis_params: parameter array of the thesis
+    (None: :func:`~lightcurve.css.sunline_ekf.default_filter_params` of ``gyro``);
+    filter_albedo: the albedo model of the robust filters, same choices except pairs; thesis_params: parameter array of the thesis
     filter (:func:`lightcurve.css.sunline_thesis.thesis_params`); thesis_control: (K, P, K_I,
     deadband rad) of eq. 3.64; noise_in_scale: eq. 2.21's noise inside the scale factors;
     shadow_model: Earth-shadow model of the truth, "conical" (umbra and penumbra: the direct
