@@ -20,8 +20,8 @@ from .gyro import GyroSpec, gyro_grade
 from .sunline_thesis import thesis_params
 from .truth import CSSScenario, Dispersions
 
-__all__ = ["TOMS_ALBEDO_GRIDS", "thesis_css", "thesis_dispersions", "thesis_filter_params", "thesis_scenario",
-           "thesis_albedo"]
+__all__ = ["TOMS_ALBEDO_GRIDS", "thesis_css", "thesis_dispersions", "thesis_filter_params",
+           "thesis_scenario", "thesis_albedo"]
 
 
 def thesis_css(configuration: str, fov_half_angle_deg: float | None = None):
