@@ -35,8 +35,9 @@ sunlit and in view — the cost is independent of the grid's global size (benchm
 ``benchmarks/css_calibration.py``).
 
 Measurement noise (§4.2, our concrete form):
-``R_κ = max(σ_css², σ_floor²) + (k_alb g_κ A_κ)² + (g_κ A_edge,κ)²`` (white noise with a floor,
-a relative albedo-model uncertainty, and the irradiance of the albedo cells lying within the
+``R_κ = max(σ_n², σ_floor²) + (k_alb g_κ A_κ)² + (g_κ A_edge,κ)²`` (white noise σ_n with a floor —
+σ_n = σ_css, or g_κ σ_css when the noise lies inside the scale factor as in eq. 2.21 — a
+relative albedo-model uncertainty, and the irradiance of the albedo cells lying within the
 FOV-edge margin, whose membership of the FOV is uncertain — large for coarse grids), plus,
 when the filter's albedo grid is coarser than the truth, the grid's representation error
 ``(g_κ (k_grid A_κ + a_grid))²`` (:func:`albedo_grid_error`; CERES 10° vs 1° at 400 km:
@@ -306,7 +307,7 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
 def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E,
                           s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
                           dlat_max, nu_out, s_out, u_out, cells_sig=np.zeros(0),
-                          init=np.zeros(0)):
+                          init=np.zeros(0), c_out=np.zeros(0)):
     """CSS measurement update in place (see module docstring).
 
     prm: :meth:`CalibrationParams.as_array`.  nu_out, s_out (N,) receive every sensor's prior
@@ -316,6 +317,11 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     plus modelled albedo, before the scale factor g_κ and the considered bias), NaN when the
     Sun is within the FOV-edge margin — the input of the dark-sensor test of
     :mod:`lightcurve.css.fault`, which must not depend on the estimated scale factor.
+    c_out (N,), when given (length N), receives the part of ``s_out`` that is correlated in
+    time — the albedo-grid representation error, which changes only as the spacecraft
+    crosses the grid's cells (0 where the grid is the truth's; NaN where ``s_out`` is) — for
+    the averaged-NIS detector's effective number of samples
+    (:meth:`~lightcurve.css.fault.AveragedNISDetector.limit`).
     Returns (m used, NIS of the used set (NaN if none), inflation factor).
 
     With ``prm`` of :meth:`CalibrationParams.thesis_full` / ``thesis_reduced`` (thesis flag
@@ -346,18 +352,26 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     h, H, D, A, cosd, Aedge = calibration_measurement_nb(
         x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
         lat_c, nlat, nlon, lon_w0, dlon, dlat_max, mk)
-    r0 = max(sig * sig, floor * floor)
-    Rk = np.empty(N)
+    in_scale = prm.shape[0] > 22 and prm[22] > 0.5
+    want_c = c_out.shape[0] == N
     idx = np.empty(N, dtype=np.int64)
+    Rk = np.empty(N)
+    Rc = np.zeros(N)
     m = 0
     for k in range(N):
+        # output noise (inside the scale factor when the sensor model is eq. 2.21's)
+        sk = x[6 + k] * sig if in_scale else sig
         # albedo-model uncertainty: relative part + the cells whose FOV membership is uncertain
-        Rk[k] = r0 + (kalb * x[6 + k] * A[k]) ** 2 + (x[6 + k] * Aedge[k]) ** 2
+        Rk[k] = (max(sk * sk, floor * floor) + (kalb * x[6 + k] * A[k]) ** 2
+                 + (x[6 + k] * Aedge[k]) ** 2)
         if A[k] > 0.0:
             # albedo-grid representation error (coarse grid vs a fine one), see
             # albedo_grid_error: 1σ = k_grid A + a_grid
-            Rk[k] += (x[6 + k] * (prm[15] * A[k] + prm[16])) ** 2
+            Rc[k] = (x[6 + k] * (prm[15] * A[k] + prm[16])) ** 2
+            Rk[k] += Rc[k]
         nu_out[k] = np.nan
+        if want_c:
+            c_out[k] = np.nan
         s_out[k] = np.nan
         u_out[k] = np.nan
         if lit > 0.0 and abs(cosd[k] - cos_fov[k]) < mk[k]:
@@ -372,6 +386,8 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
             if pred:
                 nu_out[k] = y[k] - h[k]
                 s_out[k] = v
+                if want_c:
+                    c_out[k] = Rc[k]
             if D[k] + A[k] > 0.0:
                 if gate_s <= 0.0 or (y[k] - h[k]) ** 2 / v <= gate_s:
                     idx[m] = k
@@ -416,7 +432,8 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
 
     A Python loop over the compiled per-step kernels (≈10 µs of call overhead per sample;
     no separate whole-loop kernel to compile).  Returns X (K,n), Pdiag (K,n), P_end (n,n),
-    nis (K,), m (K,), NU (K,N), S (K,N), nis_st (K,), U (K,N) gain-free predicted irradiance.
+    nis (K,), m (K,), NU (K,N), S (K,N), nis_st (K,), U (K,N) gain-free predicted irradiance,
+    C (K,N) the time-correlated part of S (see :func:`calibration_update_nb`).
     """
     K = t.shape[0]
     N = az0.shape[0]
@@ -429,6 +446,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     NU = np.full((K, N), np.nan)
     SS = np.full((K, N), np.nan)
     UU = np.full((K, N), np.nan)
+    CC = np.full((K, N), np.nan)
     x = x0.copy()
     P = P0.copy()
     arw, rrw, qp = prm[7], prm[8], prm[9]
@@ -437,6 +455,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     nu_k = np.empty(N)
     s_k = np.empty(N)
     u_k = np.empty(N)
+    c_k = np.empty(N)
     iq = np.arange(6, 6 + 3 * N)
     sub = 1 if W.shape[0] == K else max(1, W.shape[0] // max(K - 1, 1))
     sig_cells = np.zeros(0) if cells_sig is None else np.ascontiguousarray(cells_sig)
@@ -465,9 +484,11 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
                 NISST[k] = nis_st
         if timed:
             t0 = perf_counter()
+        c_k[:] = np.nan   # the thesis update does not fill it
         m, nis, infl = calibration_update_nb(x, P, Y[k], prm, az0, el0, cos_fov, horizon_B,
                                              sun_N[k], lit[k], theta[k], r_E[k], s_E[k],
-                                             *cells_args, nu_k, s_k, u_k, sig_cells, init)
+                                             *cells_args, nu_k, s_k, u_k, sig_cells, init,
+                                             c_k)
         if timed:
             t_upd[k] = (perf_counter() - t0) * 1e6
         M[k] = m
@@ -475,12 +496,13 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
         NU[k] = nu_k
         SS[k] = s_k
         UU[k] = u_k
+        CC[k] = c_k
         X[k] = x
         Pd[k] = np.diagonal(P)
     if timed:
         timings["propagation_us"] = t_prop
         timings["update_us"] = t_upd
-    return X, Pd, P, NIS, M, NU, SS, NISST, UU
+    return X, Pd, P, NIS, M, NU, SS, NISST, UU, CC
 
 
 # ---------------------------------------------------------------------------------------
@@ -517,7 +539,11 @@ class CalibrationParams:
     no CSS update while the spacecraft is in the Earth's shadow (thesis update only; chapters
     4-5 do not say, the ch. 3 filters of eq. 3.1/3.31 update only outside it). The thesis
     update uses ``fov_edge_margin`` too (0 in :meth:`thesis_full`: the text has no FOV-edge
-    rule); both switches exist for ablations.
+    rule); both switches exist for ablations. noise_in_scale: the output noise lies inside
+    the scale factors, as in O'Keefe eq. 2.21 (``V = C C_κ (V_d + V_α + ν_V)``), so the noise
+    1σ of sensor κ is ``g_κ sigma_css`` with the estimated total scale factor g_κ (our update;
+    the thesis update always uses ``Ĉ_κ σ_V``, §4.2); False: additive noise after the scale
+    factor (our own simulations).
     """
 
     sigma_css: float = 0.017
@@ -547,6 +573,7 @@ class CalibrationParams:
     init_threshold: float = 0.0
     floor_rule: str = "measured"
     skip_in_shadow: bool = False
+    noise_in_scale: bool = False
 
     @classmethod
     def thesis_full(cls, grid: str = "1p25x1", **kw) -> "CalibrationParams":
@@ -607,7 +634,8 @@ class CalibrationParams:
                          self.fov_edge_sigmas, self.albedo_grid_frac,
                          self.albedo_grid_floor, float(self.thesis), self.meas_floor,
                          self.init_threshold, float(FLOOR_RULES.index(self.floor_rule)),
-                         float(self.skip_in_shadow)], dtype=float)
+                         float(self.skip_in_shadow), float(self.noise_in_scale)],
+                        dtype=float)
 
     def for_gyro(self, spec) -> "CalibrationParams":
         """A copy with the ARW/RRW of a :class:`~lightcurve.css.gyro.GyroSpec`."""
@@ -647,7 +675,8 @@ class CalibrationResult:
     of the CSS update (NaN when none); n_used (K,); innov, innov_var (K,N) per-sensor prior
     innovations and variances (NaN when not evaluated); nis_st (K,) star-tracker NIS;
     layout: :func:`state_layout`; u_model (K,N) gain-free predicted irradiance D_κ + A_κ
-    (NaN at the FOV edge; see :func:`calibration_update_nb`)."""
+    (NaN at the FOV edge; see :func:`calibration_update_nb`); innov_var_corr (K,N) the part
+    of innov_var that is correlated in time (albedo-grid representation error)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -660,6 +689,15 @@ class CalibrationResult:
     nis_st: np.ndarray
     layout: dict
     u_model: np.ndarray | None = None
+    innov_var_corr: np.ndarray | None = None
+
+    def correlated_share(self) -> np.ndarray:
+        """(K,N) share of each innovation variance that is correlated in time (0-1; NaN
+        where the sensor was not evaluated; 0 everywhere when not recorded)."""
+        if self.innov_var_corr is None:
+            return np.where(np.isfinite(self.innov_var), 0.0, np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.clip(self.innov_var_corr / self.innov_var, 0.0, 1.0)
 
     def scale(self):
         """(K,N) estimated total scale factors g_κ."""
@@ -746,8 +784,8 @@ def run_calibration(css: CSSArray, t, Y, gyro, sun_N, lit, r_I_m, epoch_utc, *,
                                np.ascontiguousarray(el0), np.cos(css.fov_half_angle_rad),
                                np.ascontiguousarray(css.horizon_normals), cells.args(),
                                sig_area, timings)
-    X, Pd, Pend, NIS, M, NU, SS, NISST, UU = out
-    return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N), UU)
+    X, Pd, Pend, NIS, M, NU, SS, NISST, UU, CC = out
+    return CalibrationResult(t, X, Pd, Pend, NIS, M, NU, SS, NISST, state_layout(N), UU, CC)
 
 
 _CELLS: dict = {}
@@ -1005,7 +1043,8 @@ def thesis_filter_setup(name: str, albedo_dir=None):
 
 def robust_filter_setup(name: str, albedo_dir=None):
     """Our calibration filter (``variant = "robust"``) on the §4.4 thesis case, with the CSS
-    noise of §2.4 (0.05) and the intermediate gyro: ``name`` "1p25x1", "5x5" or "10x10" —
+    noise of §2.4 (0.05) inside the scale factors as in the case's sensor model (eq. 2.21,
+    ``noise_in_scale``) and the intermediate gyro: ``name`` "1p25x1", "5x5" or "10x10" —
     the full filter with that TOMS grid (the mean map only; for the coarse grids the
     representation error of :func:`albedo_grid_error` against the 1°×1.25° grid, 60° FOV,
     §2.1.3) — or "reduced" (:meth:`CalibrationParams.reduced`).  Returns
@@ -1017,7 +1056,8 @@ def robust_filter_setup(name: str, albedo_dir=None):
     key = ("robust", name, None if albedo_dir is None else str(albedo_dir))
     if key not in _SETUPS:
         if name == "reduced":
-            prm, alb = CalibrationParams.reduced(sigma_css=CSS_SIM["noise_sigma"]), "builtin"
+            prm, alb = CalibrationParams.reduced(sigma_css=CSS_SIM["noise_sigma"],
+                                                 noise_in_scale=True), "builtin"
         else:
             cells = AlbedoCells.from_map(load_toms(name, albedo_dir)[0])
             k, a = 0.0, 0.0
@@ -1025,7 +1065,7 @@ def robust_filter_setup(name: str, albedo_dir=None):
                 fine = AlbedoCells.from_map(load_toms("1p25x1", albedo_dir)[0])
                 k, a = albedo_grid_error(cells, fine, fov_half_angle_deg=60.0)
             prm = CalibrationParams(sigma_css=CSS_SIM["noise_sigma"], albedo_grid_frac=k,
-                                    albedo_grid_floor=a)
+                                    albedo_grid_floor=a, noise_in_scale=True)
             alb = cells
         _SETUPS[key] = (prm.for_gyro(gyro_grade("intermediate")), alb)
     return _SETUPS[key]

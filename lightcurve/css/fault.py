@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..estimation.consistency import chi2_interval, windowed_average
+from ..estimation.consistency import chi2_interval, correlated_average_upper, windowed_average
 from ..estimation.rng import as_generator
 
 __all__ = ["FAULT_MODES", "inject_fault", "sensor_nis", "AveragedNISDetector",
@@ -92,6 +92,14 @@ class AveragedNISDetector:
     window: number of valid samples K averaged; prob: probability of the two-sided χ²
     interval whose upper bound is the threshold (unless ``threshold`` is given explicitly);
     t_start_s: no decision before this time (filter convergence).
+
+    When the filter reports which share of each innovation variance is correlated in time
+    (:meth:`~lightcurve.css.calibration.CalibrationResult.correlated_share`: a coarse albedo
+    grid's representation error, which changes only from cell to cell), the K values of a
+    window are not independent and the χ²_K/K bound is too tight; the limit then uses the
+    effective number of samples of :func:`~lightcurve.estimation.correlated_average_upper`
+    with the share averaged over the same window.  With no correlated share the limit is
+    the χ²_K/K bound.
     """
 
     window: int = 50
@@ -99,11 +107,15 @@ class AveragedNISDetector:
     threshold: float | None = None
     t_start_s: float = 600.0
 
-    def limit(self) -> float:
-        """Threshold on the averaged NIS."""
+    def limit(self, share=None):
+        """Threshold on the averaged NIS; ``share``: window-averaged correlated share of the
+        innovation variance (array-like, 0-1; None: 0).  An explicit ``threshold`` is used
+        as given."""
         if self.threshold is not None:
             return float(self.threshold)
-        return chi2_interval(1, self.prob, self.window)[1]
+        if share is None:
+            return chi2_interval(1, self.prob, self.window)[1]
+        return correlated_average_upper(self.prob, self.window, np.nan_to_num(share))
 
     def averages(self, nis_kn) -> np.ndarray:
         """(K,N) averaged NIS of the last ``window`` valid values, at the samples that bring
@@ -116,12 +128,14 @@ class AveragedNISDetector:
             out[ok, j] = avg[ok]
         return out
 
-    def flags(self, t, nis_kn) -> np.ndarray:
+    def flags(self, t, nis_kn, share_kn=None) -> np.ndarray:
         """Boolean (K,N): sensor flagged at sample k (a new value, full window, average above
-        the limit, t ≥ t_start_s)."""
+        the limit, t ≥ t_start_s); ``share_kn`` (K,N): the correlated share of each sample's
+        innovation variance (NaN where not evaluated), averaged over the same window."""
         t = np.asarray(t, dtype=float)
+        lim = self.limit() if share_kn is None else self.limit(self.averages(share_kn))
         with np.errstate(invalid="ignore"):
-            return (self.averages(nis_kn) > self.limit()) & (t >= self.t_start_s)[:, None]
+            return (self.averages(nis_kn) > lim) & (t >= self.t_start_s)[:, None]
 
 
 @dataclass(frozen=True)

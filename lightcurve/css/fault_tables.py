@@ -181,7 +181,7 @@ def fault_table_run(seed, *, controlled=False, grids=THESIS_GRIDS, modes=FAULT_M
                                       star_valid=case.star_valid)
                 nis = sensor_nis(res.innov, res.innov_var)
                 avg = det.averages(nis)
-                F = det.flags(case.t, nis)
+                F = det.flags(case.t, nis, None if v == "thesis" else res.correlated_share())
                 if dark is not None:
                     F |= dark.flags(case.t, Y, res.u_model)
                 F &= init[None, :]

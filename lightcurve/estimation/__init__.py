@@ -23,6 +23,7 @@ from .consistency import (
     averaged_nis,
     chi2_consistency,
     chi2_interval,
+    correlated_average_upper,
     nees,
     nis,
     nmee,

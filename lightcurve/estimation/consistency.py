@@ -30,6 +30,7 @@ __all__ = [
     "nees",
     "nis",
     "chi2_interval",
+    "correlated_average_upper",
     "averaged_nees",
     "averaged_nis",
     "nmee",
@@ -103,6 +104,28 @@ def chi2_interval(dof, prob=0.95, n_avg=1):
     a = 0.5 * (1.0 - prob)
     k = dof * n_avg
     return float(stats.chi2.ppf(a, k) / n_avg), float(stats.chi2.ppf(1.0 - a, k) / n_avg)
+
+
+def correlated_average_upper(prob, n_avg, share):
+    """Upper bound of the two-sided ``prob`` interval of the average of ``n_avg`` scalar
+    NIS values when a share ``share`` (0-1, array-like) of each innovation variance is an
+    error that stays constant over the window (an error correlated over longer than the
+    window, e.g. a coarse albedo grid's representation error).
+
+    With normalised innovations ``z = √f e + √(1−f) w`` (e, w standard normal, e the same
+    for the whole window, w white), the average ε̄ of z² has mean 1 and variance
+    ``2 (f² + (1 − f²)/K)``; it is matched by a scaled χ²_ν/ν with the same two moments
+    (Satterthwaite 1946, Biometrics Bull. 2(6):110-114), ``ν = 1/(f² + (1 − f²)/K)``.
+    ``f = 0`` gives ν = K, the independent-sample bound of :func:`chi2_interval`;
+    ``f = 1`` gives ν = 1 (one χ²₁ value, whatever the window).
+    """
+    n_avg = int(n_avg)
+    if n_avg < 1:
+        raise ValueError(f"n_avg must be >= 1, got {n_avg}")
+    prob = _check_prob(prob)
+    f = np.clip(np.asarray(share, dtype=float), 0.0, 1.0)
+    nu = 1.0 / (f * f + (1.0 - f * f) / n_avg)
+    return stats.chi2.ppf(0.5 * (1.0 + prob), nu) / nu
 
 
 def order_statistic_interval(dof, k, n, prob=0.99):

@@ -223,6 +223,57 @@ def test_albedo_grid_error_term_enters_R():
     assert np.allclose(out[0.0][1][fin], (D + A)[fin])
 
 
+def test_noise_inside_the_scale_factor_and_the_correlated_part_of_the_variance():
+    """O'Keefe eq. 2.21 puts the output noise inside the scale factors (V = C C_κ (… + ν_V)):
+    with ``noise_in_scale`` the noise term of R is max((g σ)², floor²) instead of
+    max(σ², floor²) with g the estimated scale factor; ``c_out`` receives exactly the grid
+    representation-error term (g (k A + a))², the part of S correlated in time."""
+    from lightcurve.css.calibration import calibration_update_nb, initial_state
+
+    rng = np.random.default_rng(11)
+    css = dual_pyramid()
+    cells = AlbedoCells.from_map(builtin_albedo_map(10.0))
+    az0, el0 = normal_to_azel(css.normals)
+    cf = np.cos(css.fov_half_angle_rad)
+    hor = np.zeros((css.n_sensors, 3))
+    r_E, s_E = _geometry(10.0, 40.0, 40.0)
+    theta = 0.3
+    c, s = np.cos(theta), np.sin(theta)
+    s_N = np.array([c * s_E[0] - s * s_E[1], s * s_E[0] + c * s_E[1], s_E[2]])
+    N = css.n_sensors
+    L = state_layout(N)
+    for trial in range(20):
+        x = _state(css, rng)
+        x[L["consider"]] = 0.0
+        x[L["scale"]] = rng.uniform(0.3, 1.6, N)
+        _, P = initial_state(css, [1.0, 0, 0, 0], CalibrationParams())
+        mk = np.full(N, 0.03)
+        h, _, D, A, _, _ = calibration_measurement_nb(x, az0, el0, cf, hor, s_N, 1.0, theta,
+                                                      r_E, s_E, *cells.args(), mk)
+        if np.sum((A > 0) & (h > 0.05)) >= 2:
+            break
+    sig, floor, k_, a_ = 0.05, 0.02, 0.4, 0.01
+    out = {}
+    for ins in (False, True):
+        prm = CalibrationParams(sigma_css=sig, noise_floor=floor, albedo_grid_frac=k_,
+                                albedo_grid_floor=a_, fov_edge_sigmas=0.0,
+                                noise_in_scale=ins).as_array()
+        nu, sv, uu, cc = np.empty(N), np.empty(N), np.empty(N), np.empty(N)
+        calibration_update_nb(x.copy(), P.copy(), h.copy(), prm, az0, el0, cf, hor, s_N, 1.0,
+                              theta, r_E, s_E, *cells.args(), nu, sv, uu, np.zeros(0),
+                              np.zeros(0), cc)
+        out[ins] = (sv, cc)
+    g = x[L["scale"]]
+    ev = np.isfinite(out[False][0])
+    assert ev.sum() >= 2
+    want = np.maximum((g * sig) ** 2, floor ** 2) - max(sig ** 2, floor ** 2)
+    assert np.allclose((out[True][0] - out[False][0])[ev], want[ev], rtol=1e-9, atol=1e-15)
+    assert np.any(np.abs(want[ev]) > 1e-4)
+    grid = np.where(A > 0, (g * (k_ * A + a_)) ** 2, 0.0)
+    assert np.allclose(out[True][1][ev], grid[ev], rtol=1e-12, atol=0.0)
+    assert np.all(np.isnan(out[True][1][~ev]))
+
+
 def test_albedo_grid_error_grows_with_cell_size():
     """albedo_grid_error: zero against itself; with the CERES maps (table 4.3 trend) the
     10° grid's relative error coefficient exceeds the 5° one's several times (measured
