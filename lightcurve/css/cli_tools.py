@@ -220,7 +220,10 @@ def cmd_vmm(args) -> int:
         plot_vmm_study(r, png)
         print(f"wrote {png}")
     if args.output:
-        _write_json(args.output, {k: v for k, v in r.items() if k != "example"})
+        out = {k: v for k, v in r.items() if k != "example"}
+        out.update(kind="css vmm", seed=args.seed, duration_s=args.duration_s,
+                   fov_half_angle_deg=args.fov_deg, albedo=bool(args.albedo))
+        _write_json(args.output, out)
     return 0
 
 

@@ -78,46 +78,16 @@ def _max_or_nan(v) -> float:
 
 
 def thesis_filter_overrides(overrides) -> dict:
-    """Check ``overrides`` (name → value) against the fields of
-    :class:`~lightcurve.css.calibration.CalibrationParams` (an ablation of the thesis
-    filter, e.g. ``{"fov_edge_margin": 0.03}``, ``{"skip_in_shadow": True}`` or
-    ``{"floor_rule": "predicted"}``); returns
-    them with the fields' types."""
-    from dataclasses import fields
+    """Check ``overrides`` (name → value, command-line strings or typed values) against the
+    fields of :class:`~lightcurve.css.calibration.CalibrationParams` (an ablation of the
+    thesis filter, e.g. ``{"fov_edge_margin": 0.03}``, ``{"skip_in_shadow": True}`` or
+    ``{"floor_rule": "predicted"}``); returns them with the fields' types."""
+    from ..io.tomlio import field_types, typed_overrides
+    from .calibration import FLOOR_RULES, CalibrationParams
 
-    from ..errors import InputError
-    from .calibration import CalibrationParams
-
-    types = {f.name: f.type for f in fields(CalibrationParams)}
-    out = {}
-    for k, v in dict(overrides or {}).items():
-        if k not in types or k == "thesis":
-            raise InputError("not a calibration-filter setting", field="thesis_filter",
-                             value=k, allowed=", ".join(n for n in types if n != "thesis"))
-        if k == "floor_rule":
-            from .calibration import FLOOR_RULES
-
-            if v not in FLOOR_RULES:
-                raise InputError("unknown noise-floor rule", field=f"thesis_filter.{k}",
-                                 value=v, allowed=", ".join(FLOOR_RULES))
-            out[k] = str(v)
-        elif types[k] in (bool, "bool"):
-            if isinstance(v, str):
-                if v.lower() not in ("true", "false", "1", "0"):
-                    raise InputError("not a boolean", field=f"thesis_filter.{k}", value=v,
-                                     allowed="true, false")
-                v = v.lower() in ("true", "1")
-            out[k] = bool(v)
-        else:
-            try:
-                out[k] = float(v)
-            except (TypeError, ValueError):
-                raise InputError("not a number", field=f"thesis_filter.{k}",
-                                 value=v) from None
-            if not np.isfinite(out[k]) or out[k] < 0:
-                raise InputError("must be finite and non-negative",
-                                 field=f"thesis_filter.{k}", value=v, allowed=">= 0")
-    return out
+    return typed_overrides(overrides, field_types(CalibrationParams, exclude=("thesis",)),
+                           field="thesis_filter", what="calibration-filter setting",
+                           choices={"floor_rule": FLOOR_RULES}, from_text=True)
 
 
 def fault_table_case(seed, *, controlled=False, duration_s=None):
@@ -285,6 +255,7 @@ def fault_table_study(experiment="table5_1", n_runs=500, *, seed=0, workers=1,
             "thesis": {g: {"window": d.window, "threshold": d.limit()}
                        for g, d in ((g, thesis_detector(g)) for g in grids)},
             "robust": {"window": det_r.window, "threshold": det_r.limit(),
+                       "threshold_all_correlated": float(det_r.limit(1.0)),
                        "t_start_s": det_r.t_start_s, "dark_g_min": dark_r.limit(),
                        "dark_window": dark_r.window}},
         "thesis_results": THESIS_RESULTS[experiment],

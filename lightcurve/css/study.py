@@ -685,14 +685,10 @@ def load_css_study(path) -> StudySpec:
         spec = replace(spec, simulation=d)
     tf = doc.section("thesis_filter", None)
     if tf is not None:
-        d, keys = {}, _thesis_filter_keys()
-        for k in list(tf.data):
-            if k not in keys:
-                raise InputError("unknown thesis-filter parameter", file=path,
-                                 field=f"thesis_filter.{k}", value=tf.data[k],
-                                 allowed=", ".join(keys))
-            d[k] = tf.float(k, min=0.0)
-        tf.check_unknown()
+        from ..io.tomlio import typed_overrides
+
+        d = typed_overrides(tf.data, dict.fromkeys(_thesis_filter_keys(), float),
+                            field="thesis_filter", file=path, what="thesis-filter parameter")
         spec = replace(spec, thesis_filter=d)
     rf = doc.section("robust_filter", None)
     if rf is not None:
@@ -705,26 +701,11 @@ def _robust_filter_overrides(sec, path) -> dict:
     """The ``[robust_filter]`` section: fields of
     :class:`~lightcurve.css.sunline_ekf.FilterParams` with their types (booleans, integers,
     non-negative numbers)."""
-    from dataclasses import fields
-
+    from ..io.tomlio import field_types, typed_overrides
     from .sunline_ekf import FilterParams
 
-    types = {f.name: f.type for f in fields(FilterParams)}
-    out = {}
-    for k in list(sec.data):
-        if k not in types:
-            raise InputError("unknown robust-filter parameter", file=path,
-                             field=f"robust_filter.{k}", value=sec.data[k],
-                             allowed=", ".join(types))
-        t = types[k]
-        if t in (bool, "bool"):
-            out[k] = sec.bool(k)
-        elif t in (int, "int"):
-            out[k] = sec.int(k, min=1)
-        else:
-            out[k] = sec.float(k, min=0.0)
-    sec.check_unknown()
-    return out
+    return typed_overrides(sec.data, field_types(FilterParams), field="robust_filter",
+                           file=path, what="robust-filter parameter")
 
 
 def _thesis_filter_keys():

@@ -20,7 +20,8 @@ import numpy as np
 from ..errors import InputError
 from .safe_open import TOML_MAX_BYTES as MAX_TOML_BYTES
 
-__all__ = ["load_toml", "loads_toml", "read_toml_text", "Section", "REQUIRED"]
+__all__ = ["load_toml", "loads_toml", "read_toml_text", "Section", "REQUIRED", "field_types",
+           "typed_overrides"]
 
 REQUIRED = object()
 
@@ -218,3 +219,73 @@ class Section:
             right = ")" if hi_open else "]"
             allowed = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
             raise self._err(key, "value out of range", v, allowed=allowed)
+
+
+def field_types(cls, exclude=()) -> dict:
+    """Name → type of the fields of dataclass ``cls`` (except ``exclude``), for
+    :func:`typed_overrides`."""
+    from dataclasses import fields
+
+    return {f.name: f.type for f in fields(cls) if f.name not in exclude}
+
+
+_TYPE_NAMES = {bool: "bool", int: "int", float: "float", str: "str"}
+
+
+def typed_overrides(values, types: dict, *, field: str, file=None, what="parameter",
+                    choices=None, from_text=False, int_min=1) -> dict:
+    """Check a table of setting overrides (an ablation: ``[robust_filter]`` of a study file,
+    ``--thesis-filter NAME=VALUE`` on the command line) against ``types`` (name → bool, int,
+    float or str, or their names as strings: :func:`field_types` of a dataclass) and return
+    them with those types.
+
+    bool: true/false (with ``from_text``, also the strings "true", "false", "1", "0");
+    int: an integer ≥ ``int_min``; float: a finite number ≥ 0; str: one of ``choices[name]``.
+    Values from a TOML file must already have their type; with ``from_text`` (command-line
+    strings) they are parsed.  Raises :class:`InputError` naming ``file``, ``field.name``,
+    the value and what is allowed.
+    """
+    choices = choices or {}
+    out = {}
+    for k, v in dict(values or {}).items():
+        name = f"{field}.{k}"
+        if k not in types:
+            raise InputError(f"unknown {what}", file=file, field=name, value=v,
+                             allowed=", ".join(types))
+        t = types[k]
+        t = _TYPE_NAMES.get(t, t)
+        if t == "bool":
+            if from_text and isinstance(v, str) and v.lower() in ("true", "false", "1", "0"):
+                v = v.lower() in ("true", "1")
+            if not isinstance(v, bool):
+                raise InputError("expected true or false", file=file, field=name, value=v,
+                                 allowed="true, false")
+            out[k] = v
+        elif t == "int":
+            if from_text and isinstance(v, str):
+                try:
+                    v = int(v)
+                except ValueError:
+                    pass
+            if isinstance(v, bool) or not isinstance(v, int) or v < int_min:
+                raise InputError("expected an integer", file=file, field=name, value=v,
+                                 allowed=f">= {int_min}")
+            out[k] = v
+        elif t == "str":
+            allowed = tuple(choices.get(k, ()))
+            if not isinstance(v, str) or (allowed and v not in allowed):
+                raise InputError("unknown value", file=file, field=name, value=v,
+                                 allowed=", ".join(allowed) or "a string")
+            out[k] = v
+        else:
+            if from_text and isinstance(v, str):
+                try:
+                    v = float(v)
+                except ValueError:
+                    pass
+            if isinstance(v, bool) or not isinstance(v, (int, float)) \
+                    or not math.isfinite(v) or v < 0:
+                raise InputError("expected a finite non-negative number", file=file,
+                                 field=name, value=v, allowed=">= 0")
+            out[k] = float(v)
+    return out

@@ -149,7 +149,7 @@ def _above15_max_min(s, est, variant="thesis", gyro=None):
     return None if v is None else v / 60.0
 
 
-def _claims(studies, faults=None) -> list[str]:
+def _claims(studies, faults=None, vmm=None) -> list[str]:
     """The thesis's qualitative claims, each marked against our thesis-variant numbers (with
     the rule used; fewer than :data:`INDICATIVE_RUNS` runs per case: marked indicative)."""
     out = []
@@ -248,9 +248,56 @@ def _claims(studies, faults=None) -> list[str]:
     else:
         out.append("- Inertial/intermediate gyros no better than moderate: not run.")
     out += _fault_claims(faults or {})
-    out.append("- VMM better than SMM when few diodes are lit (DiGregorio): see `lightcurve css "
-               "vmm` (not part of this generated section yet).")
+    out.append(_vmm_claim(vmm))
     return out
+
+
+_VMM_ROWS = (("1", "1"), ("2", "2"), ("3+", "3 or more"))
+
+
+def _vmm_section(vmm) -> list[str]:
+    """DiGregorio's VMM-vs-SMM comparison from the JSON of ``lightcurve css vmm -o FILE``."""
+    out = ["### VMM vs SMM (DiGregorio)", ""]
+    if not vmm:
+        return out + ["Not run (`lightcurve css vmm --runs N -o vmm.json`, then "
+                      "`--css-vmm vmm.json`).", ""]
+    alb = "with" if vmm.get("albedo") else "without"
+    out += [f"`lightcurve css vmm` (`lightcurve.css.vmm`): {vmm['runs']} runs of "
+            f"{vmm.get('duration_s', float('nan')):g} s, seed {vmm.get('seed', '–')}, cube "
+            f"photodiodes with a {vmm.get('fov_half_angle_deg', float('nan')):g}° FOV half "
+            f"angle, Earth albedo {alb} (unmodelled by both filters); the same MEKF "
+            "(magnetometer, gyro, photodiodes) fed the least-squares Sun vector (SMM) or the "
+            "photodiode outputs (VMM) on the same data. Attitude error after the first 300 s, "
+            "by the number of lit photodiodes. The slides give the comparison as figures "
+            "only (“Simulation Results”), so there is no number to put beside ours.",
+            "", "| lit photodiodes | samples | SMM median / RMS (deg) | VMM median / RMS (deg) "
+            "| VMM / SMM (median) |", "|---|---|---|---|---|"]
+    rows = [(lab, vmm["by_n_lit"].get(k, {})) for k, lab in _VMM_ROWS]
+    rows.append(("1 or 2", vmm.get("lt3", {})))
+    for lab, v in rows:
+        if not v.get("samples"):
+            out.append(f"| {lab} | 0 | – | – | – |")
+            continue
+        out.append(f"| {lab} | {v['samples']} | {v['smm_median_deg']:.3f} / "
+                   f"{v['smm_rms_deg']:.3f} | {v['vmm_median_deg']:.3f} / "
+                   f"{v['vmm_rms_deg']:.3f} | {v['vmm_median_deg'] / v['smm_median_deg']:.2f} |")
+    return out + [""]
+
+
+def _vmm_claim(vmm) -> str:
+    """DiGregorio's conclusion, marked against our VMM/SMM study (agrees when the VMM's
+    median attitude error with one or two lit photodiodes is below the SMM's)."""
+    lt3 = (vmm or {}).get("lt3") or {}
+    if not lt3.get("samples"):
+        return ("- VMM better than SMM when few diodes are lit (DiGregorio, “Simulation "
+                "Results”): not run.")
+    ok = lt3["vmm_median_deg"] < lt3["smm_median_deg"]
+    tail = (f" ({vmm['runs']} runs: indicative)" if vmm["runs"] < INDICATIVE_RUNS else "")
+    return ("- VMM better than SMM when few diodes are lit (DiGregorio, “Simulation "
+            f"Results”): ours, one or two lit photodiodes, median attitude error VMM "
+            f"{lt3['vmm_median_deg']:.3f}° vs SMM {lt3['smm_median_deg']:.3f}° — "
+            + ("**agrees**" if ok else "**disagrees**") + tail
+            + " (agrees when the VMM's median is the smaller).")
 
 
 _FAULT_TITLE = {"table5_1": "Table 5.1 — uncontrolled (tumbling)",
@@ -335,21 +382,30 @@ def _faults_section(faults) -> list[str]:
                    "failed CSS 1 after the failure (10th percentile / median), against the "
                    "detection threshold.")
         out.append("")
+        corr_note = False
         out.append("| variant | grid | threshold | healthy p50 / p99 | off p10 / p50 | "
                    "stuck p10 / p50 | random p10 / p50 |")
         out.append("|---|---|---|---|---|---|---|")
         for v in vs:
             for g in s["grids"]:
                 r = s["tables"][v][g]
-                thr = (s["detectors"]["thesis"][g]["threshold"] if v == "thesis"
-                       else s["detectors"]["robust"]["threshold"])
+                d = s["detectors"][v] if v == "robust" else s["detectors"]["thesis"][g]
+                thr = f"{d['threshold']:.2f}"
+                if v == "robust" and g != "1p25x1" and "threshold_all_correlated" in d:
+                    thr += f"–{d['threshold_all_correlated']:.2f}"
+                    corr_note = True
                 h = r.get("healthy_max_avg") or {}
                 cells = [f"{_f(h.get('p50'))} / {_f(h.get('p99'))}"]
                 for m in ("off", "stuck", "random"):
                     c = (r.get(m) or {}).get("css1_max_avg") or {}
                     cells.append(f"{_f(c.get('p10'))} / {_f(c.get('p50'))}")
-                out.append(f"| {v} | {_GRID_NAME.get(g, g)} | {thr:.2f} | " + " | ".join(cells)
+                out.append(f"| {v} | {_GRID_NAME.get(g, g)} | {thr} | " + " | ".join(cells)
                            + " |")
+        if corr_note:
+            out += ["", "Robust variant, coarse grids: the limit rises with the window's share "
+                    "of the innovation variance that is the grid's representation error, "
+                    "correlated from cell to cell (the first value: none of it; the second: all "
+                    "of it; `AveragedNISDetector`, Satterthwaite's effective sample count)."]
         out.append("")
     out += _fault_ablations(faults)
     return out
@@ -618,13 +674,14 @@ def _tables4_section(b) -> list[str]:
 
 
 def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
-                table44=None, faults=()) -> str:
+                table44=None, faults=(), vmm=None) -> str:
     """The O'Keefe (2015) / DiGregorio section, from the output folders of ``lightcurve css
     study`` (each with ``summary.json``) and the JSON lines of ``benchmarks/css.py``
     (``timing``, Table 3.1) and ``benchmarks/css_tables_4.py`` (``tables4``), and the JSON of
     ``lightcurve css sun-models --table -o`` (``sun_models``, Table 4.5) and of
     ``benchmarks/css_table_4_4.py`` (``table44``): paths or None; ``faults``: the JSON files
-    of ``lightcurve css faults --experiment table5_1|table5_2 -o FILE`` (Tables 5.1-5.2).
+    of ``lightcurve css faults --experiment table5_1|table5_2 -o FILE`` (Tables 5.1-5.2);
+    ``vmm``: the JSON of ``lightcurve css vmm -o FILE`` (DiGregorio) or None.
     Experiments without a folder are listed as not run."""
     studies = _load(study_dirs)
     fault_files, faults = list(faults or ()), {}
@@ -648,6 +705,15 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
     tables4 = _json_line(tables4)
     sun_models = _json_line(sun_models)
     table44 = _json_line(table44)
+    if vmm is not None:
+        from ..io.safe_open import read_json
+
+        path, vmm = vmm, read_json(vmm, what="css vmm output")
+        if not isinstance(vmm, dict) or "lt3" not in vmm or "by_n_lit" not in vmm:
+            from ..errors import InputError
+
+            raise InputError("not an output of 'lightcurve css vmm -o FILE'", file=path,
+                             field="lt3", value="missing", allowed="the JSON it writes")
     lines = ["## Coarse sun sensors — O'Keefe (2015), DiGregorio", "",
              "Generated by `python -m lightcurve.studies.reproduction` from the study outputs "
              "(`lightcurve css study pipelines/css/okeefe2015/<experiment>.toml`). \"p99 level\": "
@@ -692,8 +758,9 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
     lines += _table44_section(table44)
     lines += _sun_models_section(sun_models)
     lines += _faults_section(faults)
+    lines += _vmm_section(vmm)
     lines += ["### The thesis's qualitative claims", ""]
-    lines += _claims(studies, faults)
+    lines += _claims(studies, faults, vmm)
     lines.append("")
     return "\n".join(lines)
 
@@ -1071,6 +1138,8 @@ def main(argv=None) -> int:
     p.add_argument("--css-faults", nargs="+", default=[],
                    help="JSON of 'lightcurve css faults --experiment table5_1|table5_2 -o FILE' "
                    "(Tables 5.1-5.2)")
+    p.add_argument("--css-vmm", default=None,
+                   help="JSON of 'lightcurve css vmm -o FILE' (DiGregorio's VMM vs SMM)")
     p.add_argument("--study", nargs="+", default=[],
                    help="output folders of 'lightcurve compare' (the Bernard studies)")
     p.add_argument("--reflection-kf", default=None,
@@ -1079,7 +1148,7 @@ def main(argv=None) -> int:
     sections = [bernard_section(a.study, reflection_kf_json=a.reflection_kf),
                 css_section(a.css, timing=a.css_timing, tables4=a.css_tables4,
                             sun_models=a.css_sun_models, table44=a.css_table44,
-                            faults=a.css_faults)]
+                            faults=a.css_faults, vmm=a.css_vmm)]
     write_reproduction(a.output, sections)
     print(f"wrote {a.output}")
     return 0

@@ -222,3 +222,36 @@ def test_vmm_beats_smm_with_few_lit_diodes():
     lt3 = r["lt3"]
     assert lt3["samples"] > 200
     assert lt3["vmm_median_deg"] < lt3["smm_median_deg"]
+
+
+def test_vmm_output_feeds_the_reproduction_section(tmp_path, capsys):
+    """``lightcurve css vmm -o`` writes the settings with the statistics; the generator turns
+    them into the table by lit photodiodes and marks DiGregorio's claim from the 1-2 lit
+    medians (agrees when the VMM's is the smaller, disagrees otherwise); a file without the
+    statistics is refused with the file and field named."""
+    import json
+
+    from lightcurve.cli import main
+    from lightcurve.errors import InputError
+    from lightcurve.studies.reproduction import css_section
+
+    out = tmp_path / "vmm.json"
+    assert main(["css", "vmm", "--runs", "1", "--duration-s", "600", "-q", "-o",
+                 str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["runs"] == 1 and d["duration_s"] == 600.0 and d["fov_half_angle_deg"] == 70.0
+    st = {"samples": 10, "smm_median_deg": 2.0, "smm_rms_deg": 3.0, "vmm_median_deg": 0.5,
+          "vmm_rms_deg": 0.8}
+    d.update(runs=40, by_n_lit={"0": {"samples": 0}, "1": st, "2": st, "3+": st}, lt3=st)
+    out.write_text(json.dumps(d))
+    txt = css_section([], vmm=out)
+    assert "| 1 or 2 | 10 | 2.000 / 3.000 | 0.500 / 0.800 | 0.25 |" in txt
+    assert "median attitude error VMM 0.500° vs SMM 2.000° — **agrees** (40 runs: indicative)" in txt
+    d["lt3"] = {**st, "vmm_median_deg": 2.5}
+    out.write_text(json.dumps(d))
+    assert "VMM 2.500° vs SMM 2.000° — **disagrees**" in css_section([], vmm=out)
+    assert "few diodes are lit (DiGregorio, “Simulation Results”): not run." in css_section([])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"runs": 3}))
+    with pytest.raises(InputError, match="lt3"):
+        css_section([], vmm=bad)
