@@ -22,6 +22,9 @@ A study TOML (``pipelines/css/okeefe2015/*.toml``)::
                                       # names, SI units) in both thesis filters
     [robust_filter]                   # optional, likewise for the robust sun-line filters
     fov_model = false                 # (sunline_ekf.FilterParams fields)
+    [gyroless]                        # optional, for measured ablations: the thesis variant's
+    lowpass_hz = 0.1                  # §3.3.3 gyro-less rate processing (okeefe2015.GYROLESS
+                                      # names: rate_limit_deg_s, lowpass_hz, sigma_s)
 
 Every case (estimator × variant × gyro) flies the same dispersed spacecraft for run ``i``
 (seed ``[seed, i]``, common random numbers; :func:`lightcurve.css.truth.simulate_css_cases`).
@@ -137,6 +140,7 @@ class StudySpec:
     simulation: dict = field(default_factory=dict)
     thesis_filter: dict = field(default_factory=dict)
     robust_filter: dict = field(default_factory=dict)
+    gyroless: dict = field(default_factory=dict)
     text: str = ""
     source: str = ""
 
@@ -146,7 +150,7 @@ class StudySpec:
         d.pop("runs")
         d.pop("text")
         d.pop("source")
-        for k in ("thesis_filter", "robust_filter"):
+        for k in ("thesis_filter", "robust_filter", "gyroless"):
             if not d[k]:                # no override: the hash of a study without the section
                 d.pop(k)
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()
@@ -175,6 +179,8 @@ def scenario_for(spec: StudySpec, estimator, variant, gyro):
         sc.thesis_params = p
     if spec.robust_filter and variant == "robust":
         sc.filter_params = replace(sc.filter_params, **spec.robust_filter)
+    if spec.gyroless and variant == "thesis":
+        sc.gyroless = {**sc.gyroless, **spec.gyroless}
     return sc
 
 
@@ -493,7 +499,8 @@ def summarize_css_study(spec: StudySpec, out_dir, *, runs=None) -> dict:
                "configuration": spec.configuration, "controlled": spec.controlled,
                "albedo": spec.albedo, "settle_s": spec.settle_s,
                "simulation": dict(spec.simulation), "thesis_filter": dict(spec.thesis_filter),
-               "robust_filter": dict(spec.robust_filter), "tau_step_s": TAU_STEP_S,
+               "robust_filter": dict(spec.robust_filter), "gyroless": dict(spec.gyroless),
+               "tau_step_s": TAU_STEP_S,
                "cases": cases, "open_choices": ok.OPEN_CHOICES,
                "verdict": _verdict(spec, cases)}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=1, default=float) + "\n")
@@ -693,6 +700,14 @@ def load_css_study(path) -> StudySpec:
     rf = doc.section("robust_filter", None)
     if rf is not None:
         spec = replace(spec, robust_filter=_robust_filter_overrides(rf, path))
+    gl = doc.section("gyroless", None)
+    if gl is not None:
+        from ..io.tomlio import typed_overrides
+        from .okeefe2015 import GYROLESS
+
+        spec = replace(spec, gyroless=typed_overrides(
+            gl.data, dict.fromkeys(GYROLESS, float), field="gyroless", file=path,
+            what="gyro-less rate setting"))
     doc.check_unknown()
     return spec
 

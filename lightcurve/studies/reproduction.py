@@ -744,6 +744,10 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
             over = (", thesis-filter overrides " + ", ".join(f"`{n} = {v:g}`"
                                                             for n, v in tf.items())
                     if tf else ", no thesis-filter override")
+            gl = s.get("gyroless") or {}
+            if gl:
+                over += ", thesis-variant gyro-less overrides " + ", ".join(
+                    f"`{n} = {v:g}`" for n, v in gl.items())
             rf = s.get("robust_filter") or {}
             if rf:
                 over += ", robust-filter overrides " + ", ".join(

@@ -226,9 +226,10 @@ def test_bundled_ablation_files_differ_by_one_switch():
             ref.seed, ref.settle_s, ref.configuration, ref.controlled, ref.duration_s,
             ref.gyros), f.name
         assert a.simulation == ref.simulation
-        changes = (a.albedo != ref.albedo) + bool(a.thesis_filter) + bool(a.robust_filter)
+        changes = ((a.albedo != ref.albedo) + bool(a.thesis_filter) + bool(a.robust_filter)
+                   + bool(a.gyroless))
         assert changes == 1, f.name
-        assert len(a.thesis_filter) + len(a.robust_filter) <= 1, f.name
+        assert len(a.thesis_filter) + len(a.robust_filter) + len(a.gyroless) <= 1, f.name
 
 
 def test_run_task_interruption_inside_kernel_is_not_a_failed_run(tmp_path, monkeypatch):
@@ -274,6 +275,31 @@ def test_study_robust_filter_override(tmp_path):
     assert rob.fov_model is False and rob.albedo_n_phi == 24 and rob.albedo_sigma == 0.05
     assert scenario_for(base, "ekf", "robust", "intermediate").filter_params.fov_model is True
     assert scenario_for(spec, "ekf", "thesis", "intermediate").filter_params.fov_model is True
+
+
+def test_study_gyroless_override_reaches_the_thesis_variant_only(tmp_path):
+    # [gyroless]: the thesis variant's §3.3.3 rate processing (okeefe2015.GYROLESS names) for
+    # measured ablations; it changes the hash, is recorded, and a bad key or value is refused
+    # with the file and the field named
+    from lightcurve.css.okeefe2015 import GYROLESS
+    from lightcurve.css.study import scenario_for
+
+    base = load_css_study(_study_toml(tmp_path))
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + "\n[gyroless]\nlowpass_hz = 0.1\n")
+    spec = load_css_study(p)
+    assert spec.gyroless == {"lowpass_hz": 0.1} and base.gyroless == {}
+    assert spec.hash != base.hash
+    th = scenario_for(spec, "ekf", "thesis", "none").gyroless
+    assert th["lowpass_hz"] == 0.1 and th["rate_limit_deg_s"] == GYROLESS["rate_limit_deg_s"]
+    assert scenario_for(spec, "ekf", "robust", "none").gyroless["lowpass_hz"] == 10.0
+    assert scenario_for(base, "ekf", "thesis", "none").gyroless["lowpass_hz"] == 10.0
+    for bad, field in (("lowpass = 0.1", "gyroless.lowpass"), ("lowpass_hz = -1.0",
+                                                               "gyroless.lowpass_hz")):
+        p.write_text(_study_toml(tmp_path).read_text() + f"\n[gyroless]\n{bad}\n")
+        with pytest.raises(InputError, match=field.replace(".", r"\.")) as e:
+            load_css_study(p)
+        assert str(p) in str(e.value)
 
 
 def test_study_gyroless_cases_take_the_gyroless_tuning(tmp_path):
