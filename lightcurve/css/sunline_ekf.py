@@ -127,7 +127,14 @@ class FilterParams:
     albedo_phi_temper: exponent (≤ 1) on the φ likelihood (1: none);
     fov_model: read the sensors' field of view from the outputs: an active sensor reading
     below ``|d| cos ψ`` (the smallest direct reading, the Sun at its FOV edge) is modelled as
-    albedo alone (see :func:`_update_core`; used by :func:`filter_step_albedo_nb`).
+    albedo alone (see :func:`_update_core`; used by :func:`filter_step_albedo_nb`);
+    hold_in_dark: with a gyro, suspend all control effort while no sensor is active once the
+    filter has started (it still propagates with the gyro; before the first Sun the gyro
+    still damps the initial rates), as §3.3.3 does without a gyro — O'Keefe
+    (§3.3.4, under fig. 3.20's discussion of the low-grade gyro) suggests it: with a gyro the
+    control "spends the entire 36 min in the shadow of the Earth driving the spacecraft
+    away from the true sun-direction" and "the 99th percentile bounds for the low
+    performance gyro case can be reduced by adopting a similar control approach".
     """
 
     sigma_meas: float = 0.3
@@ -154,6 +161,7 @@ class FilterParams:
     albedo_dark_margin: float = 0.1
     albedo_phi_temper: float = 1.0
     fov_model: bool = True
+    hold_in_dark: bool = False
 
     def as_array(self) -> np.ndarray:
         """Parameters packed for the numba kernels (order of the fields; the FOV as its

@@ -513,7 +513,9 @@ def truth_loop_nb(geom, sens, gyro, body, init, est, ctrl):
                     s_est = d / nd
             # ---- control ------------------------------------------------------------
             u[:] = 0.0
-            if controlled and kind >= 0 and not suspended:
+            # robust variant with a gyro and FilterParams.hold_in_dark: no control in the dark
+            held = use_gyro and not thesis and fprm.shape[0] > 24 and fprm[24] > 0.5 and dark_r
+            if controlled and kind >= 0 and not suspended and not held:
                 w_ctrl = w_meas if use_gyro else om_f
                 if thesis:
                     if not ctrl_started:
