@@ -93,6 +93,18 @@ def test_study_load_run_resume_report(tmp_path, capsys):
     # resume: nothing recomputed, more runs only adds the missing ones
     summary = run_css_study(spec, out, runs=3, workers=1, progress=False)
     assert all(c["runs"] == 3 for c in summary["cases"])
+    # the NEES of the sun-line filter: mean over runs and the median run, from the per-run
+    # means stored with each run (NaN, and left out, for a run without settled samples)
+    per_run = []
+    for f in sorted((out / "runs").glob("*_ekf.npz")):
+        m = json.loads(bytes(np.load(f)["meta"]).decode())
+        if "_thesis_" in f.name:
+            per_run.append(next(iter(m["scalars"].values()))["nees_mean"])
+    ekf = summary["cases"][0]
+    per_run = [v for v in per_run if np.isfinite(v)]
+    assert per_run
+    assert np.isclose(ekf["nees_mean"], np.mean(per_run))
+    assert np.isclose(ekf["nees_run_median"], np.median(per_run))
     for name, mt in mtimes.items():
         assert (out / "runs" / name).stat().st_mtime_ns == mt
     # a different study in the same folder is refused (exit 2), unless --force
