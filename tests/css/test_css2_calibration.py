@@ -179,12 +179,9 @@ def test_albedo_model_error_grows_with_cell_size():
     assert rms10 > 1.3 * rms5 > 0
 
 
-def test_albedo_grid_error_term_enters_R():
-    """The representation-error term adds exactly (g (k A + a))² to the innovation variance
-    of every evaluated sensor with modelled albedo A > 0 (and nothing to the others)."""
-    from lightcurve.css.calibration import calibration_update_nb, initial_state
-
-    rng = np.random.default_rng(5)
+def _update_geometry():
+    """One update's inputs: dual pyramid, 10° built-in albedo, the spacecraft 10° N / 40° E
+    with the Sun 40° from its zenith, Earth rotation angle 0.3 rad (s_N the Sun in ECI)."""
     css = dual_pyramid()
     cells = AlbedoCells.from_map(builtin_albedo_map(10.0))
     az0, el0 = normal_to_azel(css.normals)
@@ -194,6 +191,16 @@ def test_albedo_grid_error_term_enters_R():
     theta = 0.3
     c, s = np.cos(theta), np.sin(theta)
     s_N = np.array([c * s_E[0] - s * s_E[1], s * s_E[0] + c * s_E[1], s_E[2]])
+    return css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N
+
+
+def test_albedo_grid_error_term_enters_R():
+    """The representation-error term adds exactly (g (k A + a))² to the innovation variance
+    of every evaluated sensor with modelled albedo A > 0 (and nothing to the others)."""
+    from lightcurve.css.calibration import calibration_update_nb, initial_state
+
+    rng = np.random.default_rng(5)
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = _update_geometry()
     N = css.n_sensors
     k_, a_ = 0.4, 0.01
     for trial in range(20):
@@ -231,15 +238,7 @@ def test_noise_inside_the_scale_factor_and_the_correlated_part_of_the_variance()
     from lightcurve.css.calibration import calibration_update_nb, initial_state
 
     rng = np.random.default_rng(11)
-    css = dual_pyramid()
-    cells = AlbedoCells.from_map(builtin_albedo_map(10.0))
-    az0, el0 = normal_to_azel(css.normals)
-    cf = np.cos(css.fov_half_angle_rad)
-    hor = np.zeros((css.n_sensors, 3))
-    r_E, s_E = _geometry(10.0, 40.0, 40.0)
-    theta = 0.3
-    c, s = np.cos(theta), np.sin(theta)
-    s_N = np.array([c * s_E[0] - s * s_E[1], s * s_E[0] + c * s_E[1], s_E[2]])
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = _update_geometry()
     N = css.n_sensors
     L = state_layout(N)
     for trial in range(20):

@@ -71,6 +71,15 @@ albedo = "builtin"
     return p
 
 
+def _with_section(tmp_path, text):
+    """The test study without and with ``text`` (a TOML section) appended: (base spec, spec,
+    path of the file with the section)."""
+    base = load_css_study(_study_toml(tmp_path))
+    p = _study_toml(tmp_path)
+    p.write_text(p.read_text() + "\n" + text)
+    return base, load_css_study(p), p
+
+
 def test_study_load_run_resume_report(tmp_path, capsys):
     spec = load_css_study(_study_toml(tmp_path))
     assert spec.estimators == ("ekf", "lsmn") and spec.variants == ("thesis", "robust")
@@ -172,10 +181,7 @@ def test_study_thesis_filter_override(tmp_path):
     from lightcurve.css.study import scenario_for
     from lightcurve.css.sunline_thesis import THESIS_PRM
 
-    base = load_css_study(_study_toml(tmp_path))
-    p = _study_toml(tmp_path)
-    p.write_text(p.read_text() + "\n[thesis_filter]\nsigma_valpha = 0.2\n")
-    spec = load_css_study(p)
+    base, spec, _ = _with_section(tmp_path, "[thesis_filter]\nsigma_valpha = 0.2\n")
     assert spec.thesis_filter == {"sigma_valpha": 0.2} and base.thesis_filter == {}
     assert spec.hash != base.hash
     i = THESIS_PRM.index("sigma_valpha")
@@ -188,7 +194,7 @@ def test_study_thesis_filter_override(tmp_path):
     from dataclasses import asdict
 
     d = asdict(base)
-    for k in ("runs", "text", "source", "thesis_filter", "robust_filter"):
+    for k in ("runs", "text", "source", "thesis_filter", "robust_filter", "gyroless"):
         d.pop(k)
     assert base.hash == hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()
                                        ).hexdigest()
@@ -276,11 +282,8 @@ def test_study_robust_filter_override(tmp_path):
     # the robust variant only and change the study hash
     from lightcurve.css.study import scenario_for
 
-    base = load_css_study(_study_toml(tmp_path))
-    p = _study_toml(tmp_path)
-    p.write_text(p.read_text() + "\n[robust_filter]\nfov_model = false\nalbedo_n_phi = 24\n"
-                 "albedo_sigma = 0.05\n")
-    spec = load_css_study(p)
+    base, spec, _ = _with_section(tmp_path, "[robust_filter]\nfov_model = false\n"
+                                  "albedo_n_phi = 24\nalbedo_sigma = 0.05\n")
     assert spec.robust_filter == {"fov_model": False, "albedo_n_phi": 24, "albedo_sigma": 0.05}
     assert base.robust_filter == {} and spec.hash != base.hash
     rob = scenario_for(spec, "ekf", "robust", "intermediate").filter_params
@@ -296,10 +299,7 @@ def test_study_gyroless_override_reaches_the_thesis_variant_only(tmp_path):
     from lightcurve.css.okeefe2015 import GYROLESS
     from lightcurve.css.study import scenario_for
 
-    base = load_css_study(_study_toml(tmp_path))
-    p = _study_toml(tmp_path)
-    p.write_text(p.read_text() + "\n[gyroless]\nlowpass_hz = 0.1\n")
-    spec = load_css_study(p)
+    base, spec, p = _with_section(tmp_path, "[gyroless]\nlowpass_hz = 0.1\n")
     assert spec.gyroless == {"lowpass_hz": 0.1} and base.gyroless == {}
     assert spec.hash != base.hash
     th = scenario_for(spec, "ekf", "thesis", "none").gyroless
