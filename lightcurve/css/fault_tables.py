@@ -23,7 +23,10 @@ albedo's random numbers; §5.2.2).  Two variants run on the same data:
   happens before a sensor's window is full: no decision until 100 values are averaged.
 * ``robust``: our calibration filter (:func:`~lightcurve.css.calibration.robust_filter_setup`)
   with our detectors — the χ²-bounded averaged NIS of
-  :class:`~lightcurve.css.fault.AveragedNISDetector` and the
+  :class:`~lightcurve.css.fault.AveragedNISDetector` (its bound widened by the share of
+  each innovation variance that the filter reports as the grid's time-correlated
+  representation error, :meth:`~lightcurve.css.calibration.CalibrationResult.correlated_share`)
+  and the
   :class:`~lightcurve.css.fault.DarkSensorDetector` (CSS noise 0.05 of §2.4).
 
 Fig. 5.5 compares the averaged NIS of nominal and failed sensors: per run we keep the largest
