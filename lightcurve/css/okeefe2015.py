@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["ORBIT", "SPACECRAFT", "WHEEL_AXES", "CSS_SIM", "TRUTH_SHADOW_MODEL", "GYRO_TABLE_2_3",
-           "GYRO_DRIFT_TAU_S",
+           "GYRO_DRIFT_TAU_S", "ECLIPSE_S",
            "EKF_TUNING", "ECKF_TUNING", "CONTROL", "GYROLESS", "CALIBRATION", "FAULT",
            "THESIS_RESULTS", "OPEN_CHOICES", "gyro_sigmas"]
 
@@ -92,6 +92,10 @@ GYRO_TABLE_2_3 = {
     "low": (1e-1, 1e-2),
 }
 GYRO_DRIFT_TAU_S = 1000.0
+
+# §3.3.4: with a gyro "the control spends the entire 36 min in the shadow of the Earth"
+# (400 km, the §2.4 orbit).
+ECLIPSE_S = 36.0 * 60.0
 
 
 def gyro_sigmas(grade: str):

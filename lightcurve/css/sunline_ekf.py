@@ -86,6 +86,11 @@ __all__ = ["FilterParams", "FILTER_KINDS", "run_filter", "run_filter_nb", "ekf_p
 FILTER_KINDS = ("ekf", "eckf")
 
 
+HOLD_DRIFT_DEG = 15.0
+"""Gyro attitude drift over an eclipse (deg, 1σ) above which :meth:`FilterParams.for_gyro`
+suspends control in the dark (the error level of O'Keefe's time-above-15° metric)."""
+
+
 @dataclass(frozen=True)
 class FilterParams:
     """Tuning of the sun-line filters (dimensionless outputs, SI time).
@@ -135,6 +140,8 @@ class FilterParams:
     control "spends the entire 36 min in the shadow of the Earth driving the spacecraft
     away from the true sun-direction" and "the 99th percentile bounds for the low
     performance gyro case can be reduced by adopting a similar control approach".
+    None (default): decided by :meth:`for_gyro` from the gyro's drift over an eclipse
+    (off where no gyro model is known); True/False: forced.
     """
 
     sigma_meas: float = 0.3
@@ -161,12 +168,13 @@ class FilterParams:
     albedo_dark_margin: float = 0.1
     albedo_phi_temper: float = 1.0
     fov_model: bool = True
-    hold_in_dark: bool = False
+    hold_in_dark: bool | None = None
 
     def as_array(self) -> np.ndarray:
         """Parameters packed for the numba kernels (order of the fields; the FOV as its
         cosine)."""
-        a = np.array([float(v) for v in asdict(self).values()])
+        a = np.array([float(bool(v)) if v is None else float(v)
+                      for v in asdict(self).values()])
         a[13] = np.cos(np.radians(self.fov_half_angle_deg))
         return a
 
@@ -177,14 +185,25 @@ class FilterParams:
         time of the Table 2.3 grades (O'Keefe 2015 §2.4, "over 1000 s";
         :data:`~lightcurve.css.okeefe2015.GYRO_DRIFT_TAU_S`).  The angle random walk σ_v
         enters d as white noise; the bias, nearly constant over ~100 s, as a random walk
-        over that window."""
+        over that window.
+
+        ``hold_in_dark`` left at None is set from the gyro's 1σ attitude drift over one
+        eclipse, ``√(σ_v² T + σ_B² T²)`` with T the 36 min of O'Keefe §3.3.4: control
+        stops in the dark when that drift exceeds :data:`HOLD_DRIFT_DEG` (15°, the error
+        level of the thesis's time-above-15° metric, figs. 3.12-3.20), i.e. when steering
+        through the shadow on the gyro cannot keep the Sun within it."""
         from dataclasses import replace
 
-        from .okeefe2015 import GYRO_DRIFT_TAU_S
+        from .okeefe2015 import ECLIPSE_S, GYRO_DRIFT_TAU_S
 
         sb2 = spec.bias_sigma ** 2 + spec.rrw ** 2 * GYRO_DRIFT_TAU_S
+        hold = self.hold_in_dark
+        if hold is None:
+            drift = np.sqrt(spec.arw ** 2 * ECLIPSE_S + sb2 * ECLIPSE_S ** 2)
+            hold = bool(drift > np.radians(HOLD_DRIFT_DEG))
         return replace(self, q_proc=max(self.q_proc, spec.arw ** 2 + sb2 * 100.0),
-                       consider_sigma=max(self.consider_sigma, float(np.sqrt(sb2))))
+                       consider_sigma=max(self.consider_sigma, float(np.sqrt(sb2))),
+                       hold_in_dark=hold)
 
     def for_css(self, css) -> "FilterParams":
         """A copy with the FOV of a :class:`~lightcurve.css.sensors.CSSArray` (largest one)."""

@@ -254,6 +254,8 @@ def typed_overrides(values, types: dict, *, field: str, file=None, what="paramet
                              allowed=", ".join(types))
         t = types[k]
         t = _TYPE_NAMES.get(t, t)
+        if isinstance(t, str) and t.endswith(" | None"):   # optional field: None = automatic
+            t = t[:-len(" | None")]
         if t == "bool":
             if from_text and isinstance(v, str) and v.lower() in ("true", "false", "1", "0"):
                 v = v.lower() in ("true", "1")

@@ -161,6 +161,27 @@ def test_gyroless_control_is_suspended_in_the_dark(variant):
     assert np.degrees(np.linalg.norm(r.omega, axis=1)).max() < 10.0
 
 
+def test_hold_in_dark_default_follows_the_gyro_drift_over_an_eclipse():
+    # FilterParams.for_gyro: with hold_in_dark None the control stops in the dark when the
+    # gyro's 1σ attitude drift over the 36 min eclipse of O'Keefe §3.3.4 exceeds 15°:
+    # √(σ_v² T + σ_B² T²), Table 2.3 low grade (σ_v 0.1°/√s, σ_b 0.01°/s, σ_B² = 3 σ_b²):
+    # √(0.01·2160 + 3e-4·2160²) = 37.7°; moderate (a hundredth of each): 3.77°
+    from lightcurve.css.gyro import gyro_grade
+    from lightcurve.css.sunline_ekf import FilterParams
+
+    T = 36 * 60.0
+    low = np.sqrt(0.1 ** 2 * T + 3 * 0.01 ** 2 * T ** 2)
+    assert np.isclose(low, 37.7, atol=0.05)
+    assert FilterParams().hold_in_dark is None
+    assert FilterParams().for_gyro(gyro_grade("low")).hold_in_dark is True
+    for g in ("inertial", "intermediate", "moderate"):
+        assert FilterParams().for_gyro(gyro_grade(g)).hold_in_dark is False
+    # an explicit choice is kept
+    assert FilterParams(hold_in_dark=False).for_gyro(gyro_grade("low")).hold_in_dark is False
+    assert FilterParams(hold_in_dark=True).for_gyro(gyro_grade("moderate")).hold_in_dark
+    assert FilterParams().as_array()[-1] == 0.0
+
+
 @pytest.mark.parametrize("hold", [False, True])
 def test_robust_hold_in_dark_suspends_control_with_a_gyro(hold):
     # FilterParams.hold_in_dark: with a gyro the robust variant normally keeps controlling
