@@ -236,6 +236,31 @@ def _selected_update(x, P, nu, Hm, R, N, gate, infl_max):
 
 
 @numba.njit(cache=True)
+def _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c, cells_n,
+                       cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon, dlat_max):
+    """(N,N) covariance of the albedo irradiance on the sensors from the spread of the cells'
+    albedo coefficients (O'Keefe eq. 4.30b, :func:`albedo_coefficient_cov_nb`) at the
+    estimated attitude and misalignments, before the scale factors; zeros without a spread
+    map (``cells_sig`` empty), without cells, or in the shadow."""
+    N = az0.shape[0]
+    Ra = np.zeros((N, N))
+    if cells_sig.shape[0] == cells_ra.shape[0] and nlat > 0 and lit > 0.0:
+        C = mrp2dcm_nb(x[0:3].copy())
+        nE = np.empty((N, 3))
+        hE = np.empty((N, 3))
+        E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))   # ECI → Earth-fixed, R3(θ)
+        for k in range(N):
+            a = az0[k] + x[6 + N + 2 * k]
+            e = el0[k] + x[6 + N + 2 * k + 1]
+            nb = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+            nE[k] = mv3_nb(E, mtv3_nb(C, nb))
+            hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
+        Ra = albedo_coefficient_cov_nb(cells_c, cells_n, cells_ra, cells_sig, lat_c, nlat, nlon,
+                                       lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE)
+    return Ra
+
+
+@numba.njit(cache=True)
 def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E,
                    cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
                    nu_out, s_out, u_out, cells_sig, init):
@@ -253,20 +278,9 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     h, H, D, A, cosd, _ = calibration_measurement_nb(
         x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
         lat_c, nlat, nlon, lon_w0, dlon, dlat_max, np.zeros(N))
-    Ra = np.zeros((N, N))
-    if cells_sig.shape[0] == cells_ra.shape[0] and nlat > 0 and lit > 0.0:
-        C = mrp2dcm_nb(x[0:3].copy())
-        nE = np.empty((N, 3))
-        hE = np.empty((N, 3))
-        E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))   # ECI → Earth-fixed, R3(θ)
-        for k in range(N):
-            a = az0[k] + x[6 + N + 2 * k]
-            e = el0[k] + x[6 + N + 2 * k + 1]
-            nb = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-            nE[k] = mv3_nb(E, mtv3_nb(C, nb))
-            hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
-        Ra = albedo_coefficient_cov_nb(cells_c, cells_n, cells_ra, cells_sig, lat_c, nlat, nlon,
-                                       lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE)
+    Ra = _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c,
+                            cells_n, cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon,
+                            dlat_max)
     idx = np.empty(N, dtype=np.int64)
     m = 0
     for k in range(N):
@@ -354,6 +368,11 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         lat_c, nlat, nlon, lon_w0, dlon, dlat_max, mk)
     in_scale = prm.shape[0] > 22 and prm[22] > 0.5
     want_c = c_out.shape[0] == N
+    # the albedo map's spread (TOMS σ per cell): a time-correlated error of the modelled albedo
+    Ra = (_albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c,
+                             cells_n, cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon,
+                             dlat_max)
+          if prm.shape[0] > 23 and prm[23] > 0.5 else np.zeros((N, N)))
     idx = np.empty(N, dtype=np.int64)
     Rk = np.empty(N)
     Rc = np.zeros(N)
@@ -368,7 +387,8 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
             # albedo-grid representation error (coarse grid vs a fine one), see
             # albedo_grid_error: 1σ = k_grid A + a_grid
             Rc[k] = (x[6 + k] * (prm[15] * A[k] + prm[16])) ** 2
-            Rk[k] += Rc[k]
+        Rc[k] += x[6 + k] * x[6 + k] * Ra[k, k]
+        Rk[k] += Rc[k]
         nu_out[k] = np.nan
         if want_c:
             c_out[k] = np.nan
@@ -543,7 +563,10 @@ class CalibrationParams:
     the scale factors, as in O'Keefe eq. 2.21 (``V = C C_κ (V_d + V_α + ν_V)``), so the noise
     1σ of sensor κ is ``g_κ sigma_css`` with the estimated total scale factor g_κ (our update;
     the thesis update always uses ``Ĉ_κ σ_V``, §4.2); False: additive noise after the scale
-    factor (our own simulations).
+    factor (our own simulations). albedo_spread: our update adds the spread of the albedo
+    map's coefficients (the TOMS σ per cell, O'Keefe eq. 4.30b; needs a (mean, std) map pair)
+    to each sensor's R, as an error correlated in time (the draw of a cell stays for the
+    run; the thesis update always uses it for the full filter).
     """
 
     sigma_css: float = 0.017
@@ -574,6 +597,7 @@ class CalibrationParams:
     floor_rule: str = "measured"
     skip_in_shadow: bool = False
     noise_in_scale: bool = False
+    albedo_spread: bool = False
 
     @classmethod
     def thesis_full(cls, grid: str = "1p25x1", **kw) -> "CalibrationParams":
@@ -634,8 +658,8 @@ class CalibrationParams:
                          self.fov_edge_sigmas, self.albedo_grid_frac,
                          self.albedo_grid_floor, float(self.thesis), self.meas_floor,
                          self.init_threshold, float(FLOOR_RULES.index(self.floor_rule)),
-                         float(self.skip_in_shadow), float(self.noise_in_scale)],
-                        dtype=float)
+                         float(self.skip_in_shadow), float(self.noise_in_scale),
+                         float(self.albedo_spread)], dtype=float)
 
     def for_gyro(self, spec) -> "CalibrationParams":
         """A copy with the ARW/RRW of a :class:`~lightcurve.css.gyro.GyroSpec`."""
@@ -1045,9 +1069,10 @@ def robust_filter_setup(name: str, albedo_dir=None):
     """Our calibration filter (``variant = "robust"``) on the §4.4 thesis case, with the CSS
     noise of §2.4 (0.05) inside the scale factors as in the case's sensor model (eq. 2.21,
     ``noise_in_scale``) and the intermediate gyro: ``name`` "1p25x1", "5x5" or "10x10" —
-    the full filter with that TOMS grid (the mean map only; for the coarse grids the
-    representation error of :func:`albedo_grid_error` against the 1°×1.25° grid, 60° FOV,
-    §2.1.3) — or "reduced" (:meth:`CalibrationParams.reduced`).  Returns
+    the full filter with that TOMS grid (the mean map, with the map's spread in R as a
+    time-correlated error, ``albedo_spread``; for the coarse grids also the representation
+    error of :func:`albedo_grid_error` against the 1°×1.25° grid, 60° FOV, §2.1.3) — or
+    "reduced" (:meth:`CalibrationParams.reduced`).  Returns
     ``(CalibrationParams, albedo)`` for :func:`run_calibration`."""
     from .albedo import load_toms
     from .gyro import gyro_grade
@@ -1059,14 +1084,16 @@ def robust_filter_setup(name: str, albedo_dir=None):
             prm, alb = CalibrationParams.reduced(sigma_css=CSS_SIM["noise_sigma"],
                                                  noise_in_scale=True), "builtin"
         else:
-            cells = AlbedoCells.from_map(load_toms(name, albedo_dir)[0])
+            pair = load_toms(name, albedo_dir)
+            cells = AlbedoCells.from_map(pair[0])
             k, a = 0.0, 0.0
             if name != "1p25x1":
                 fine = AlbedoCells.from_map(load_toms("1p25x1", albedo_dir)[0])
                 k, a = albedo_grid_error(cells, fine, fov_half_angle_deg=60.0)
             prm = CalibrationParams(sigma_css=CSS_SIM["noise_sigma"], albedo_grid_frac=k,
-                                    albedo_grid_floor=a, noise_in_scale=True)
-            alb = cells
+                                    albedo_grid_floor=a, noise_in_scale=True,
+                                    albedo_spread=True)
+            alb = pair
         _SETUPS[key] = (prm.for_gyro(gyro_grade("intermediate")), alb)
     return _SETUPS[key]
 

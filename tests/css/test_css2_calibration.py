@@ -273,6 +273,53 @@ def test_noise_inside_the_scale_factor_and_the_correlated_part_of_the_variance()
     assert np.all(np.isnan(out[True][1][~ev]))
 
 
+def test_albedo_spread_enters_R_as_a_correlated_error():
+    """``albedo_spread``: the robust update adds g² times the diagonal of the albedo
+    coefficients' covariance (O'Keefe eq. 4.30b, :func:`albedo_coefficient_cov_nb` at the
+    estimated attitude and misalignments) to R and to its time-correlated part; without a
+    spread map, or with the switch off, nothing.  The reference covariance is built here
+    from the attitude and misalignment of the state, independently of the update."""
+    from lightcurve.core.rotations import euler321_to_dcm_nb, mrp2dcm_nb
+    from lightcurve.css.albedo import albedo_coefficient_cov_nb
+    from lightcurve.css.calibration import calibration_update_nb, initial_state
+
+    rng = np.random.default_rng(3)
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = _update_geometry()
+    N = css.n_sensors
+    L = state_layout(N)
+    sig_area = 0.2 * cells.args()[2]          # σ_j A_j: a 20 % spread of every cell
+    for trial in range(20):
+        x = _state(css, rng)
+        x[L["consider"]] = 0.0
+        _, P = initial_state(css, [1.0, 0, 0, 0], CalibrationParams())
+        h, _, D, A, _, _ = calibration_measurement_nb(x, az0, el0, cf, hor, s_N, 1.0, theta,
+                                                      r_E, s_E, *cells.args(), np.full(N, 0.03))
+        if np.sum((A > 0) & (h > 0.05)) >= 2:
+            break
+    out = {}
+    for spread in (False, True):
+        prm = CalibrationParams(fov_edge_sigmas=0.0, albedo_spread=spread).as_array()
+        nu, sv, uu, cc = np.empty(N), np.empty(N), np.empty(N), np.empty(N)
+        calibration_update_nb(x.copy(), P.copy(), h.copy(), prm, az0, el0, cf, hor, s_N, 1.0,
+                              theta, r_E, s_E, *cells.args(), nu, sv, uu, sig_area,
+                              np.zeros(0), cc)
+        out[spread] = (sv, cc)
+    C = mrp2dcm_nb(x[0:3].copy())
+    E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))
+    mis = x[L["misalignment"]].reshape(N, 2)
+    a, e = az0 + mis[:, 0], el0 + mis[:, 1]
+    nb = np.column_stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+    nE = (E @ C.T @ nb.T).T
+    Ra = albedo_coefficient_cov_nb(*cells.args()[:3], sig_area, *cells.args()[3:], r_E, s_E,
+                                   np.ascontiguousarray(nE), cf, np.zeros((N, 3)))
+    g = x[L["scale"]]
+    ev = np.isfinite(out[False][0])
+    want = g ** 2 * np.diag(Ra)
+    assert np.any(want[ev] > 1e-8)
+    assert np.allclose((out[True][0] - out[False][0])[ev], want[ev], rtol=1e-9, atol=1e-15)
+    assert np.allclose((out[True][1] - out[False][1])[ev], want[ev], rtol=1e-9, atol=1e-15)
+
+
 def test_albedo_grid_error_grows_with_cell_size():
     """albedo_grid_error: zero against itself; with the CERES maps (table 4.3 trend) the
     10° grid's relative error coefficient exceeds the 5° one's several times (measured
