@@ -546,6 +546,18 @@ def test_reproduction_time_above_15_claims(tmp_path):
     assert "at most 8.0 min — **disagrees** (5 runs per case: indicative)" in line(
         "- Without a gyro, every EKF run")
     assert "**agrees**" in line("- Without a gyro, the ECKF slightly more")
+    # an ablation of the same experiment is marked by the same rule on the same line; its
+    # gyro-less overrides are stated in its section
+    da = tmp_path / "abl"
+    da.mkdir()
+    (da / "summary.json").write_text(json.dumps({
+        "study": "ablation-fig3_15-x", "experiment": "fig3_15", "runs": 120, "albedo": "toms",
+        "failures": 0, "verdict": "v", "gyroless": {"lowpass_hz": 0.1},
+        "cases": [_c("ekf", 9.0, None, 2.5 * 60.0, runs=120)]}))
+    txt = css_section([d11, d15, da])
+    gl = next(x for x in txt.splitlines() if x.startswith("- Without a gyro, every EKF run"))
+    assert gl.endswith("; ablation `ablation-fig3_15-x`: at most 2.5 min — **agrees**.")
+    assert "thesis-variant gyro-less overrides `lowpass_hz = 0.1`" in txt
 
 
 def test_reproduction_ablation_states_its_switch(tmp_path):
