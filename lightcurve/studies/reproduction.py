@@ -269,11 +269,12 @@ def _vmm_section(vmm) -> list[str]:
     if not vmm:
         return out + ["Not run (`lightcurve css vmm --runs N -o vmm.json`, then "
                       "`--css-vmm vmm.json`).", ""]
-    alb = "with" if vmm.get("albedo") else "without"
+    alb = ("Earth albedo in the truth, unmodelled by both filters" if vmm.get("albedo")
+           else "no Earth albedo")
     out += [f"`lightcurve css vmm` (`lightcurve.css.vmm`): {vmm['runs']} runs of "
             f"{vmm.get('duration_s', float('nan')):g} s, seed {vmm.get('seed', '–')}, cube "
             f"photodiodes with a {vmm.get('fov_half_angle_deg', float('nan')):g}° FOV half "
-            f"angle, Earth albedo {alb} (unmodelled by both filters); the same MEKF "
+            f"angle, {alb}; the same MEKF "
             "(magnetometer, gyro, photodiodes) fed the least-squares Sun vector (SMM) or the "
             "photodiode outputs (VMM) on the same data. Attitude error after the first 300 s, "
             "by the number of lit photodiodes. The slides give the comparison as figures "
