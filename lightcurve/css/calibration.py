@@ -35,12 +35,12 @@ sunlit and in view — the cost is independent of the grid's global size (benchm
 ``benchmarks/css_calibration.py``).
 
 Measurement noise (§4.2, our concrete form):
-``R_κ = max(σ_n², σ_floor²) + (k_alb g_κ A_κ)² + (g_κ A_edge,κ)²`` (white noise σ_n with a floor —
-σ_n = σ_css, or g_κ σ_css when the noise lies inside the scale factor as in eq. 2.21 — a
-relative albedo-model uncertainty, and the irradiance of the albedo cells lying within the
-FOV-edge margin, whose membership of the FOV is uncertain — large for coarse grids), plus,
-when the filter's albedo grid is coarser than the truth, the grid's representation error
-``(g_κ (k_grid A_κ + a_grid))²`` (:func:`albedo_grid_error`; CERES 10° vs 1° at 400 km:
+``R_κ = max(σ_n², σ_floor²) + (k_alb g_κ A_κ)² + (g_κ A_edge,κ)²`` (white noise σ_n with
+a floor — σ_n = σ_css, or g_κ σ_css when the noise lies inside the scale factor as in
+eq. 2.21 — a relative albedo-model uncertainty, and the irradiance of the albedo cells
+lying within the FOV-edge margin, whose membership of the FOV is uncertain — large for coarse
+grids), plus, when the filter's albedo grid is coarser than the truth, the grid's
+representation error ``(g_κ (k_grid A_κ + a_grid))²`` (:func:`albedo_grid_error`; CERES 10° vs 1° at 400 km:
 k ≈ 0.39, a ≈ 0.012; 5°: 0.075, 0.0035 — without it the 10° filter is over-confident);
 sensors are used when
 their *predicted* output exceeds ``threshold`` (selecting on the noisy measured output would

@@ -194,24 +194,39 @@ def _update_geometry():
     return css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N
 
 
+def _state_with_albedo_lit(css, rng, geom, n_min, scale=None):
+    """A random state (:func:`_state`, no considered bias; scale factors uniform on ``scale``
+    when given) with at least ``n_min`` sensors predicted lit and carrying modelled albedo in
+    the geometry ``geom`` of :func:`_update_geometry`; returns (x, P0, h, D, A)."""
+    from lightcurve.css.calibration import initial_state
+
+    _, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = geom
+    N = css.n_sensors
+    L = state_layout(N)
+    for trial in range(20):
+        x = _state(css, rng)
+        x[L["consider"]] = 0.0
+        if scale is not None:
+            x[L["scale"]] = rng.uniform(scale[0], scale[1], N)
+        _, P = initial_state(css, [1.0, 0, 0, 0], CalibrationParams())
+        h, _, D, A, _, _ = calibration_measurement_nb(x, az0, el0, cf, hor, s_N, 1.0, theta,
+                                                      r_E, s_E, *cells.args(), np.full(N, 0.03))
+        if np.sum((A > 0) & (h > 0.05)) >= n_min:
+            break
+    return x, P, h, D, A
+
+
 def test_albedo_grid_error_term_enters_R():
     """The representation-error term adds exactly (g (k A + a))² to the innovation variance
     of every evaluated sensor with modelled albedo A > 0 (and nothing to the others)."""
-    from lightcurve.css.calibration import calibration_update_nb, initial_state
+    from lightcurve.css.calibration import calibration_update_nb
 
     rng = np.random.default_rng(5)
-    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = _update_geometry()
+    geom = _update_geometry()
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = geom
     N = css.n_sensors
     k_, a_ = 0.4, 0.01
-    for trial in range(20):
-        x = _state(css, rng)
-        x[state_layout(N)["consider"]] = 0.0
-        _, P = initial_state(css, [1.0, 0, 0, 0], CalibrationParams())
-        mk = np.full(N, 0.03)
-        h, _, D, A, _, _ = calibration_measurement_nb(x, az0, el0, cf, hor, s_N, 1.0, theta,
-                                                      r_E, s_E, *cells.args(), mk)
-        if np.sum((A > 0) & (h > 0.05)) >= 1:
-            break
+    x, P, h, D, A = _state_with_albedo_lit(css, rng, geom, 1)
     out = {}
     for kk, aa in ((0.0, 0.0), (k_, a_)):
         prm = CalibrationParams(albedo_grid_frac=kk, albedo_grid_floor=aa,
@@ -235,22 +250,14 @@ def test_noise_inside_the_scale_factor_and_the_correlated_part_of_the_variance()
     with ``noise_in_scale`` the noise term of R is max((g σ)², floor²) instead of
     max(σ², floor²) with g the estimated scale factor; ``c_out`` receives exactly the grid
     representation-error term (g (k A + a))², the part of S correlated in time."""
-    from lightcurve.css.calibration import calibration_update_nb, initial_state
+    from lightcurve.css.calibration import calibration_update_nb
 
     rng = np.random.default_rng(11)
-    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = _update_geometry()
+    geom = _update_geometry()
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = geom
     N = css.n_sensors
     L = state_layout(N)
-    for trial in range(20):
-        x = _state(css, rng)
-        x[L["consider"]] = 0.0
-        x[L["scale"]] = rng.uniform(0.3, 1.6, N)
-        _, P = initial_state(css, [1.0, 0, 0, 0], CalibrationParams())
-        mk = np.full(N, 0.03)
-        h, _, D, A, _, _ = calibration_measurement_nb(x, az0, el0, cf, hor, s_N, 1.0, theta,
-                                                      r_E, s_E, *cells.args(), mk)
-        if np.sum((A > 0) & (h > 0.05)) >= 2:
-            break
+    x, P, h, D, A = _state_with_albedo_lit(css, rng, geom, 2, scale=(0.3, 1.6))
     sig, floor, k_, a_ = 0.05, 0.02, 0.4, 0.01
     out = {}
     for ins in (False, True):
@@ -281,21 +288,15 @@ def test_albedo_spread_enters_R_as_a_correlated_error():
     from the attitude and misalignment of the state, independently of the update."""
     from lightcurve.core.rotations import euler321_to_dcm_nb, mrp2dcm_nb
     from lightcurve.css.albedo import albedo_coefficient_cov_nb
-    from lightcurve.css.calibration import calibration_update_nb, initial_state
+    from lightcurve.css.calibration import calibration_update_nb
 
     rng = np.random.default_rng(3)
-    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = _update_geometry()
+    geom = _update_geometry()
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = geom
     N = css.n_sensors
     L = state_layout(N)
     sig_area = 0.2 * cells.args()[2]          # σ_j A_j: a 20 % spread of every cell
-    for trial in range(20):
-        x = _state(css, rng)
-        x[L["consider"]] = 0.0
-        _, P = initial_state(css, [1.0, 0, 0, 0], CalibrationParams())
-        h, _, D, A, _, _ = calibration_measurement_nb(x, az0, el0, cf, hor, s_N, 1.0, theta,
-                                                      r_E, s_E, *cells.args(), np.full(N, 0.03))
-        if np.sum((A > 0) & (h > 0.05)) >= 2:
-            break
+    x, P, h, D, A = _state_with_albedo_lit(css, rng, geom, 2)
     out = {}
     for spread in (False, True):
         prm = CalibrationParams(fov_edge_sigmas=0.0, albedo_spread=spread).as_array()

@@ -164,8 +164,9 @@ def test_gyroless_control_is_suspended_in_the_dark(variant):
 def test_hold_in_dark_default_follows_the_gyro_drift_over_an_eclipse():
     # FilterParams.for_gyro: with hold_in_dark None the control stops in the dark when the
     # gyro's 1σ attitude drift over the 36 min eclipse of O'Keefe §3.3.4 exceeds 15°:
-    # √(σ_v² T + σ_B² T²), Table 2.3 low grade (σ_v 0.1°/√s, σ_b 0.01°/s, σ_B² = 3 σ_b²):
-    # √(0.01·2160 + 3e-4·2160²) = 37.7°; moderate (a hundredth of each): 3.77°
+    # √(σ_v² T + σ_B² T²), Table 2.3 low grade (σ_v 0.1°/√s, σ_b 0.01°/s,
+    # σ_B² = 3 σ_b²): √(0.01·2160 + 3e-4·2160²) = 37.7°; moderate (a hundredth of each):
+    # 3.77°
     from lightcurve.css.gyro import gyro_grade
     from lightcurve.css.sunline_ekf import FilterParams
 
@@ -184,10 +185,11 @@ def test_hold_in_dark_default_follows_the_gyro_drift_over_an_eclipse():
 
 @pytest.mark.parametrize("hold", [False, True])
 def test_robust_hold_in_dark_suspends_control_with_a_gyro(hold):
-    # FilterParams.hold_in_dark: with a gyro the robust variant normally keeps controlling
-    # through the eclipse (wheel momenta change in the dark); with the switch it suspends all
-    # control effort there once the filter has started, as §3.3.3 does without a gyro and §3.3.4 suggests for the
-    # low-grade gyro (same run, same eclipse; wheel momenta h_s = J_s (Ω + G_sᵀ ω))
+    # FilterParams.hold_in_dark: with hold_in_dark False the robust variant keeps controlling
+    # through the eclipse (wheel momenta change in the dark); with True it suspends all
+    # control effort there once the filter has started, as §3.3.3 does without a gyro and
+    # §3.3.4 suggests for the low-grade gyro (same run, same eclipse; wheel momenta
+    # h_s = J_s (Ω + G_sᵀ ω))
     from dataclasses import replace
 
     from lightcurve.css.experiments import thesis_scenario
