@@ -306,13 +306,14 @@ def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dl
 
 @numba.njit(cache=True)
 def albedo_coefficient_cov_nb(centers, cnormals, rho_area, sig_area, lat_c, nlat, nlon, lon_w0,
-                              dlon, dlat_max, r_E, s_E, nE, cos_fov, hE):
+                              dlon, dlat_max, r_E, s_E, nE, cos_fov, hE, diag_only=False):
     """Covariance (N,N) of the albedo irradiance on the sensors caused by the uncertainty of
     the cells' albedo coefficients (O'Keefe 2015 eq. 4.27 ν_α, eq. 4.30b): with the TOMS
     standard deviation σ_j of cell j (``sig_area`` = σ_j A_j, m²) and its irradiance per unit
     albedo w_j = cos(sun) cos(view)/(π d²), ``Σ_j σ_j² A_j² w_j² c_ij c_kj`` over the sunlit cells
     in view and inside both sensors' FOV (c_ij the cosine on sensor i; structure horizons
-    ``hE``).  Units of the solar irradiance squared, before the sensor scale factors."""
+    ``hE``).  Units of the solar irradiance squared, before the sensor scale factors.
+    ``diag_only``: only the variances (the diagonal; the rest stays zero)."""
     N = nE.shape[0]
     Ra = np.zeros((N, N))
     if nlat == 0:
@@ -350,6 +351,9 @@ def albedo_coefficient_cov_nb(centers, cnormals, rho_area, sig_area, lat_c, nlat
             if anyc:
                 for k in range(N):
                     if cvec[k] != 0.0:
+                        if diag_only:
+                            Ra[k, k] += cvec[k] * cvec[k]
+                            continue
                         for m in range(N):
                             Ra[k, m] += cvec[k] * cvec[m]
     return Ra

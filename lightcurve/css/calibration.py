@@ -237,11 +237,13 @@ def _selected_update(x, P, nu, Hm, R, N, gate, infl_max):
 
 @numba.njit(cache=True)
 def _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c, cells_n,
-                       cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon, dlat_max):
+                       cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                       diag_only=False):
     """(N,N) covariance of the albedo irradiance on the sensors from the spread of the cells'
     albedo coefficients (O'Keefe eq. 4.30b, :func:`albedo_coefficient_cov_nb`) at the
     estimated attitude and misalignments, before the scale factors; zeros without a spread
-    map (``cells_sig`` empty), without cells, or in the shadow."""
+    map (``cells_sig`` empty), without cells, or in the shadow; ``diag_only``: the variances
+    only (what a diagonal R needs)."""
     N = az0.shape[0]
     Ra = np.zeros((N, N))
     if cells_sig.shape[0] == cells_ra.shape[0] and nlat > 0 and lit > 0.0:
@@ -256,7 +258,8 @@ def _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, ce
             nE[k] = mv3_nb(E, mtv3_nb(C, nb))
             hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
         Ra = albedo_coefficient_cov_nb(cells_c, cells_n, cells_ra, cells_sig, lat_c, nlat, nlon,
-                                       lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE)
+                                       lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE,
+                                       diag_only)
     return Ra
 
 
@@ -371,7 +374,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     # the albedo map's spread (TOMS σ per cell): a time-correlated error of the modelled albedo
     Ra = (_albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c,
                              cells_n, cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon,
-                             dlat_max)
+                             dlat_max, True)
           if prm.shape[0] > 23 and prm[23] > 0.5 else np.zeros((N, N)))
     idx = np.empty(N, dtype=np.int64)
     Rk = np.empty(N)

@@ -172,9 +172,8 @@ class FilterParams:
 
     def as_array(self) -> np.ndarray:
         """Parameters packed for the numba kernels (order of the fields; the FOV as its
-        cosine)."""
-        a = np.array([float(bool(v)) if v is None else float(v)
-                      for v in asdict(self).values()])
+        cosine; an undecided ``hold_in_dark`` as 0)."""
+        a = np.array([0.0 if v is None else float(v) for v in asdict(self).values()])
         a[13] = np.cos(np.radians(self.fov_half_angle_deg))
         return a
 

@@ -313,6 +313,11 @@ def test_albedo_spread_enters_R_as_a_correlated_error():
     nE = (E @ C.T @ nb.T).T
     Ra = albedo_coefficient_cov_nb(*cells.args()[:3], sig_area, *cells.args()[3:], r_E, s_E,
                                    np.ascontiguousarray(nE), cf, np.zeros((N, 3)))
+    # the variances alone (what the diagonal R uses) are the full covariance's diagonal
+    Rd = albedo_coefficient_cov_nb(*cells.args()[:3], sig_area, *cells.args()[3:], r_E, s_E,
+                                   np.ascontiguousarray(nE), cf, np.zeros((N, 3)), True)
+    assert np.array_equal(np.diag(Rd), np.diag(Ra))
+    assert not np.any(Rd - np.diag(np.diag(Rd)))
     g = x[L["scale"]]
     ev = np.isfinite(out[False][0])
     want = g ** 2 * np.diag(Ra)
