@@ -164,6 +164,8 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
             kw["variant"] = opts["variant"]
         if "gate" in opts:
             kw["gate"] = opts["gate"]
+        if "eta_sigma_deg_s2" in opts:   # the filters' η only; the simulated truth keeps its own
+            kw["eta_sigma_deg_s2"] = float(opts["eta_sigma_deg_s2"])
         for k in ("alpha", "beta", "kappa"):
             if k in opts and c.filter == "ukf":
                 kw[k] = float(opts[k])

@@ -39,6 +39,8 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     shared_init = true                    # one initial estimate for all filters of a run
                                           # (default: true with variant = "thesis")
     truth_acs_mode = "random_walk"        # controlled TRUTH model (default: the scenario's)
+    eta_sigma_deg_s2 = 2.5e-3             # uncontrolled FILTER process noise σ_η, deg/s^1.5
+                                          # (default: each scenario's; the truth keeps its own)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -467,6 +469,8 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         opts["shared_init"] = o.bool("shared_init")
     if o.has("truth_acs_mode"):
         opts["truth_acs_mode"] = o.str("truth_acs_mode", choices=("random_walk", "jitter"))
+    if o.has("eta_sigma_deg_s2"):
+        opts["eta_sigma_deg_s2"] = o.float("eta_sigma_deg_s2", min=0.0, max=10.0)
     o.check_unknown()
     # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
     # configuration objects validate them (lightcurve.filters.config)

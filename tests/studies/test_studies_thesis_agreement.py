@@ -161,3 +161,21 @@ def test_ablation_options(tmp_path):
     f.write_text(txt.replace('gate = "auto"', 'gate = "sometimes"'))
     with pytest.raises(InputError, match="gate"):
         load_study(f)
+
+
+@pytest.mark.parametrize("path", sorted((STUDIES / "ablations").glob("thesis-*-ablation-*.toml")),
+                         ids=lambda p: p.stem)
+def test_ablation_studies_share_the_base_seeds_and_cells(path):
+    """An ablation is one switch on the same runs: it loads, keeps its base study's seed, table
+    and variant, and runs a subset of the base's cells (so each of its cells has the base's
+    simulated lightcurves and initial estimates)."""
+    ab = load_study(path)
+    stem, label = path.stem.split("-ablation-")
+    base = load_study(STUDIES / (stem + ".toml"))
+    assert ab.name == path.stem
+    # the two switches that are the seed and the variant themselves
+    assert (ab.seed != base.seed) == (label == "seeds") and ab.runs == base.runs
+    assert ((ab.options.get("variant") != base.options.get("variant"))
+            == label.startswith("robust-"))
+    assert ab.thesis_table_text == base.thesis_table_text
+    assert set(ab.cells) <= set(base.cells) and ab.cells
