@@ -867,8 +867,9 @@ def _disagreements(sums):
             continue
         abl = _ablations(sums, name)
         out.append(f"\n**Fig. {fig}: cells that disagree** (ours / thesis; runs outside 3σ "
-                   "θx θy θz ωx ωy ωz; *flipped by*: the ablations — one switch each, same "
-                   "seeds — whose colour for the cell is the thesis's)\n")
+                   "θx θy θz ωx ωy ωz; *flipped by*: the ablations on the same seeds — one "
+                   "switch each, two where the label joins two — whose colour for the cell is "
+                   "the thesis's)\n")
         out.append("| filter | dynamics | sites | σθ (°) | σω (°/s) | r (%) | ours | thesis | "
                    "outside 3σ | flipped by |")
         out.append("|---|---|---|---|---|---|---|---|---|---|")
@@ -889,7 +890,7 @@ def _disagreements(sums):
                        f"{why} |")
         if abl:
             out.append("")
-            out.append("Ablation tables (agreement of the whole table with one switch): " + "; ".join(
+            out.append("Ablation tables (agreement over the cells each ablation ran): " + "; ".join(
                 f"{lab} {a['agreement']['agree']}/{a['agreement']['compared']}"
                 for lab, a in abl.items() if "agreement" in a) + ".")
     return out
