@@ -118,6 +118,10 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
         return simulate(sc, seed=sim_seed)
 
 
+#: study [options] passed to :func:`lightcurve.filters.invert` unchanged, for every filter
+_INVERT_OPTIONS = ("acs_mode", "variant", "gate", "eta_sigma_deg_s2")
+
+
 def execute_task(task: RunTask, device: str = "cpu") -> dict:
     """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
     ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
@@ -158,14 +162,9 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
             kw["particles"] = int(opts["particles"])
         if c.filter == "bpf" and device != "cpu":
             kw["device"] = device
-        if "acs_mode" in opts:
-            kw["acs_mode"] = opts["acs_mode"]
-        if "variant" in opts:
-            kw["variant"] = opts["variant"]
-        if "gate" in opts:
-            kw["gate"] = opts["gate"]
-        if "eta_sigma_deg_s2" in opts:   # the filters' η only; the simulated truth keeps its own
-            kw["eta_sigma_deg_s2"] = float(opts["eta_sigma_deg_s2"])
+        # [options] that are invert() keywords as they stand (validated by load_study);
+        # eta_sigma_deg_s2 is the filters' η only: the simulated truth keeps the scenario's
+        kw.update({k: opts[k] for k in _INVERT_OPTIONS if k in opts})
         for k in ("alpha", "beta", "kappa"):
             if k in opts and c.filter == "ukf":
                 kw[k] = float(opts[k])
