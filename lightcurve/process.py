@@ -137,8 +137,14 @@ def _set_pdeathsig(sig) -> bool:
 
 
 def _exit_now(signum, frame=None) -> None:
-    """SIGTERM handler of a worker: run the exit finalisers, then leave at once (a task in
-    progress is abandoned; raising SystemExit would be caught by the pool's task loop)."""
+    """SIGTERM handler of a worker: remove the temporary files of its writes in progress
+    (:func:`lightcurve.io.atomic.remove_own_temp`), run the exit finalisers, then leave at once
+    (a task in progress is abandoned; raising SystemExit would be caught by the pool's task
+    loop)."""
+    atomic = sys.modules.get("lightcurve.io.atomic")  # no import in a signal handler
+    if atomic is not None:
+        with contextlib.suppress(Exception):
+            atomic.remove_own_temp()
     with contextlib.suppress(Exception):
         from multiprocessing import util
 

@@ -18,6 +18,9 @@ hash of the host name, ``suffix`` e.g. ``.png`` or ``.tmp``). A killed writer le
 the same folder (:func:`clean_stale_temp`) removes those of the same final name whose writer
 is provably gone — same host and the pid no longer alive — and, for other hosts (a shared
 network folder), those untouched for a day. A live writer's temporary file is never removed.
+A worker process that is stopped by SIGTERM in the middle of a write (its handler,
+:func:`lightcurve.process.watch_parent`, leaves with ``os._exit`` and so skips the writer's
+clean-up) first removes its own temporary files with :func:`remove_own_temp`.
 """
 
 from __future__ import annotations
@@ -32,12 +35,38 @@ import time
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "fsync_dir",
-           "clean_stale_temp", "current_umask", "temp_prefix"]
+           "clean_stale_temp", "current_umask", "temp_prefix", "remove_own_temp"]
 
 #: temporary files of other hosts are removed only after this long without a change
 FOREIGN_TEMP_AGE_S = 86400.0
 _TMP_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[0-9a-f]{6})-(?P<pid>[0-9]+)-[a-z0-9_]{8}"
                      r"(?:\.[A-Za-z0-9_.\-]*)?$")
+
+
+#: (folder, prefix) → number of writes in progress in this process; registered before the
+#: temporary file is created, so a signal between its creation and its registration cannot
+#: leave it behind
+_OWN: dict[tuple[str, str], int] = {}
+
+
+def remove_own_temp() -> int:
+    """Remove the temporary files of this process's writes in progress (for a process about
+    to exit without unwinding, e.g. a worker's SIGTERM handler). Returns how many."""
+    return sum(_remove_prefixed(folder, prefix) for folder, prefix in list(_OWN))
+
+
+def _remove_prefixed(folder: str, prefix: str) -> int:
+    n = 0
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return 0
+    for e in entries:
+        if e.name.startswith(prefix):
+            with contextlib.suppress(OSError):
+                os.unlink(e.path)
+                n += 1
+    return n
 
 
 def _host_tag() -> str:
@@ -139,16 +168,20 @@ def atomic_path(path, suffix: str | None = None):
     check_not_input(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_temp(path.parent, path.name)
-    # the suffix stays last: writers such as matplotlib pick the format from it
-    fd, tmp = tempfile.mkstemp(prefix=temp_prefix(path.name), suffix=suffix or ".tmp",
-                               dir=path.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~current_umask())
-    except (OSError, AttributeError):  # e.g. Windows: modes do not apply
-        pass
-    os.close(fd)
-    tmp = Path(tmp)
-    try:
+    key = (str(path.parent), temp_prefix(path.name))
+    _OWN[key] = _OWN.get(key, 0) + 1
+    tmp = None
+    try:  # from before the temporary file exists: an interruption anywhere removes it
+        # the suffix stays last: writers such as matplotlib pick the format from it
+        fd, name = tempfile.mkstemp(prefix=key[1], suffix=suffix or ".tmp", dir=path.parent)
+        tmp = Path(name)
+        try:
+            try:
+                os.fchmod(fd, 0o666 & ~current_umask())
+            except (OSError, AttributeError):  # e.g. Windows: modes do not apply
+                pass
+        finally:
+            os.close(fd)
         yield tmp
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
@@ -157,9 +190,18 @@ def atomic_path(path, suffix: str | None = None):
         except OSError as exc:  # name the file the user asked for, not the temporary one
             raise OSError(exc.errno, exc.strerror, str(path)) from None
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+        if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+        elif _OWN.get(key) == 1:  # interrupted inside mkstemp: the only write of this name
+            _remove_prefixed(*key)
         raise
+    finally:
+        left = _OWN.get(key, 1) - 1
+        if left > 0:
+            _OWN[key] = left
+        else:
+            _OWN.pop(key, None)
     fsync_dir(path.parent)
 
 

@@ -208,3 +208,86 @@ def test_atomic_write_exception_cleans_up_and_skips_fsync(tmp_path, monkeypatch)
     atomic.atomic_write_bytes(path, b"new")
     assert path.read_bytes() == b"new"
     assert atomic.fsync_dir(tmp_path) is False or not hasattr(os, "O_DIRECTORY")
+
+
+@pytest.mark.parametrize("where", ["mkstemp", "umask", "fsync"])
+def test_interruption_between_creating_and_using_the_temporary_file(where, tmp_path, monkeypatch):
+    """Ctrl-C (or SIGTERM, which raises like it in the command line) may land at any bytecode:
+    also after the temporary file was created but before the block's body runs (setting its
+    mode), or inside mkstemp after the file exists. No temporary file may stay, the previous
+    file is untouched, and a later write of the same name works."""
+    import os
+    import tempfile
+
+    from lightcurve.io import atomic
+
+    path = tmp_path / "c.bin"
+    atomic.atomic_write_bytes(path, b"old")
+
+    def interrupt(*a, **k):
+        raise KeyboardInterrupt
+
+    if where == "mkstemp":
+        real = tempfile.mkstemp
+
+        def mkstemp(*a, **k):
+            fd, name = real(*a, **k)  # the file exists, the caller never sees its name
+            os.close(fd)
+            raise KeyboardInterrupt
+        monkeypatch.setattr(tempfile, "mkstemp", mkstemp)
+    elif where == "umask":
+        monkeypatch.setattr(atomic, "current_umask", interrupt)
+    else:
+        monkeypatch.setattr(os, "fsync", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        atomic.atomic_write_bytes(path, b"new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.bin"]
+    assert path.read_bytes() == b"old" and atomic._OWN == {}
+    monkeypatch.undo()
+    atomic.atomic_write_bytes(path, b"new")
+    assert path.read_bytes() == b"new"
+
+
+@pytest.mark.skipif(not hasattr(__import__("signal"), "SIGTERM") or __import__("sys").platform
+                    == "win32", reason="POSIX signals")
+def test_worker_stopped_by_sigterm_mid_write_leaves_no_temporary_file(tmp_path):
+    """A pool worker's SIGTERM handler (lightcurve.process.watch_parent) leaves with os._exit,
+    which skips atomic_path's own clean-up; it must remove the temporary file of the write in
+    progress itself. Checked with a child process stopped inside the write, and a control child
+    killed by SIGKILL (no handler runs) that does leave its file: the check can fail."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    code = ("import os, sys, signal, time\n"
+            "from lightcurve.process import _exit_now\n"
+            "from lightcurve.io.atomic import atomic_path\n"
+            "signal.signal(signal.SIGTERM, _exit_now)\n"
+            "with atomic_path(sys.argv[1], suffix='.h5.tmp') as tmp:\n"
+            "    tmp.write_bytes(b'x' * 1000)\n"
+            "    print('writing', flush=True)\n"
+            "    time.sleep(60)\n")
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    left = {}
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        folder = tmp_path / sig.name
+        folder.mkdir()
+        proc = subprocess.Popen([sys.executable, "-c", code, str(folder / "run.h5")], env=env,
+                                stdout=subprocess.PIPE)
+        try:
+            assert proc.stdout.readline().strip() == b"writing"
+            assert len(list(folder.glob(".*"))) == 1  # the write is in progress
+            proc.send_signal(sig)
+            rc = proc.wait(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            proc.stdout.close()
+        assert rc == (128 + signal.SIGTERM if sig == signal.SIGTERM else -signal.SIGKILL)
+        assert not (folder / "run.h5").exists()
+        left[sig.name] = sorted(p.name for p in folder.iterdir())
+    assert left["SIGTERM"] == []
+    assert len(left["SIGKILL"]) == 1 and left["SIGKILL"][0].startswith(".run.h5.")
