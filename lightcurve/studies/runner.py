@@ -118,13 +118,30 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
         return simulate(sc, seed=sim_seed)
 
 
+@functools.lru_cache(maxsize=32)
+def _filter_eta(text: str, file: str, horizon_s: float, library_dirs: tuple = (),
+                site_dirs: tuple = ()) -> float:
+    """The filters' σ_η (deg/s^1.5) for study option ``filter_drift_horizon_s``: the scenario's
+    ``drift_deg_per_orbit`` reached after ``horizon_s`` seconds instead of one orbit
+    (:func:`lightcurve.studies.scenario.eta_sigma_from_drift`)."""
+    from .scenario import eta_sigma_from_drift
+
+    sc = _scenario(text, file, library_dirs, site_dirs)
+    return eta_sigma_from_drift(sc.attitude.drift_deg_per_orbit, horizon_s)
+
+
 #: study [options] passed to :func:`lightcurve.filters.invert` unchanged, for every filter
 _INVERT_OPTIONS = ("acs_mode", "variant", "gate", "eta_sigma_deg_s2")
 
 
-def execute_task(task: RunTask, device: str = "cpu") -> dict:
+def execute_task(task: RunTask, device: str = "cpu", select=None) -> dict:
     """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
     ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
+
+    ``select``: optional callable ``Lightcurve → Lightcurve`` applied to the simulated curve
+    before the inversion (diagnostics that hide epochs from the filters, e.g.
+    ``benchmarks/bernard_glints.py``); the truth and the seeds are unchanged. Studies never
+    set it.
 
     Never raises for a failing run: the result has ``status = "failed"`` and ``error`` (the
     traceback text). Simulated lightcurves are cached per process (the same lightcurve serves
@@ -157,6 +174,8 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
                          int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
                          tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
                          opts.get("truth_acs_mode", ""))
+        if select is not None:
+            lc = select(lc)
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])
@@ -165,6 +184,10 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
         # [options] that are invert() keywords as they stand (validated by load_study);
         # eta_sigma_deg_s2 is the filters' η only: the simulated truth keeps the scenario's
         kw.update({k: opts[k] for k in _INVERT_OPTIONS if k in opts})
+        if "filter_drift_horizon_s" in opts and c.dynamics == "uncontrolled":
+            kw["eta_sigma_deg_s2"] = _filter_eta(
+                task.scenario_text, task.scenario_file, float(opts["filter_drift_horizon_s"]),
+                tuple(getattr(task, "library_dirs", ())), tuple(getattr(task, "site_dirs", ())))
         for k in ("alpha", "beta", "kappa"):
             if k in opts and c.filter == "ukf":
                 kw[k] = float(opts[k])

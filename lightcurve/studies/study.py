@@ -41,6 +41,11 @@ grid of settings; every combination of the grid values is one *cell*, and each c
     truth_acs_mode = "random_walk"        # controlled TRUTH model (default: the scenario's)
     eta_sigma_deg_s2 = 2.5e-3             # uncontrolled FILTER process noise σ_η, deg/s^1.5
                                           # (default: each scenario's; the truth keeps its own)
+    filter_drift_horizon_s = 360.0        # or: the FILTER σ_η sized so that the scenario's
+                                          # drift_deg_per_orbit is reached after this many
+                                          # seconds instead of one orbit (not with
+                                          # eta_sigma_deg_s2; every uncontrolled scenario of
+                                          # the study must give drift_deg_per_orbit)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -471,6 +476,11 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         opts["truth_acs_mode"] = o.str("truth_acs_mode", choices=("random_walk", "jitter"))
     if o.has("eta_sigma_deg_s2"):
         opts["eta_sigma_deg_s2"] = o.float("eta_sigma_deg_s2", min=0.0, max=10.0)
+    if o.has("filter_drift_horizon_s"):
+        if "eta_sigma_deg_s2" in opts:
+            raise InputError("give either eta_sigma_deg_s2 or filter_drift_horizon_s, not both",
+                             file=path, field="options.filter_drift_horizon_s")
+        opts["filter_drift_horizon_s"] = o.float("filter_drift_horizon_s", min=1.0, max=1e8)
     o.check_unknown()
     # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
     # configuration objects validate them (lightcurve.filters.config)
@@ -518,6 +528,12 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
                 raise InputError(f"scenario {f.name} has dynamics {sc.attitude.dynamics!r}, the "
                                  f"grid cell needs {dyn!r}", file=path, field="study.scenario",
                                  value=str(f))
+            if ("filter_drift_horizon_s" in opts and dyn == "uncontrolled"
+                    and sc.attitude.drift_deg_per_orbit is None):
+                raise InputError(f"options.filter_drift_horizon_s sizes the filters' η from the "
+                                 f"scenario's drift; scenario {f.name} gives eta_sigma_deg_s2 "
+                                 "instead", file=f, field="attitude.drift_deg_per_orbit",
+                                 allowed="a drift in degrees after one orbit (Bernard §9.2.4)")
             if len(sc.sites) != ns:
                 raise InputError(f"scenario {f.name} has {len(sc.sites)} site(s), the grid cell "
                                  f"needs {ns}", file=path, field="study.scenario", value=str(f))

@@ -157,3 +157,34 @@ def test_filter_eta_option_reaches_the_filter_only(tmp_path, make_study):
     p.write_text(p.read_text().replace("eta_sigma_deg_s2 = 0.05", "eta_sigma_deg_s2 = -1.0"))
     with pytest.raises(InputError, match="options.eta_sigma_deg_s2"):
         load_study(p)
+
+
+def test_filter_drift_horizon_sizes_eta_from_the_scenario_drift(tmp_path, make_study):
+    # [options] filter_drift_horizon_s = T: the filters' η is d·√(3/T³) from the scenario's
+    # drift_deg_per_orbit d (Bernard §9.2.4 sizes it over one orbit; eta_sigma_from_drift) —
+    # the run equals the study with eta_sigma_deg_s2 set to that number by hand
+    from lightcurve.studies.runner import execute_task
+
+    p = make_study(tmp_path, filters=("mekf",), dynamics=("uncontrolled",), runs=1)
+    scen = tmp_path / "tiny-uncontrolled-1site.toml"
+    scen.write_text(scen.read_text().replace('torques = ["gravity_gradient"]',
+                                             'torques = ["gravity_gradient"]\n'
+                                             "drift_deg_per_orbit = 10.0"))
+    text = p.read_text()
+    p.write_text(text + "[options]\nfilter_drift_horizon_s = 60.0\n")
+    st = load_study(p)
+    eta = float(10.0 * np.sqrt(3.0 / 60.0 ** 3))   # 0.0373 deg/s^1.5, by hand
+    p.write_text(text + f"[options]\neta_sigma_deg_s2 = {eta!r}\n")
+    ref = load_study(p)
+    r, r_ref = execute_task(st.tasks(1)[0]), execute_task(ref.tasks(1)[0])
+    assert r["status"] == r_ref["status"] == "ok"
+    np.testing.assert_array_equal(r["omega_sigma_rad_s"], r_ref["omega_sigma_rad_s"])
+    np.testing.assert_array_equal(r["att_error_deg"], r_ref["att_error_deg"])
+    # both options at once, and a scenario that gives η instead of a drift, are refused
+    p.write_text(text + f"[options]\neta_sigma_deg_s2 = {eta!r}\nfilter_drift_horizon_s = 60.0\n")
+    with pytest.raises(InputError, match="options.filter_drift_horizon_s"):
+        load_study(p)
+    scen.write_text(scen.read_text().replace("drift_deg_per_orbit = 10.0", ""))
+    p.write_text(text + "[options]\nfilter_drift_horizon_s = 60.0\n")
+    with pytest.raises(InputError, match="attitude.drift_deg_per_orbit"):
+        load_study(p)

@@ -179,3 +179,21 @@ def test_ablation_studies_share_the_base_seeds_and_cells(path):
             == label.startswith("robust-"))
     assert ab.thesis_table_text == base.thesis_table_text
     assert set(ab.cells) <= set(base.cells) and ab.cells
+
+
+@pytest.mark.parametrize("path", sorted((STUDIES / "ablations").glob("thesis-*eta-window.toml")),
+                         ids=lambda p: p.stem)
+def test_eta_window_ablations_size_eta_from_the_section_9_2_4_drift(path):
+    """The window-sized η ablations derive the filters' η from each scenario's §9.2.4 drift
+    (LEO 2°, MEO 10°, GEO 15° after one orbit; Bernard §9.2.4) reached after the 360 s window
+    (§9.3.1): σ_η = d·√(3/360³), computed here by hand."""
+    from lightcurve.studies.runner import _filter_eta
+
+    st = load_study(path)
+    assert st.options["filter_drift_horizon_s"] == 360.0
+    d = {"fig9-4": 2.0, "b1": 10.0, "b2": 10.0, "b3": 15.0, "b4": 15.0}[
+        path.stem.split("-")[2] if path.stem.startswith("thesis-fig-") else "fig9-4"]
+    for (dyn, ns), f in st.scenario_files.items():
+        assert dyn == "uncontrolled"
+        eta = _filter_eta(st.scenario_texts[(dyn, ns)], str(f), 360.0)
+        assert eta == pytest.approx(d * (3.0 / 360.0 ** 3) ** 0.5, rel=1e-12)
