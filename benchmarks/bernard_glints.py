@@ -3,10 +3,13 @@ is run twice on the study's own seeds: as the study runs it, and with the glint 
 from the filter (the truth, the initial estimates and the noise draws are unchanged).
 
 A glint epoch is one whose noise-free magnitude is more than ``--brighter`` mag brighter than
-the median noise-free magnitude of that run's curve (the sharp specular spikes of the +X facet,
-m = 0.04 in Bernard Table 9.2; the thesis describes these "specular spikes" of the MEO curve in
-§9.4.2, Fig. 9.9b). For each cell the script prints the runs outside 3σ of the six final error
-components (θx θy θz ωx ωy ωz, Bernard §9.3.1), the traffic-light colour of the thesis's rule
+the median noise-free magnitude of that run's curve (:func:`lightcurve.studies.runner.hide_glints`):
+the sharp specular spikes of the +X facet (m = 0.04, Bernard Table 9.2). The thesis shows these
+"specular spikes" in the controlled MEO curve (§9.4.2, Fig. 9.9b) and states that the
+uncontrolled fast-spinning curves lack them (§9.4.5, Fig. 9.19).
+
+For each cell the script prints the runs outside 3σ of the six final error components
+(θx θy θz ωx ωy ωz, Bernard §9.3.1), the traffic-light colour of the thesis's rule
 (:func:`lightcurve.studies.metrics.traffic_light`, scaled to the run count), the published
 colour, and the mean final attitude error over the runs with its standard error (a mean more
 than 3 standard errors from zero is a bias of the estimator on this geometry: every run of a
@@ -34,17 +37,8 @@ sys.path.insert(0, str(ROOT))
 
 from lightcurve.studies.agreement import thesis_color  # noqa: E402
 from lightcurve.studies.metrics import outside_3sigma, traffic_light  # noqa: E402
-from lightcurve.studies.runner import execute_task, limit_blas_threads  # noqa: E402
+from lightcurve.studies.runner import execute_task, hide_glints, limit_blas_threads  # noqa: E402
 from lightcurve.studies.study import load_study  # noqa: E402
-
-
-def hide_glints(brighter_mag: float):
-    """``Lightcurve → Lightcurve`` without the epochs more than ``brighter_mag`` mag brighter
-    than the median noise-free magnitude."""
-    def select(lc):
-        m = np.asarray(lc.truth_mag, float)
-        return lc.subset(~(m < np.nanmedian(m) - brighter_mag))
-    return select
 
 
 def run_cell(tasks, select):
@@ -97,7 +91,8 @@ def main():
     for c in cells:
         ct = [t for t in tasks if t.cell == c]
         row = {"cell": c.as_dict(), "thesis": thesis_color(study.thesis_table, c.as_dict())}
-        for name, sel in (("all_epochs", None), ("glints_hidden", hide_glints(a.brighter))):
+        hide = lambda lc: hide_glints(lc, a.brighter)  # noqa: E731
+        for name, sel in (("all_epochs", None), ("glints_hidden", hide)):
             row[name] = run_cell(ct, sel)
             r = row[name]
             print(f"{c.filter} {c.dynamics} sites={c.sites} σθ={c.sigma_theta_deg:g} "

@@ -118,6 +118,20 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
         return simulate(sc, seed=sim_seed)
 
 
+def hide_glints(curve, brighter_mag: float):
+    """``curve`` without the epochs whose noise-free magnitude (``truth_mag``) is more than
+    ``brighter_mag`` mag brighter than the median noise-free magnitude of the curve: the sharp
+    specular spikes. Diagnostic of study option ``hide_glints_mag``: Bernard §9.4.5 states that
+    the large spikes of the controlled fast-spinning curves are not present in the
+    uncontrolled ones (Fig. 9.19), while the uncontrolled truth simulated here keeps them.
+    Needs a simulated curve (``truth_mag``)."""
+    if curve.truth_mag is None:
+        raise InputError("hiding the glint epochs needs the noise-free magnitudes of a "
+                         "simulated curve", field="truth_mag")
+    m = np.asarray(curve.truth_mag, float)
+    return curve.subset(~(m < np.nanmedian(m) - float(brighter_mag)))
+
+
 @functools.lru_cache(maxsize=32)
 def _filter_eta(text: str, file: str, horizon_s: float, library_dirs: tuple = (),
                 site_dirs: tuple = ()) -> float:
@@ -174,6 +188,8 @@ def execute_task(task: RunTask, device: str = "cpu", select=None) -> dict:
                          int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
                          tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
                          opts.get("truth_acs_mode", ""))
+        if "hide_glints_mag" in opts:
+            lc = hide_glints(lc, float(opts["hide_glints_mag"]))
         if select is not None:
             lc = select(lc)
         kw = {}

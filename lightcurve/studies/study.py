@@ -46,6 +46,10 @@ grid of settings; every combination of the grid values is one *cell*, and each c
                                           # seconds instead of one orbit (not with
                                           # eta_sigma_deg_s2; every uncontrolled scenario of
                                           # the study must give drift_deg_per_orbit)
+    hide_glints_mag = 2.0                 # DIAGNOSTIC: the filters do not see the epochs
+                                          # whose noise-free magnitude is more than this many
+                                          # mag brighter than the run's median (the specular
+                                          # spikes; lightcurve.studies.runner.hide_glints)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -481,6 +485,8 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
             raise InputError("give either eta_sigma_deg_s2 or filter_drift_horizon_s, not both",
                              file=path, field="options.filter_drift_horizon_s")
         opts["filter_drift_horizon_s"] = o.float("filter_drift_horizon_s", min=1.0, max=1e8)
+    if o.has("hide_glints_mag"):
+        opts["hide_glints_mag"] = o.float("hide_glints_mag", min=0.0, min_open=True, max=30.0)
     o.check_unknown()
     # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
     # configuration objects validate them (lightcurve.filters.config)

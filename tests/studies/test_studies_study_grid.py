@@ -188,3 +188,31 @@ def test_filter_drift_horizon_sizes_eta_from_the_scenario_drift(tmp_path, make_s
     p.write_text(text + "[options]\nfilter_drift_horizon_s = 60.0\n")
     with pytest.raises(InputError, match="attitude.drift_deg_per_orbit"):
         load_study(p)
+
+
+def test_hide_glints_option_hides_the_spike_epochs_from_the_filters_only(tmp_path, make_study):
+    # [options] hide_glints_mag (diagnostic; Bernard §9.4.5: the uncontrolled fast-spinning
+    # curves lack the controlled ones' large spikes): the filters run on the epochs whose
+    # noise-free magnitude is not more than that many mag brighter than the run's median
+    # (selected here by hand), with the study's seeds; the truth is unchanged
+    from lightcurve.filters import invert
+    from lightcurve.studies.runner import _lightcurve, execute_task
+
+    p = make_study(tmp_path, filters=("mekf",), dynamics=("uncontrolled",), runs=1)
+    text = p.read_text()
+    p.write_text(text + "[options]\nhide_glints_mag = 2.0\n")
+    st = load_study(p)
+    t = st.tasks(1)[0]
+    lc = _lightcurve(t.scenario_text, t.scenario_file, 1.0, int(t.sim_seed))
+    keep = [k for k, m in enumerate(lc.truth_mag) if not m < sorted(lc.truth_mag)[6] - 2.0]
+    assert len(lc) == 13 and 0 < len(keep) < 13  # the IC puts a glint at t = 0 (§9.3.3)
+    r = execute_task(t)
+    assert r["status"] == "ok"
+    np.testing.assert_array_equal(r["t"], lc.t[keep])
+    est = invert(lc.subset(keep), "mekf", seed=int(t.filter_seed), sigma_theta_deg=3.0,
+                 sigma_omega_deg_s=0.02)
+    np.testing.assert_array_equal(r["att_error_deg"], est.att_error_deg)
+    for bad in ("0.0", "-1.0", "31.0"):
+        p.write_text(text + f"[options]\nhide_glints_mag = {bad}\n")
+        with pytest.raises(InputError, match="options.hide_glints_mag"):
+            load_study(p)
