@@ -3,7 +3,7 @@ is run twice on the study's own seeds: as the study runs it, and with the glint 
 from the filter (the truth, the initial estimates and the noise draws are unchanged).
 
 A glint epoch is one whose noise-free magnitude is more than ``--brighter`` mag brighter than
-the median noise-free magnitude of that run's curve (:func:`lightcurve.studies.runner.hide_glints`):
+the median noise-free magnitude of the nearby epochs (:func:`lightcurve.studies.runner.hide_glints`):
 the sharp specular spikes of the +X facet (m = 0.04, Bernard Table 9.2). The thesis shows these
 "specular spikes" in the controlled MEO curve (§9.4.2, Fig. 9.9b) and states that the
 uncontrolled fast-spinning curves lack them (§9.4.5, Fig. 9.19).
@@ -74,7 +74,7 @@ def main():
     ap.add_argument("--runs", type=int, default=30, help="runs per cell (the study's first N)")
     ap.add_argument("--brighter", type=float, default=2.0,
                     help="glint: noise-free magnitude more than this many mag brighter than "
-                    "the run's median (default 2)")
+                    "the median of the same site's epochs within ±4 of it (default 2)")
     a = ap.parse_args()
     limit_blas_threads()
     study = load_study(a.study)

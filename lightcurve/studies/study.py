@@ -48,8 +48,9 @@ grid of settings; every combination of the grid values is one *cell*, and each c
                                           # the study must give drift_deg_per_orbit)
     hide_glints_mag = 2.0                 # DIAGNOSTIC: the filters do not see the epochs
                                           # whose noise-free magnitude is more than this many
-                                          # mag brighter than the run's median (the specular
-                                          # spikes; lightcurve.studies.runner.hide_glints)
+                                          # mag brighter than the median of the same site's
+                                          # epochs within ±4 of it (the specular spikes;
+                                          # lightcurve.studies.runner.hide_glints)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
