@@ -55,13 +55,17 @@ def remove_own_temp() -> int:
     return sum(_remove_prefixed(folder, prefix) for folder, prefix in list(_OWN))
 
 
+def _scan(folder) -> list:
+    """The entries of ``folder``; none where it cannot be read."""
+    try:
+        return list(os.scandir(folder))
+    except OSError:
+        return []
+
+
 def _remove_prefixed(folder: str, prefix: str) -> int:
     n = 0
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return 0
-    for e in entries:
+    for e in _scan(folder):
         if e.name.startswith(prefix):
             with contextlib.suppress(OSError):
                 os.unlink(e.path)
@@ -110,11 +114,7 @@ def clean_stale_temp(folder, name: str | None = None) -> int:
     host = _host_tag()
     now = time.time()
     n = 0
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return 0
-    for e in entries:
+    for e in _scan(folder):
         m = _TMP_RE.match(e.name)
         if m is None or (name is not None and m.group("name") != name):
             continue
