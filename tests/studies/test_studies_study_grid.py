@@ -217,3 +217,35 @@ def test_hide_glints_option_hides_the_spike_epochs_from_the_filters_only(tmp_pat
         p.write_text(text + f"[options]\nhide_glints_mag = {bad}\n")
         with pytest.raises(InputError, match="options.hide_glints_mag"):
             load_study(p)
+
+
+def test_hide_glints_finds_spikes_per_site_and_not_a_pass_trend():
+    # a made-up two-site curve: site 0 brightens steadily by 0.3 mag per epoch (a pass) and has
+    # one spike 5 mag above its neighbours; site 1 is flat at 12 mag with spikes at its first
+    # and its last epoch (the window is cut at the ends) and a 1.5 mag bump that stays
+    from dataclasses import dataclass
+
+    from lightcurve.studies.runner import hide_glints
+
+    @dataclass
+    class Curve:
+        truth_mag: np.ndarray
+        site: np.ndarray
+        kept: np.ndarray = None
+
+        def subset(self, mask):
+            return Curve(self.truth_mag[mask], self.site[mask], np.asarray(mask))
+
+    m0 = 15.0 - 0.3 * np.arange(20)
+    m0[7] -= 5.0
+    m1 = np.full(12, 12.0)
+    m1[[0, 11]] = 8.0
+    m1[5] = 10.5
+    mag = np.empty(32)
+    site = np.empty(32, int)
+    mag[:24:2], site[:24:2] = m1, 1           # interleaved in time with site 0
+    mag[1:24:2], site[1:24:2] = m0[:12], 0
+    mag[24:], site[24:] = m0[12:], 0
+    out = hide_glints(Curve(mag, site), 2.0)
+    assert np.flatnonzero(~out.kept).tolist() == [0, 15, 22]  # site 1's ends, site 0's spike
+    assert hide_glints(Curve(mag, site), 6.0).kept.all()       # no spike of 6 mag
