@@ -3,7 +3,8 @@ is run twice on the study's own seeds: as the study runs it, and with the glint 
 from the filter (the truth, the initial estimates and the noise draws are unchanged).
 
 A glint epoch is one whose noise-free magnitude is more than ``--brighter`` mag brighter than
-the median noise-free magnitude of the nearby epochs (:func:`lightcurve.studies.runner.hide_glints`):
+the median noise-free magnitude of the nearby epochs (study option ``hide_glints_mag``,
+:func:`lightcurve.studies.runner.hide_glints`):
 the sharp specular spikes of the +X facet (m = 0.04, Bernard Table 9.2). The thesis shows these
 "specular spikes" in the controlled MEO curve (§9.4.2, Fig. 9.9b) and states that the
 uncontrolled fast-spinning curves lack them (§9.4.5, Fig. 9.19).
@@ -28,6 +29,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,28 +39,32 @@ sys.path.insert(0, str(ROOT))
 
 from lightcurve.studies.agreement import thesis_color  # noqa: E402
 from lightcurve.studies.metrics import outside_3sigma, traffic_light  # noqa: E402
-from lightcurve.studies.runner import execute_task, hide_glints, limit_blas_threads  # noqa: E402
+from lightcurve.studies.runner import execute_task, limit_blas_threads  # noqa: E402
 from lightcurve.studies.study import load_study  # noqa: E402
 
 
-def run_cell(tasks, select):
-    out, err, n_hidden = [], [], []
+def run_cell(tasks, hide_glints_mag=None):
+    """Run ``tasks``; with ``hide_glints_mag`` as the study option of that name sets it."""
+    out, err, n_epochs = [], [], []
     for t in tasks:
-        r = execute_task(t, select=select)
+        if hide_glints_mag is not None:
+            opts = {**dict(t.options), "hide_glints_mag": float(hide_glints_mag)}
+            t = replace(t, options=tuple(sorted(opts.items())))
+        r = execute_task(t)
         if r["status"] != "ok":
             out.append(np.ones(6, bool))
             continue
         out.append(outside_3sigma(r["att_error_deg"][-1], r["att_sigma_deg"][-1],
                                   r["omega_error_rad_s"][-1], r["omega_sigma_rad_s"][-1]))
         err.append(r["att_error_deg"][-1])
-        n_hidden.append(len(r["t"]))
+        n_epochs.append(len(r["t"]))
     err = np.array(err).reshape(-1, 3)
     counts = np.sum(out, axis=0).astype(int)
     return {"outside_3sigma": counts.tolist(), "color": traffic_light(counts, len(tasks)),
             "mean_att_error_deg": np.round(err.mean(0), 3).tolist() if len(err) else None,
             "se_att_error_deg": (np.round(err.std(0, ddof=1) / np.sqrt(len(err)), 3).tolist()
                                  if len(err) > 1 else None),
-            "epochs": int(np.median(n_hidden)) if n_hidden else 0}
+            "epochs": int(np.median(n_epochs)) if n_epochs else 0}
 
 
 def main():
@@ -91,9 +97,8 @@ def main():
     for c in cells:
         ct = [t for t in tasks if t.cell == c]
         row = {"cell": c.as_dict(), "thesis": thesis_color(study.thesis_table, c.as_dict())}
-        hide = lambda lc: hide_glints(lc, a.brighter)  # noqa: E731
-        for name, sel in (("all_epochs", None), ("glints_hidden", hide)):
-            row[name] = run_cell(ct, sel)
+        for name, mag in (("all_epochs", None), ("glints_hidden", a.brighter)):
+            row[name] = run_cell(ct, mag)
             r = row[name]
             print(f"{c.filter} {c.dynamics} sites={c.sites} σθ={c.sigma_theta_deg:g} "
                   f"σω={c.sigma_omega_deg_s:g} r={c.r_percent:g}% {name:13s} "

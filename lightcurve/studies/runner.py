@@ -164,14 +164,9 @@ def _filter_eta(text: str, file: str, horizon_s: float, library_dirs: tuple = ()
 _INVERT_OPTIONS = ("acs_mode", "variant", "gate", "eta_sigma_deg_s2")
 
 
-def execute_task(task: RunTask, device: str = "cpu", select=None) -> dict:
+def execute_task(task: RunTask, device: str = "cpu") -> dict:
     """Run one task: simulate the cell's scenario with ``task.sim_seed``, invert with
     ``task.filter_seed``, compute :func:`~lightcurve.studies.metrics.run_metrics`.
-
-    ``select``: optional callable ``Lightcurve → Lightcurve`` applied to the simulated curve
-    before the inversion (diagnostics that hide epochs from the filters, e.g.
-    ``benchmarks/bernard_glints.py``); the truth and the seeds are unchanged. Studies never
-    set it.
 
     Never raises for a failing run: the result has ``status = "failed"`` and ``error`` (the
     traceback text). Simulated lightcurves are cached per process (the same lightcurve serves
@@ -206,8 +201,6 @@ def execute_task(task: RunTask, device: str = "cpu", select=None) -> dict:
                          opts.get("truth_acs_mode", ""))
         if "hide_glints_mag" in opts:
             lc = hide_glints(lc, float(opts["hide_glints_mag"]))
-        if select is not None:
-            lc = select(lc)
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])
