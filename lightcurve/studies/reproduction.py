@@ -318,24 +318,55 @@ def _pc(a, b):
     return f"{a}/{b} ({100.0 * a / b:.2f} %)" if b else f"{a}/{b}"
 
 
-def _merge_variants(a: dict, b: dict, path) -> dict:
-    """Two outputs of one fault table with different ``--variant`` (same runs, seed, grids
-    and failure modes: the same simulated spacecraft) as one, thesis variant first."""
+def _merge_outputs(a: dict, b: dict, path) -> dict:
+    """Two outputs of one fault table from the same runs (runs, seed and failure modes equal:
+    the same simulated spacecraft) as one: other ``--variant`` and/or other ``--grids``
+    (a table computed in parts); a (variant, grid) present in both is refused.  Variants
+    thesis first, grids in the thesis's order (1°×1.25°, 5°×5°, 10°×10°)."""
     from ..errors import InputError
 
-    for k in ("runs", "seed", "grids", "modes"):
+    for k in ("runs", "seed", "modes"):
         if a.get(k) != b.get(k):
             raise InputError(f"a second output of {a['experiment']} with another {k}: the "
-                             "variants of one table must come from the same runs",
+                             "parts of one table must come from the same runs",
                              file=path, field=k, value=b.get(k), allowed=str(a.get(k)))
-    if set(a["variants"]) & set(b["variants"]):
-        raise InputError(f"two outputs of {a['experiment']} with the same variant",
-                         file=path, field="variants", value=b["variants"])
+    tables = {v: dict(g) for v, g in a["tables"].items()}
+    for v, grids in b["tables"].items():
+        both = sorted(set(tables.get(v, {})) & set(grids))
+        if both:
+            raise InputError(f"two outputs of {a['experiment']} with the same variant and grid",
+                             file=path, field="variants", value=f"{v} {', '.join(both)}")
+        tables.setdefault(v, {}).update(grids)
+    order = [g for g in _GRID_NAME if g in set(a["grids"]) | set(b["grids"])]
     out = dict(a)
+    out["grids"] = order + [g for g in a["grids"] + b["grids"] if g not in order]
     out["variants"] = [v for v in ("thesis", "robust") if v in a["variants"] + b["variants"]]
-    out["tables"] = {**a["tables"], **b["tables"]}
-    out["detectors"] = {**a["detectors"], **b["detectors"]}
+    out["tables"] = tables
+    det = {v: (dict(d) if isinstance(d, dict) else d) for v, d in a["detectors"].items()}
+    for v, d in b["detectors"].items():
+        if v == "thesis":   # one detector per grid
+            det.setdefault(v, {}).update(d)
+        else:
+            det.setdefault(v, d)
+    out["detectors"] = det
+    out["thesis_results"] = {**a.get("thesis_results", {}), **b.get("thesis_results", {})}
     return out
+
+
+def _check_complete(faults: dict, files) -> None:
+    """Every variant of a merged fault table has every grid (a part left out is refused)."""
+    from ..errors import InputError
+
+    for key, d in faults.items():
+        if key == "ablations":
+            continue
+        for v in d["variants"]:
+            missing = [g for g in d["grids"] if g not in d["tables"].get(v, {})]
+            if missing:
+                raise InputError(f"{key}: the {v} variant lacks grids that another part "
+                                 "has; give the output with them too",
+                                 file=", ".join(map(str, files)), field="grids",
+                                 value=", ".join(missing))
 
 
 def _faults_section(faults) -> list[str]:
@@ -710,9 +741,10 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
         if d.get("thesis_filter"):
             faults.setdefault("ablations", []).append(d)
         elif d["experiment"] in faults:
-            faults[d["experiment"]] = _merge_variants(faults[d["experiment"]], d, f)
+            faults[d["experiment"]] = _merge_outputs(faults[d["experiment"]], d, f)
         else:
             faults[d["experiment"]] = d
+    _check_complete(faults, fault_files)
     timing = _json_line(timing)
     tables4 = _json_line(tables4)
     sun_models = _json_line(sun_models)
