@@ -78,7 +78,8 @@ from .sensors import CSSArray, normal_to_azel
 __all__ = ["AlbedoCells", "CalibrationParams", "CalibrationResult", "run_calibration",
            "calibration_measurement_nb", "calibration_update_nb", "albedo_vectors_nb",
            "CalibrationCase", "simulate_calibration_case", "state_layout", "acceptance_summary",
-           "albedo_grid_error", "initialised_sensors"]
+           "albedo_grid_error", "initialised_sensors", "albedo_subdivision",
+           "ALBEDO_SUBCELL_DEG"]
 
 
 # ---------------------------------------------------------------------------------------
@@ -825,6 +826,12 @@ def _cells_cache(amap: AlbedoMap) -> AlbedoCells:
     return _CELLS[key][0]
 
 
+# The sub-cell size (deg) on which the robust calibration filter integrates a coarse albedo
+# grid: finer sub-cells hardly reduce the 10° map's irradiance error at 400 km any further
+# (docs/measurements.md, "Coarse TOMS grids").
+ALBEDO_SUBCELL_DEG = 2.5
+
+
 def albedo_grid_error(coarse: AlbedoCells, fine: AlbedoCells, *, altitude_m=400e3,
                       fov_half_angle_deg=70.0, n_geometries=300, n_sensors=8, seed=0):
     """Representation error of a coarse albedo grid, as the 1σ model ``k A + a``.
@@ -1068,15 +1075,30 @@ def thesis_filter_setup(name: str, albedo_dir=None):
     return _SETUPS[key]
 
 
+def albedo_subdivision(amap: AlbedoMap, subcell_deg: float = ALBEDO_SUBCELL_DEG) -> int:
+    """How many sub-cells per side (:meth:`AlbedoMap.subdivided`) bring ``amap``'s widest
+    cell down to ``subcell_deg`` degrees (1 for a map already that fine)."""
+    widest = max(float(np.max(np.diff(amap.lat_edges_rad))),
+                 float(np.max(np.diff(amap.lon_edges_rad))))
+    return max(1, int(np.ceil(np.degrees(widest) / float(subcell_deg) - 1e-9)))
+
+
 def robust_filter_setup(name: str, albedo_dir=None):
     """Our calibration filter (``variant = "robust"``) on the §4.4 thesis case, with the CSS
     noise of §2.4 (0.05) inside the scale factors as in the case's sensor model (eq. 2.21,
     ``noise_in_scale``) and the intermediate gyro: ``name`` "1p25x1", "5x5" or "10x10" —
     the full filter with that TOMS grid (the mean map, with the map's spread in R as a
-    time-correlated error, ``albedo_spread``; for the coarse grids also the representation
-    error of :func:`albedo_grid_error` against the 1°×1.25° grid, 60° FOV, §2.1.3) — or
-    "reduced" (:meth:`CalibrationParams.reduced`).  Returns
-    ``(CalibrationParams, albedo)`` for :func:`run_calibration`."""
+    time-correlated error, ``albedo_spread``) — or "reduced"
+    (:meth:`CalibrationParams.reduced`).  Returns ``(CalibrationParams, albedo)`` for
+    :func:`run_calibration`.
+
+    A coarse grid keeps its values (the filter knows the 5° or 10° map, no more) but its
+    irradiance is integrated over sub-cells of at most :data:`ALBEDO_SUBCELL_DEG`
+    (:func:`albedo_subdivision`): one cell centre misrepresents a cell as wide as the
+    altitude.  The spread term then treats the sub-cells as independent draws, as the
+    truth does its 1°×1.25° cells.  The grid's remaining representation error
+    (:func:`albedo_grid_error` of the sub-divided map against the 1°×1.25° one, 60° FOV,
+    §2.1.3) enters R.  The thesis variant (:func:`thesis_filter_setup`) uses cell centres."""
     from .albedo import load_toms
     from .gyro import gyro_grade
     from .okeefe2015 import CSS_SIM
@@ -1088,6 +1110,8 @@ def robust_filter_setup(name: str, albedo_dir=None):
                                                  noise_in_scale=True), "builtin"
         else:
             pair = load_toms(name, albedo_dir)
+            n = albedo_subdivision(pair[0])
+            pair = (pair[0].subdivided(n), pair[1].subdivided(n))
             cells = AlbedoCells.from_map(pair[0])
             k, a = 0.0, 0.0
             if name != "1p25x1":

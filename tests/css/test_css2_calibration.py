@@ -344,3 +344,82 @@ def test_albedo_grid_error_grows_with_cell_size():
     k10, a10 = albedo_grid_error(maps[10], maps[1], n_geometries=150)
     assert k10 > 3.0 * k5 > 0.0
     assert a10 >= a5
+
+
+def test_subdivided_map_keeps_the_values_and_the_area_weighted_sums():
+    """AlbedoMap.subdivided: every sub-cell carries its parent's value, the edges nest, and
+    Σ value × area over each parent cell is unchanged (cell_areas_m2 is additive)."""
+    from lightcurve.earth.albedo import cell_areas_m2
+
+    rng = np.random.default_rng(3)
+    m = builtin_albedo_map(10.0)
+    m = type(m).regular(rng.uniform(0.05, 0.9, m.values.shape))
+    assert m.subdivided(1) is m
+    with pytest.raises(ValueError, match="positive"):
+        m.subdivided(0)
+    s = m.subdivided(4)
+    assert s.values.shape == (4 * m.values.shape[0], 4 * m.values.shape[1])
+    assert np.array_equal(s.lat_edges_rad[::4], m.lat_edges_rad)
+    assert np.array_equal(s.lon_edges_rad[::4], m.lon_edges_rad)
+    assert np.array_equal(s.values[5::4, 9::4], m.values[1:, 2:])
+    A, As = (cell_areas_m2(x.lat_edges_rad, x.lon_edges_rad) for x in (m, s))
+    nl, nn = m.values.shape
+    parent = (s.values * As).reshape(nl, 4, nn, 4).sum(axis=(1, 3))
+    assert np.allclose(parent, m.values * A, rtol=1e-12, atol=0.0)
+
+
+def test_sub_cells_integrate_a_coarse_cell_where_its_centre_cannot():
+    """Quadrature of eq. 2.15 on a uniform Earth (reflectivity 0.3 everywhere, so only the
+    geometry differs): over random 400 km geometries the 10° grid's cell centres miss the
+    1.25° grid's irradiance by several times more than the same 10° grid on 2.5° sub-cells
+    (measured RMS 0.057 vs 0.0035 of the solar irradiance; bound: 4×)."""
+    from lightcurve.css.albedo import AlbedoMap
+
+    coarse = AlbedoMap.regular(np.full((18, 36), 0.3))
+    ref = AlbedoCells.from_map(AlbedoMap.regular(np.full((144, 288), 0.3)))
+    c1 = AlbedoCells.from_map(coarse)
+    c4 = AlbedoCells.from_map(coarse.subdivided(4))
+    rng = np.random.default_rng(0)
+    N = 8
+    cf, hz = np.full(N, 0.5), np.zeros((N, 3))
+    err = {1: [], 4: []}
+    for _ in range(60):
+        lat, lon = np.arcsin(rng.uniform(-1, 1)), rng.uniform(-np.pi, np.pi)
+        up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+        east = np.array([-np.sin(lon), np.cos(lon), 0.0])
+        z = rng.uniform(0.0, 0.5 * np.pi)
+        s_E, r_E = np.cos(z) * up + np.sin(z) * east, (6378137.0 + 400e3) * up
+        nE = rng.normal(size=(N, 3))
+        nE /= np.linalg.norm(nE, axis=1, keepdims=True)
+        irr = {}
+        for key, cells in (("ref", ref), (1, c1), (4, c4)):
+            V, _, _ = albedo_vectors_nb(*cells.args(), r_E, s_E, nE, cf, hz, np.zeros(N))
+            irr[key] = np.sum(nE * V, axis=1)
+        for n in (1, 4):
+            err[n].append(irr[n] - irr["ref"])
+    rms = {n: np.sqrt(np.mean(np.concatenate(e) ** 2)) for n, e in err.items()}
+    assert rms[1] > 4.0 * rms[4] > 0.0
+
+
+def test_robust_filter_integrates_the_coarse_toms_grids_on_sub_cells():
+    """The robust filter's 5° and 10° TOMS maps are the coarse maps on ≤ 2.5° sub-cells
+    (values unchanged), and the representation error left in R is a fraction of the
+    cell-centre one (10°: k measured 0.054 against 0.41 at the cell centres)."""
+    from lightcurve.css.albedo import load_toms
+    from lightcurve.css.calibration import (ALBEDO_SUBCELL_DEG, albedo_grid_error,
+                                            robust_filter_setup)
+
+    d = shared_data_dir()
+    if d is None:
+        pytest.skip("../shared/data (TOMS maps) not available")
+    for grid, n in (("5x5", 2), ("10x10", 4)):
+        prm, (mean, std) = robust_filter_setup(grid)
+        m0, s0 = load_toms(grid)
+        assert np.degrees(np.max(np.diff(mean.lon_edges_rad))) <= ALBEDO_SUBCELL_DEG + 1e-9
+        assert np.array_equal(mean.values[::n, ::n], m0.values)
+        assert np.array_equal(std.values[::n, ::n], s0.values)
+        if grid == "10x10":
+            fine = AlbedoCells.from_map(load_toms("1p25x1")[0])
+            k_centre, _ = albedo_grid_error(AlbedoCells.from_map(m0), fine, n_geometries=100,
+                                            fov_half_angle_deg=60.0)
+            assert prm.albedo_grid_frac < 0.3 * k_centre
