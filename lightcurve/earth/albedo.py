@@ -27,13 +27,14 @@ so the cells add up to the ellipsoid's surface area.
 Maps: CERES 2018 albedo CSV files (rows latitude −90…90 south to north, columns longitude
 −180…180; 18×36, 36×72 or 180×360) and the TOMS 2000–2005 mean reflectivity and its standard
 deviation that O'Keefe (2015) §2.1.2.1 uses (percent, rows of longitude × columns of latitude,
-i.e. transposed; 10°×10° 36×18, 5°×5° 72×36, 1°×1.25° 288×180; :func:`load_toms`).  The
+i.e. transposed, the coarse files' longitudes east to west; 10°×10° 36×18, 5°×5° 72×36,
+1°×1.25° 288×180; :func:`load_albedo_map`, :func:`load_toms`).  The
 default map is the built-in zonal model :func:`zonal_albedo`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numba
@@ -229,8 +230,9 @@ def builtin_albedo_map(resolution_deg: float = 10.0) -> AlbedoMap:
 _CERES_SHAPES = ((18, 36), (36, 72), (180, 360))
 _TOMS_SHAPES = ((36, 18), (72, 36), (288, 180))
 TOMS_GRIDS = {"10x10": "10x10", "5x5": "5x5", "1p25x1": "1p25x1"}
-# TOMS grids whose files list the longitudes east to west (reversed by load_toms)
-TOMS_COARSE_MIRRORED = ("5x5", "10x10")
+# shapes (as written: longitude rows x latitude columns) of the TOMS files whose rows run
+# east to west: the 5x5 and 10x10 grids (load_albedo_map reverses them)
+_TOMS_EAST_TO_WEST = ((36, 18), (72, 36))
 """TOMS grid names of the files ``earthReflectivity{Mean,Std}_<grid>.dat``."""
 
 
@@ -238,6 +240,14 @@ def load_albedo_map(path) -> AlbedoMap:
     """Load a CERES albedo CSV (shape 18×36, 36×72 or 180×360, values in [0, 1]) or a
     TOMS reflectivity ``.dat`` file (36×18, 72×36 or 288×180 in percent; transposed to the
     CERES layout — mean or standard-deviation files alike).
+
+    TOMS longitude order: the rows of the 288×180 (1°×1.25°) files run west to east from
+    −180°, those of the 72×36 (5°) and 36×18 (10°) files east to west; the coarse ones are
+    reversed here.  Evidence: the area-weighted mean of the 1°×1.25° map over each coarse
+    cell equals the coarse file's value to 0.019 (5°) / 0.027 (10°) RMS reflectivity once
+    reversed, 0.096 / 0.089 as written (standard-deviation files: 0.010 / 0.016 against
+    0.049 / 0.043).  O'Keefe (2015) §4.4 uses the three grids as one data set at three
+    resolutions, so a coarse-grid filter must see the Earth its fine-grid truth flies over.
 
     Raises :class:`InputError` (naming the file and field) for a missing file, unparsable
     numbers, a wrong shape, NaN, or values outside [0, 1] (0–100 % for TOMS).
@@ -265,6 +275,8 @@ def load_albedo_map(path) -> AlbedoMap:
                              field="values", value=raw.shape,
                              allowed="36x18, 72x36 or 288x180 (rows longitude, columns latitude)")
         vals, scale_max = raw.T / 100.0, "0..100 percent"
+        if raw.shape in _TOMS_EAST_TO_WEST:
+            vals = np.ascontiguousarray(vals[:, ::-1])
     else:
         if raw.shape not in _CERES_SHAPES:
             raise InputError("albedo map has the wrong shape", file=path, field="values",
@@ -361,14 +373,8 @@ def load_toms(grid: str = "1p25x1", directory=None):
     ``../shared/data/earth_albedo`` beside the repository, or $LIGHTCURVE_SHARED_DATA);
     :class:`InputError` names the missing file.
 
-    Longitude order: the 1°×1.25° files are read west to east (:func:`load_albedo_map`); the
-    rows of the 5°×5° and 10°×10° files (:data:`TOMS_COARSE_MIRRORED`) run the other way and
-    are reversed here.  Evidence: the area-weighted mean of the 1°×1.25° map over each coarse
-    cell equals the coarse file's value to 0.019 (5°) / 0.027 (10°) RMS reflectivity once the
-    coarse rows are reversed, 0.096 / 0.089 as written; the standard-deviation files likewise
-    (0.010 / 0.016 against 0.049 / 0.043).  O'Keefe §4.4 uses the three grids as one data
-    set at three resolutions, so the truth (fine grid) and a coarse-grid filter must see the
-    same Earth.
+    The longitude order of each file is :func:`load_albedo_map`'s (the coarse files list
+    their longitudes the other way round from the 1°×1.25° ones).
     """
     if grid not in TOMS_GRIDS:
         raise InputError("unknown TOMS grid", field="grid", value=grid,
@@ -383,9 +389,6 @@ def load_toms(grid: str = "1p25x1", directory=None):
     d = Path(directory)
     mean = load_albedo_map(d / f"earthReflectivityMean_{grid}.dat")
     std = load_albedo_map(d / f"earthReflectivityStd_{grid}.dat")
-    if grid in TOMS_COARSE_MIRRORED:
-        mean, std = (replace(m, values=np.ascontiguousarray(m.values[:, ::-1]))
-                     for m in (mean, std))
     return mean, std
 
 

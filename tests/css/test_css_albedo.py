@@ -130,7 +130,8 @@ def test_load_toms_transposed_percent():
     m = alb.load_albedo_map(ALB_DIR / "earthReflectivityMean_10x10.dat")
     raw = np.loadtxt(ALB_DIR / "earthReflectivityMean_10x10.dat")
     assert m.values.shape == (18, 36)
-    assert np.allclose(m.values, raw.T / 100)
+    # rows of longitude as written, listed east to west in the coarse files
+    assert np.allclose(m.values, raw.T[:, ::-1] / 100)
     assert m.values[0].mean() > 0.8 and m.values[-1].mean() > 0.8  # polar bands
 
 
