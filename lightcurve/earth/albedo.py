@@ -230,10 +230,10 @@ def builtin_albedo_map(resolution_deg: float = 10.0) -> AlbedoMap:
 _CERES_SHAPES = ((18, 36), (36, 72), (180, 360))
 _TOMS_SHAPES = ((36, 18), (72, 36), (288, 180))
 TOMS_GRIDS = {"10x10": "10x10", "5x5": "5x5", "1p25x1": "1p25x1"}
+"""TOMS grid names of the files ``earthReflectivity{Mean,Std}_<grid>.dat``."""
 # shapes (as written: longitude rows x latitude columns) of the TOMS files whose rows run
 # east to west: the 5x5 and 10x10 grids (load_albedo_map reverses them)
 _TOMS_EAST_TO_WEST = ((36, 18), (72, 36))
-"""TOMS grid names of the files ``earthReflectivity{Mean,Std}_<grid>.dat``."""
 
 
 def load_albedo_map(path) -> AlbedoMap:
@@ -243,11 +243,10 @@ def load_albedo_map(path) -> AlbedoMap:
 
     TOMS longitude order: the rows of the 288×180 (1°×1.25°) files run west to east from
     −180°, those of the 72×36 (5°) and 36×18 (10°) files east to west; the coarse ones are
-    reversed here.  Evidence: the area-weighted mean of the 1°×1.25° map over each coarse
-    cell equals the coarse file's value to 0.019 (5°) / 0.027 (10°) RMS reflectivity once
-    reversed, 0.096 / 0.089 as written (standard-deviation files: 0.010 / 0.016 against
-    0.049 / 0.043).  O'Keefe (2015) §4.4 uses the three grids as one data set at three
-    resolutions, so a coarse-grid filter must see the Earth its fine-grid truth flies over.
+    reversed here, so that they are the 1°×1.25° map averaged over their cells (checked
+    against the area-weighted 1°×1.25° map, docs/measurements.md "Coarse TOMS grids").
+    O'Keefe (2015) §4.4 uses the three grids as one data set at three resolutions, so a
+    coarse-grid filter must see the Earth its fine-grid truth flies over.
 
     Raises :class:`InputError` (naming the file and field) for a missing file, unparsable
     numbers, a wrong shape, NaN, or values outside [0, 1] (0–100 % for TOMS).

@@ -381,7 +381,8 @@ def _faults_section(faults) -> list[str]:
             "fails CSS 1 in the three modes on copies of one simulated truth, and runs the "
             "thesis-variant filter with the §5.2 detector (100-sample averaged NIS, thresholds "
             "3.0/1.2/1.2) and our robust filter (output noise inside the scale factors, as in "
-            "eq. 2.21) with our detectors (χ²-bounded 50-sample averaged NIS from 600 s, the "
+            "eq. 2.21; a coarse grid's irradiance integrated on 2.5° sub-cells) with our "
+            "detectors (χ²-bounded 50-sample averaged NIS from 600 s, the "
             "bound widened by the share of the innovation variance that is the coarse grids' "
             "correlated representation error; dark-sensor test) on the same data. False "
             "detections: "
@@ -653,7 +654,8 @@ def _tables4_section(b) -> list[str]:
         return out + ["Not run (`python benchmarks/css_tables_4.py`).", ""]
     th = b["thesis"]
     out += [f"`benchmarks/css_tables_4.py` (seed {b['seed']}; one case, like the tables; thesis "
-            f"variant of §4.2-4.3, then our robust filters on the same case). Thesis / ours.", "",
+            f"variant of §4.2-4.3, then our robust filters on the same case; theirs integrate a "
+            f"coarse grid on 2.5° sub-cells). Thesis / ours.", "",
             "| table | filter | 3σ C | 3σ θ (deg) | 3σ φ (deg) | errors inside 3σ |",
             "|---|---|---|---|---|---|"]
 
