@@ -20,7 +20,8 @@ def _cmd_reproduction(args) -> int:
     sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
                 css_section(list(args.css or []), timing=args.css_timing,
                             tables4=args.css_tables4, sun_models=args.css_sun_models,
-                            table44=args.css_table44, faults=list(args.css_faults or []))]
+                            table44=args.css_table44, faults=list(args.css_faults or []),
+                            vmm=args.css_vmm)]
     write_reproduction(args.output, sections)
     n = len(load_summaries(dirs))
     n_css = len(args.css or [])
@@ -49,6 +50,8 @@ def register(sub) -> None:
                    "(O'Keefe Tables 5.1-5.2; repeatable)")
     p.add_argument("--css-sun-models", default=None, metavar="FILE",
                    help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
+    p.add_argument("--css-vmm", default=None, metavar="FILE",
+                   help="JSON of 'lightcurve css vmm -o FILE' (DiGregorio's VMM vs SMM)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",
                    help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.7/10.8)")
     add_output(p, what="file", default="docs/reproduction.md",

@@ -46,7 +46,8 @@ sensors are used when
 their *predicted* output exceeds ``threshold`` (selecting on the noisy measured output would
 bias weak-signal innovations) or their output exceeds 3 × ``threshold`` (so a badly predicted
 sensor cannot lock itself out), and the model predicts light on them, except near the FOV
-edge (``fov_edge_margin`` in cosine, widened by the 3σ uncertainty of the normal); a per-sensor
+edge (``fov_edge_margin`` in cosine, widened by the 3σ uncertainty of the normal) or, inside
+the FOV, near the structure-horizon plane (the same margin); a per-sensor
 innovation gate (``gate_sensor``, χ²₁) rejects outliers; when the NIS of the accepted set
 exceeds ``gate × m`` the whole R is inflated by ``NIS/(gate m)`` (at most ``inflate_max``).
 
@@ -321,6 +322,16 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
     return _selected_update(x, P, nu, Hm, R, N, np.inf, 1.0)
 
 
+@numba.njit(cache=True, inline="always")
+def _near_plane(normal, v, margin):
+    """True when the unit vector ``v`` lies within ``margin`` (cosine of the angle to the
+    normal) of the plane with normal ``normal``; False for a zero normal (no plane)."""
+    nn = normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]
+    if nn <= 0.0:
+        return False
+    return abs(normal[0] * v[0] + normal[1] * v[1] + normal[2] * v[2]) < margin * np.sqrt(nn)
+
+
 @numba.njit(cache=True)
 def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E,
                           s_E, cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
@@ -370,6 +381,7 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
     h, H, D, A, cosd, Aedge = calibration_measurement_nb(
         x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
         lat_c, nlat, nlon, lon_w0, dlon, dlat_max, mk)
+    s_B = mv3_nb(mrp2dcm_nb(x[0:3].copy()), s_N)
     in_scale = prm.shape[0] > 22 and prm[22] > 0.5
     want_c = c_out.shape[0] == N
     # the albedo map's spread (TOMS σ per cell): a time-correlated error of the modelled albedo
@@ -400,6 +412,8 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         u_out[k] = np.nan
         if lit > 0.0 and abs(cosd[k] - cos_fov[k]) < mk[k]:
             continue  # Sun at the FOV edge: the cut-off makes the model unreliable
+        if lit > 0.0 and cosd[k] > cos_fov[k] and _near_plane(horizon_B[k], s_B, margin):
+            continue  # Sun at the structure horizon inside the FOV: the same kind of step
         u_out[k] = D[k] + A[k]
         pred = h[k] > thr
         # selection on the *prediction*: selecting on the noisy output (y > thr) would bias
@@ -550,7 +564,9 @@ class CalibrationParams:
     Sun cosine lies within this distance (plus ``fov_edge_sigmas`` × sin ψ × the 1σ direction
     uncertainty of the sensor normal, √(P_δαδα + P_δεδε)) of the FOV cut-off cos ψ are skipped (the step of
     the output at the edge, ≈ cos ψ, makes small attitude/misalignment errors look like huge
-    innovations); use_albedo: full (True) or reduced (False)
+    innovations), and so are sensors whose Sun, inside the FOV, lies within
+    ``fov_edge_margin`` of their structure-horizon plane (§2.2.1; the output steps there
+    from the full n̂·ŝ to 0); use_albedo: full (True) or reduced (False)
     filter; albedo_grid_frac, albedo_grid_floor: representation error of a coarse albedo
     grid added to R as 1σ = g (albedo_grid_frac · A + albedo_grid_floor) for sensors with
     modelled albedo A > 0 (0 when the filter's grid is the truth's; values for a CERES grid

@@ -423,3 +423,38 @@ def test_robust_filter_integrates_the_coarse_toms_grids_on_sub_cells():
             k_centre, _ = albedo_grid_error(AlbedoCells.from_map(m0), fine, n_geometries=100,
                                             fov_half_angle_deg=60.0)
             assert prm.albedo_grid_frac < 0.3 * k_centre
+
+
+def test_sun_at_the_structure_horizon_is_not_evaluated():
+    """A directly lit sensor whose Sun lies within ``fov_edge_margin`` (cosine) of its
+    structure-horizon plane (O'Keefe §2.2.1) is skipped like one at the FOV edge: the output
+    steps there from n̂·ŝ to 0, so a hair's attitude error gives an innovation of the whole
+    output.  0.5° from the plane (0.0087 < 0.03): no innovation and no gain-free prediction;
+    10° from it: evaluated; no plane (zero normal): evaluated."""
+    from lightcurve.core.rotations import mrp2dcm_nb
+    from lightcurve.css.calibration import calibration_update_nb
+
+    rng = np.random.default_rng(5)
+    geom = _update_geometry()
+    css, cells, az0, el0, cf, hor, r_E, s_E, theta, s_N = geom
+    N = css.n_sensors
+    x, P, h, D, A = _state_with_albedo_lit(css, rng, geom, 1)
+    k = int(np.argmax(D))
+    assert D[k] > 0.6   # directly lit, well inside the FOV
+    s_B = mrp2dcm_nb(x[0:3].copy()) @ s_N
+    u = np.cross(s_B, [0.0, 0.0, 1.0])
+    u /= np.linalg.norm(u)
+    prm = CalibrationParams().as_array()
+    res = {}
+    for label, beta_deg in (("near", 0.5), ("clear", 10.0), ("none", None)):
+        hz = hor.copy()
+        if beta_deg is not None:   # plane normal at beta from the plane: Sun on the lit side
+            b = np.radians(beta_deg)
+            hz[k] = np.cos(b) * u + np.sin(b) * s_B
+        nu, sv, uu = np.empty(N), np.empty(N), np.empty(N)
+        calibration_update_nb(x.copy(), P.copy(), h.copy(), prm, az0, el0, cf, hz, s_N, 1.0,
+                              theta, r_E, s_E, *cells.args(), nu, sv, uu)
+        res[label] = (nu[k], uu[k])
+    assert np.isnan(res["near"][0]) and np.isnan(res["near"][1])
+    for label in ("clear", "none"):
+        assert np.isfinite(res[label][0]) and np.isclose(res[label][1], D[k] + A[k])

@@ -248,6 +248,9 @@ def test_vmm_output_feeds_the_reproduction_section(tmp_path, capsys):
     assert "| 1 or 2 | 10 | 2.000 / 3.000 | 0.500 / 0.800 | 0.25 |" in txt
     assert ("median attitude error VMM 0.500° vs SMM 2.000° — **agrees** (40 runs: "
             "indicative)") in txt
+    md = tmp_path / "r.md"   # the same through `lightcurve reproduction --css-vmm`
+    assert main(["reproduction", "--css-vmm", str(out), "-o", str(md)]) == 0
+    assert "| 1 or 2 | 10 | 2.000 / 3.000 | 0.500 / 0.800 | 0.25 |" in md.read_text()
     d["lt3"] = {**st, "vmm_median_deg": 2.5}
     out.write_text(json.dumps(d))
     assert "VMM 2.500° vs SMM 2.000° — **disagrees**" in css_section([], vmm=out)
