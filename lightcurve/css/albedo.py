@@ -28,7 +28,7 @@ __all__ = [
     "albedo_on_sensors_nb", "albedo_cells_nb", "cell_irradiance_nb", "earth_rotation_angle",
     "albedo_sun_frame_nb", "expected_albedo_nb", "albedo_phi_nb", "sun_nadir_axis_nb",
     "TOMS_GRIDS", "load_toms", "draw_albedo_map", "AlbedoCells", "albedo_vectors_nb",
-    "albedo_coefficient_cov_nb",
+    "albedo_coefficient_cov_nb", "cap_cells_nb", "cells_vectors_nb", "cells_coefficient_cov_nb",
 ]
 
 
@@ -256,19 +256,20 @@ def _cap_row_columns(lat_i, phi, lon, cos_l, nlon, lon_w0, dlon):
 
 
 @numba.njit(cache=True)
-def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
-                      r_E, s_E, nE, cos_fov, hE, edge_m):
-    """Per-sensor albedo vector sums V_κ = Σ a_j ĉ_j (Earth-fixed, (N,3)) over the cells that
-    are sunlit, in view of the spacecraft and inside sensor κ's FOV (normals nE (N,3),
-    structure-horizon normals hE (N,3), Earth-fixed).  Only rows/columns of the cap visible
-    from r_E (m) are visited.  ``edge_m`` (N,): cosine margin about each FOV cut-off; the
-    irradiance Σ a_j c_j of the cells inside that band (whose membership is uncertain) is
-    returned as ``A_edge``.  Returns (V (N,3), A_edge (N,), number of cells evaluated)."""
-    N = nE.shape[0]
-    V = np.zeros((N, 3))
-    Aedge = np.zeros(N)
+def cap_cells_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max, r_E,
+                 s_E, sig_area=np.zeros(0)):
+    """The cells of a gridded map (:class:`AlbedoCells`) that are sunlit and in view of the
+    spacecraft at ``r_E`` (m) with the unit Sun direction ``s_E`` (both Earth-fixed): their
+    irradiance ratios a_j (eq. 2.15) and unit spacecraft→cell directions, in grid order.
+
+    Only the rows and columns of the cap visible from ``r_E`` are visited
+    (:func:`_cap_row_columns`).  ``sig_area`` (cells,): σ_j A_j of the map's spread (m²),
+    optional; gives ``w_j = a_j σ_j / ρ_j`` (the irradiance per unit albedo times σ_j; 0
+    where σ_j A_j ≤ 0).  Returns (U (m,3), a (m,), w (m,), m, number of cells evaluated:
+    those of the cap with ρ_j A_j > 0)."""
+    n_cap = 0
     if nlat == 0:
-        return V, Aedge, 0
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0), 0, 0
     rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
     lam0 = np.arccos(min(1.0, 6356752.0 / rn))  # visible cap half angle (polar radius: safe)
     phi = np.arcsin(r_E[2] / rn)
@@ -276,31 +277,133 @@ def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dl
     lo = phi - lam0 - dlat_max
     hi = phi + lam0 + dlat_max
     cos_l = np.cos(min(np.pi, lam0 + dlat_max + 0.01))
+    for i in range(nlat):
+        if lat_c[i] < lo or lat_c[i] > hi:
+            continue
+        c0, ncol = _cap_row_columns(lat_c[i], phi, lon, cos_l, nlon, lon_w0, dlon)
+        n_cap += ncol
+    U = np.empty((n_cap, 3))
+    a_out = np.empty(n_cap)
+    w_out = np.zeros(n_cap)
+    with_sig = sig_area.shape[0] == rho_area.shape[0]
+    m = 0
     count = 0
     for i in range(nlat):
         if lat_c[i] < lo or lat_c[i] > hi:
             continue
         c0, ncol = _cap_row_columns(lat_c[i], phi, lon, cos_l, nlon, lon_w0, dlon)
         for cc in range(ncol):
-            jc = (c0 + cc) % nlon
-            j = i * nlon + jc
+            j = i * nlon + (c0 + cc) % nlon
             if rho_area[j] <= 0.0:
                 continue
             count += 1
             a, ux, uy, uz = cell_irradiance_nb(centers, cnormals, rho_area, j, r_E, s_E)
             if a == 0.0:
                 continue
+            U[m, 0] = ux
+            U[m, 1] = uy
+            U[m, 2] = uz
+            a_out[m] = a
+            if with_sig and sig_area[j] > 0.0:
+                w_out[m] = a / rho_area[j] * sig_area[j]
+            m += 1
+    return U, a_out, w_out, m, count
+
+
+@numba.njit(cache=True)
+def cells_vectors_nb(U, a, m, nE, cos_fov, hE, edge_m):
+    """Per-sensor albedo vector sums V_κ = Σ a_j û_j (N,3) over the first ``m`` cells of
+    :func:`cap_cells_nb` that lie inside sensor κ's FOV (cosine above ``cos_fov[κ]`` and
+    positive) and in front of its structure horizon (``hE[κ]·û ≥ 0``; a zero row: none),
+    and ``A_edge`` (N,): Σ a_j c_j of the cells whose cosine lies within ``edge_m[κ]`` of the
+    cut-off (their FOV membership is uncertain).  Normals ``nE`` and horizons ``hE`` in the
+    cells' axes.  The sensors are the inner loop (vectorised); each sum runs over the cells
+    in grid order."""
+    N = nE.shape[0]
+    nx = np.ascontiguousarray(nE[:, 0])
+    ny = np.ascontiguousarray(nE[:, 1])
+    nz = np.ascontiguousarray(nE[:, 2])
+    hx = np.ascontiguousarray(hE[:, 0])
+    hy = np.ascontiguousarray(hE[:, 1])
+    hz = np.ascontiguousarray(hE[:, 2])
+    vx = np.zeros(N)
+    vy = np.zeros(N)
+    vz = np.zeros(N)
+    ae = np.zeros(N)
+    for j in range(m):
+        ux, uy, uz, aj = U[j, 0], U[j, 1], U[j, 2], a[j]
+        for k in range(N):
+            c = nx[k] * ux + ny[k] * uy + nz[k] * uz
+            hd = hx[k] * ux + hy[k] * uy + hz[k] * uz
+            # bitwise & (no short circuit) keeps the sensor loop branch-free
+            ae[k] += aj * c if (c > 0.0) & (abs(c - cos_fov[k]) < edge_m[k]) else 0.0
+            w = aj if (c >= cos_fov[k]) & (c > 0.0) & (hd >= 0.0) else 0.0
+            vx[k] += w * ux
+            vy[k] += w * uy
+            vz[k] += w * uz
+    V = np.empty((N, 3))
+    for k in range(N):
+        V[k, 0] = vx[k]
+        V[k, 1] = vy[k]
+        V[k, 2] = vz[k]
+    return V, ae
+
+
+@numba.njit(cache=True)
+def cells_coefficient_cov_nb(U, w, m, nE, cos_fov, hE, diag_only=False):
+    """Covariance (N,N) of the albedo irradiance on the sensors from the spread of the
+    cells' albedo coefficients (O'Keefe 2015 eq. 4.27 ν_α, eq. 4.30b), ``Σ_j w_j² c_ij c_kj``
+    over the first ``m`` cells of :func:`cap_cells_nb` (``w`` its σ-weighted irradiance per
+    unit albedo) inside both sensors' FOV and in front of their structure horizons (as
+    :func:`cells_vectors_nb`); c_ij the cosine on sensor i.  ``diag_only``: the variances
+    only.  The sensors are the inner loops; each sum runs over the cells in grid order."""
+    N = nE.shape[0]
+    Ra = np.zeros((N, N))
+    nx = np.ascontiguousarray(nE[:, 0])
+    ny = np.ascontiguousarray(nE[:, 1])
+    nz = np.ascontiguousarray(nE[:, 2])
+    hx = np.ascontiguousarray(hE[:, 0])
+    hy = np.ascontiguousarray(hE[:, 1])
+    hz = np.ascontiguousarray(hE[:, 2])
+    cvec = np.zeros(N)
+    for j in range(m):
+        wj = w[j]
+        if wj == 0.0:
+            continue
+        ux, uy, uz = U[j, 0], U[j, 1], U[j, 2]
+        anyc = False
+        for k in range(N):
+            c = nx[k] * ux + ny[k] * uy + nz[k] * uz
+            hd = hx[k] * ux + hy[k] * uy + hz[k] * uz
+            ok = (c >= cos_fov[k]) & (c > 0.0) & (hd >= 0.0)
+            cvec[k] = wj * c if ok else 0.0
+            anyc = anyc | ok
+        if not anyc:
+            continue
+        if diag_only:
             for k in range(N):
-                c = nE[k, 0] * ux + nE[k, 1] * uy + nE[k, 2] * uz
-                if c > 0.0 and abs(c - cos_fov[k]) < edge_m[k]:
-                    Aedge[k] += a * c
-                if c < cos_fov[k] or c <= 0.0:
-                    continue
-                if hE[k, 0] * ux + hE[k, 1] * uy + hE[k, 2] * uz < 0.0:
-                    continue
-                V[k, 0] += a * ux
-                V[k, 1] += a * uy
-                V[k, 2] += a * uz
+                Ra[k, k] += cvec[k] * cvec[k]
+        else:
+            for k in range(N):
+                ck = cvec[k]
+                if ck != 0.0:
+                    for mm in range(N):
+                        Ra[k, mm] += ck * cvec[mm]
+    return Ra
+
+
+@numba.njit(cache=True)
+def albedo_vectors_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+                      r_E, s_E, nE, cos_fov, hE, edge_m):
+    """Per-sensor albedo vector sums V_κ = Σ a_j ĉ_j (Earth-fixed, (N,3)) over the cells that
+    are sunlit, in view of the spacecraft and inside sensor κ's FOV (normals nE (N,3),
+    structure-horizon normals hE (N,3), Earth-fixed): :func:`cap_cells_nb` then
+    :func:`cells_vectors_nb`.  ``edge_m`` (N,): cosine margin about each FOV cut-off; the
+    irradiance Σ a_j c_j of the cells inside that band (whose membership is uncertain) is
+    returned as ``A_edge``.  Returns (V (N,3), A_edge (N,), number of cells evaluated)."""
+    U, a, _, m, count = cap_cells_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0,
+                                     dlon, dlat_max, r_E, s_E)
+    V, Aedge = cells_vectors_nb(U, a, m, nE, cos_fov, hE, edge_m)
     return V, Aedge, count
 
 
@@ -310,14 +413,12 @@ def albedo_coefficient_cov_nb(centers, cnormals, rho_area, sig_area, lat_c, nlat
     """Covariance (N,N) of the albedo irradiance on the sensors caused by the uncertainty of
     the cells' albedo coefficients (O'Keefe 2015 eq. 4.27 ν_α, eq. 4.30b): with the TOMS
     standard deviation σ_j of cell j (``sig_area`` = σ_j A_j, m²) and its irradiance per unit
-    albedo w_j = cos(sun) cos(view)/(π d²), ``Σ_j σ_j² A_j² w_j² c_ij c_kj`` over the sunlit cells
-    in view and inside both sensors' FOV (c_ij the cosine on sensor i; structure horizons
-    ``hE``).  Units of the solar irradiance squared, before the sensor scale factors.
-    ``diag_only``: only the variances (the diagonal; the rest stays zero)."""
-    N = nE.shape[0]
-    Ra = np.zeros((N, N))
-    if nlat == 0:
-        return Ra
+    albedo cos(sun) cos(view)/(π d²), :func:`cells_coefficient_cov_nb` over the sunlit cells
+    in view (:func:`cap_cells_nb`).  Units of the solar irradiance squared, before the sensor
+    scale factors.  ``diag_only``: only the variances (the diagonal; the rest stays zero)."""
+    U, _, w, m, _ = cap_cells_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon,
+                                 dlat_max, r_E, s_E, sig_area)
+    return cells_coefficient_cov_nb(U, w, m, nE, cos_fov, hE, diag_only)
     rn = np.sqrt(r_E[0] ** 2 + r_E[1] ** 2 + r_E[2] ** 2)
     lam0 = np.arccos(min(1.0, 6356752.0 / rn))
     phi = np.arcsin(r_E[2] / rn)

@@ -70,8 +70,9 @@ from ..core.kalman import joseph_update_nb
 from ..core.rotations import euler321_to_dcm_nb, mrp2dcm_nb, mrp_dcm_vec_jac_nb
 from ..estimation.rng import as_generator
 from ..rotations import quat_mult, quat_to_mrp, rotvec_to_quat
-from .albedo import (AlbedoCells, AlbedoMap, albedo_coefficient_cov_nb, albedo_vectors_nb,
-                     builtin_albedo_map, earth_rotation_angle)
+from .albedo import (AlbedoCells, AlbedoMap, albedo_vectors_nb, builtin_albedo_map,
+                     cap_cells_nb, cells_coefficient_cov_nb, cells_vectors_nb,
+                     earth_rotation_angle)
 from .attitude_ekf import (mrp_apply_correction_nb, mrp_propagate_nb, mtv3_nb, mv3_nb,
                            star_tracker_update_nb)
 from .sensors import CSSArray, normal_to_azel
@@ -100,6 +101,18 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
     theta Earth rotation angle (rad); r_E, s_E spacecraft position (m) and unit Sun
     direction, Earth-fixed; the rest: :meth:`AlbedoCells.args`.
     """
+    U, a, _, m, _ = cap_cells_nb(cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
+                                 dlat_max, r_E, s_E)
+    return _measurement_cells_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, U, a, m,
+                                 edge_m)
+
+
+@numba.njit(cache=True)
+def _measurement_cells_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, U, a_cells, mc,
+                          edge_m):
+    """:func:`calibration_measurement_nb` on the sunlit cells in view already found
+    (:func:`~lightcurve.css.albedo.cap_cells_nb`: directions U, irradiance ratios a_cells,
+    count mc; Earth-fixed)."""
     N = az0.shape[0]
     n = x.shape[0]
     s = x[0:3].copy()
@@ -124,15 +137,14 @@ def calibration_measurement_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit, theta,
     # albedo vector sums (Earth-fixed -> inertial)
     V_N = np.zeros((N, 3))
     Aedge = np.zeros(N)
-    if nlat > 0:
+    if mc > 0:
         nE = np.empty((N, 3))
         hE = np.empty((N, 3))
         E = euler321_to_dcm_nb(np.array([theta, 0.0, 0.0]))   # ECI → Earth-fixed, R3(θ)
         for k in range(N):
             nE[k] = mv3_nb(E, mtv3_nb(C, nb[k]))
             hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
-        V_E, Aedge, _ = albedo_vectors_nb(cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0,
-                                          dlon, dlat_max, r_E, s_E, nE, cos_fov, hE, edge_m)
+        V_E, Aedge = cells_vectors_nb(U, a_cells, mc, nE, cos_fov, hE, edge_m)
         for k in range(N):
             V_N[k] = mtv3_nb(E, V_E[k])
     Js = mrp_dcm_vec_jac_nb(s, s_N)
@@ -238,17 +250,17 @@ def _selected_update(x, P, nu, Hm, R, N, gate, infl_max):
 
 
 @numba.njit(cache=True)
-def _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c, cells_n,
-                       cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon, dlat_max,
+def _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, U, w, mc, have_sig,
                        diag_only=False):
     """(N,N) covariance of the albedo irradiance on the sensors from the spread of the cells'
-    albedo coefficients (O'Keefe eq. 4.30b, :func:`albedo_coefficient_cov_nb`) at the
-    estimated attitude and misalignments, before the scale factors; zeros without a spread
-    map (``cells_sig`` empty), without cells, or in the shadow; ``diag_only``: the variances
-    only (what a diagonal R needs)."""
+    albedo coefficients (O'Keefe eq. 4.30b, :func:`cells_coefficient_cov_nb` on the sunlit
+    cells in view U, σ-weighted irradiances w, count mc of
+    :func:`~lightcurve.css.albedo.cap_cells_nb`) at the estimated attitude and misalignments,
+    before the scale factors; zeros without a spread map (``have_sig`` False), without cells,
+    or in the shadow; ``diag_only``: the variances only (what a diagonal R needs)."""
     N = az0.shape[0]
     Ra = np.zeros((N, N))
-    if cells_sig.shape[0] == cells_ra.shape[0] and nlat > 0 and lit > 0.0:
+    if have_sig and mc > 0 and lit > 0.0:
         C = mrp2dcm_nb(x[0:3].copy())
         nE = np.empty((N, 3))
         hE = np.empty((N, 3))
@@ -259,9 +271,7 @@ def _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, ce
             nb = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
             nE[k] = mv3_nb(E, mtv3_nb(C, nb))
             hE[k] = mv3_nb(E, mtv3_nb(C, horizon_B[k]))
-        Ra = albedo_coefficient_cov_nb(cells_c, cells_n, cells_ra, cells_sig, lat_c, nlat, nlon,
-                                       lon_w0, dlon, dlat_max, r_E, s_E, nE, cos_fov, hE,
-                                       diag_only)
+        Ra = cells_coefficient_cov_nb(U, w, mc, nE, cos_fov, hE, diag_only)
     return Ra
 
 
@@ -280,12 +290,12 @@ def _thesis_update(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, theta, 
             s_out[k] = np.nan
             u_out[k] = np.nan
         return 0, np.nan, 1.0
-    h, H, D, A, cosd, _ = calibration_measurement_nb(
-        x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
-        lat_c, nlat, nlon, lon_w0, dlon, dlat_max, np.zeros(N))
-    Ra = _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c,
-                            cells_n, cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon,
-                            dlat_max)
+    U, a, w, mc, _ = cap_cells_nb(cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
+                                  dlat_max, r_E, s_E, cells_sig)
+    h, H, D, A, cosd, _ = _measurement_cells_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit,
+                                                theta, U, a, mc, np.zeros(N))
+    Ra = _albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, U, w, mc,
+                            cells_sig.shape[0] == cells_ra.shape[0])
     idx = np.empty(N, dtype=np.int64)
     m = 0
     for k in range(N):
@@ -378,17 +388,18 @@ def calibration_update_nb(x, P, y, prm, az0, el0, cos_fov, horizon_B, s_N, lit, 
         ia = 6 + N + 2 * k
         sin_fov = np.sqrt(max(0.0, 1.0 - cos_fov[k] * cos_fov[k]))
         mk[k] = margin + prm[14] * sin_fov * np.sqrt(P[ia, ia] + P[ia + 1, ia + 1])
-    h, H, D, A, cosd, Aedge = calibration_measurement_nb(
-        x, az0, el0, cos_fov, horizon_B, s_N, lit, theta, r_E, s_E, cells_c, cells_n, cells_ra,
-        lat_c, nlat, nlon, lon_w0, dlon, dlat_max, mk)
+    want_sig = prm.shape[0] > 23 and prm[23] > 0.5
+    U, a, w, mc, _ = cap_cells_nb(cells_c, cells_n, cells_ra, lat_c, nlat, nlon, lon_w0, dlon,
+                                  dlat_max, r_E, s_E, cells_sig if want_sig else np.zeros(0))
+    h, H, D, A, cosd, Aedge = _measurement_cells_nb(x, az0, el0, cos_fov, horizon_B, s_N, lit,
+                                                    theta, U, a, mc, mk)
     s_B = mv3_nb(mrp2dcm_nb(x[0:3].copy()), s_N)
     in_scale = prm.shape[0] > 22 and prm[22] > 0.5
     want_c = c_out.shape[0] == N
     # the albedo map's spread (TOMS σ per cell): a time-correlated error of the modelled albedo
-    Ra = (_albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, r_E, s_E, cells_c,
-                             cells_n, cells_ra, cells_sig, lat_c, nlat, nlon, lon_w0, dlon,
-                             dlat_max, True)
-          if prm.shape[0] > 23 and prm[23] > 0.5 else np.zeros((N, N)))
+    Ra = (_albedo_spread_cov(x, az0, el0, cos_fov, horizon_B, lit, theta, U, w, mc,
+                             cells_sig.shape[0] == cells_ra.shape[0], True)
+          if want_sig else np.zeros((N, N)))
     idx = np.empty(N, dtype=np.int64)
     Rk = np.empty(N)
     Rc = np.zeros(N)
@@ -455,6 +466,21 @@ def _consider_propagate(x, P, N, dt, tau, sig_b):
         P[i, i] += q
 
 
+@numba.njit(cache=True)
+def _propagate_sample_nb(x, P, W, j0, sub, dt, arw, rrw, qp, N, tau, sig_b):
+    """Time update over one CSS sample interval ``dt`` (s), in place: ``sub`` gyro steps of
+    :func:`~lightcurve.css.attitude_ekf.mrp_propagate_nb` with the samples ``W[j0:j0+sub]``,
+    the random walk ``qp`` (density) on the scale-factor and misalignment variances, and the
+    Gauss-Markov decay of the considered albedo errors (:func:`_consider_propagate`)."""
+    h = dt / sub
+    for j in range(sub):
+        mrp_propagate_nb(x, P, W[j0 + j], h, arw, rrw, 0.0)
+    if qp > 0.0:
+        for i in range(6, 6 + 3 * N):
+            P[i, i] += qp * dt
+    _consider_propagate(x, P, N, dt, tau, sig_b)
+
+
 def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0, P0, prm,
                          az0, el0, cos_fov, horizon_B, cells_args, cells_sig=None, timings=None):
     """Whole-recording loop: propagate with the gyro, star-tracker update, CSS update.
@@ -468,8 +494,9 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     ``W`` holds one gyro sample per interval (K,3), or ``sub`` samples per interval
     ((K−1)·sub, 3: propagation at the gyro rate, e.g. 10 Hz for 2 Hz CSS samples, §2.4).
 
-    A Python loop over the compiled per-step kernels (≈10 µs of call overhead per sample;
-    no separate whole-loop kernel to compile).  Returns X (K,n), Pdiag (K,n), P_end (n,n),
+    A Python loop over the compiled per-sample kernels (:func:`_propagate_sample_nb`, the
+    star-tracker update, :func:`calibration_update_nb`; no separate whole-loop kernel to
+    compile).  Returns X (K,n), Pdiag (K,n), P_end (n,n),
     nis (K,), m (K,), NU (K,N), S (K,N), nis_st (K,), U (K,N) gain-free predicted irradiance,
     C (K,N) the time-correlated part of S (see :func:`calibration_update_nb`).
     """
@@ -494,7 +521,6 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
     s_k = np.empty(N)
     u_k = np.empty(N)
     c_k = np.empty(N)
-    iq = np.arange(6, 6 + 3 * N)
     sub = 1 if W.shape[0] == K else max(1, W.shape[0] // max(K - 1, 1))
     sig_cells = np.zeros(0) if cells_sig is None else np.ascontiguousarray(cells_sig)
     init = np.zeros(N) if prm.shape[0] > 17 and prm[17] > 0.5 else np.zeros(0)
@@ -509,11 +535,7 @@ def run_calibration_loop(t, Y, W, sun_N, lit, theta, r_E, s_E, QST, stvalid, x0,
             if timed:
                 t0 = perf_counter()
             dt = t[k] - t[k - 1]
-            for j in range(sub):
-                mrp_propagate_nb(x, P, W[(k - 1) * sub + j], dt / sub, arw, rrw, 0.0)
-            if qp > 0.0:
-                P[iq, iq] += qp * dt
-            _consider_propagate(x, P, N, dt, tau, sig_b)
+            _propagate_sample_nb(x, P, W, (k - 1) * sub, sub, dt, arw, rrw, qp, N, tau, sig_b)
             if timed:
                 t_prop[(k - 1) * sub:k * sub] = (perf_counter() - t0) * 1e6 / sub
         if stvalid[k]:

@@ -350,6 +350,9 @@ def _merge_outputs(a: dict, b: dict, path) -> dict:
             det.setdefault(v, d)
     out["detectors"] = det
     out["thesis_results"] = {**a.get("thesis_results", {}), **b.get("thesis_results", {})}
+    # the parts ran the same runs: one run of the whole table costs the parts' sum
+    ca, cb = a.get("cpu_s_per_run"), b.get("cpu_s_per_run")
+    out["cpu_s_per_run"] = ca + cb if ca is not None and cb is not None else None
     return out
 
 
@@ -400,7 +403,7 @@ def _faults_section(faults) -> list[str]:
             continue
         th = s["thesis_results"]
         vs = s["variants"]
-        out.append(f"{s['runs']} runs (thesis: 500), seed {s['seed']}.")
+        out.append(f"{s['runs']} runs (thesis: 500), seed {s['seed']}." + _run_cost(s))
         out.append("")
         head = "| grid | failure | thesis: false | thesis: correct |"
         sep = "|---|---|---|---|"
@@ -453,6 +456,21 @@ def _faults_section(faults) -> list[str]:
         out.append("")
     out += _fault_ablations(faults)
     return out
+
+
+def _run_cost(s) -> str:
+    """What one run of a fault table costs (its ``cpu_s_per_run``, absent in older outputs)
+    and the most runs that fit in 30 minutes on 2 cores (the issue's budget where the
+    thesis's 500 do not fit)."""
+    c = s.get("cpu_s_per_run")
+    if not c:
+        return ""
+    vs = " and ".join(s.get("variants", []))
+    return (f" One run ({vs} variant{'s' if len(s.get('variants', [])) > 1 else ''}, every "
+            f"grid and failure mode) takes {c:.1f} CPU-s: "
+            f"{s['runs']} runs are {s['runs'] * c / 120.0:.0f} min on 2 cores, the thesis's "
+            f"500 would be {500 * c / 120.0:.0f} min, and 30 min on 2 cores hold "
+            f"{int(3600.0 // c)} runs.")
 
 
 def _fault_ablations(faults) -> list[str]:

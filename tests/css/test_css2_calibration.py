@@ -94,6 +94,47 @@ def test_windowed_albedo_equals_brute_force(lat, lon):
         assert count < 0.1 * cells.nlat * cells.nlon
 
 
+@pytest.mark.parametrize("lat,lon,sun", [(0.0, 0.0, 30.0), (62.0, 179.5, 75.0),
+                                         (-88.0, -40.0, 10.0)])
+def test_cap_cell_sums_match_a_numpy_reference(lat, lon, sun):
+    """The calibration filter's albedo sums from the visible cap's cells (cap_cells_nb, then
+    cells_vectors_nb and cells_coefficient_cov_nb: eq. 2.15's vector sums, the FOV-edge band
+    and eq. 4.30b's spread covariance) equal a plain NumPy evaluation over every sunlit cell
+    in view of the truth grid (albedo_cells_in_view), with structure horizons, FOV cut-offs
+    and a 20 % spread of every cell's albedo."""
+    from lightcurve.css.albedo import (albedo_cells_in_view, cap_cells_nb,
+                                       cells_coefficient_cov_nb, cells_vectors_nb)
+
+    amap = builtin_albedo_map(2.0)
+    cells = AlbedoCells.from_map(amap)
+    r_E, s_E = _geometry(lat, lon, sun)
+    rng = np.random.default_rng(11)
+    N = 8
+    nE = rng.normal(size=(N, 3))
+    nE[0] = -r_E                                  # one sensor looking straight down
+    nE /= np.linalg.norm(nE, axis=1, keepdims=True)
+    hE = rng.normal(size=(N, 3))
+    hE[::3] = 0.0                                 # no structure horizon on some sensors
+    cf = np.cos(np.radians(rng.uniform(50.0, 80.0, N)))
+    edge = np.full(N, 0.05)
+    U, a, w, m, _ = cap_cells_nb(*cells.args(), r_E, s_E, 0.2 * cells.rho_area_m2)
+    V, Ae = cells_vectors_nb(U, a, m, nE, cf, hE, edge)
+    Ra = cells_coefficient_cov_nb(U, w, m, nE, cf, hE)
+    Rd = cells_coefficient_cov_nb(U, w, m, nE, cf, hE, True)
+    dirs, ratio = albedo_cells_in_view(amap.grid(), r_E, s_E)
+    assert m == ratio.size and m > 100
+    c = dirs @ nE.T                                # (cells, N) cosines on the sensors
+    inside = (c >= cf) & (c > 0.0) & (dirs @ hE.T >= 0.0)
+    V_ref = ((ratio[:, None] * inside).T @ dirs)
+    Ae_ref = np.sum(ratio[:, None] * c * ((c > 0.0) & (np.abs(c - cf) < edge)), axis=0)
+    W = 0.2 * ratio[:, None] * c * inside
+    assert np.sum(nE * V_ref, axis=1)[0] > 0.05 and np.any(Ae_ref > 0.0)
+    assert np.allclose(V, V_ref, rtol=1e-10, atol=1e-15)
+    assert np.allclose(Ae, Ae_ref, rtol=1e-10, atol=1e-15)
+    assert np.allclose(Ra, W.T @ W, rtol=1e-10, atol=1e-18)
+    assert np.array_equal(np.diag(Rd), np.diag(Ra)) and not np.any(Rd - np.diag(np.diag(Rd)))
+
+
 @pytest.fixture(scope="module")
 def case44():
     # §4.4: one orbit (5553 s), 1 s steps, tumbling 1 deg/s per axis, dual pyramid 70° FOV,

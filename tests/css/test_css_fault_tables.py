@@ -244,6 +244,7 @@ def test_one_run_of_table_5_1_end_to_end():
         assert row["false"] == len(r[v]["10x10"]["random"]["false"])
     assert o["detectors"]["thesis"]["10x10"] == {"window": 100, "threshold": 1.2}
     assert o["variants"] == ["thesis", "robust"] and o["failed_sensor"] == 1
+    assert o["workers"] == 1 and o["cpu_s_per_run"] > 0.0
 
 
 def test_generator_merges_a_table_computed_in_parts_by_grid(tmp_path):
@@ -254,7 +255,7 @@ def test_generator_merges_a_table_computed_in_parts_by_grid(tmp_path):
     from lightcurve.errors import InputError
     from lightcurve.studies.reproduction import css_section
 
-    def part(variant, grid, false):
+    def part(variant, grid, false, cpu_s):
         row = {"false": false, "false_total": 800, "correct": 90, "total": 100,
                "ttd_s": {"p50": 12.0}, "ttd_eval_s": {"p50": 1.5},
                "css1_max_avg": {"p10": 20.0, "p50": 40.0}, "nis_failed": []}
@@ -264,21 +265,26 @@ def test_generator_merges_a_table_computed_in_parts_by_grid(tmp_path):
                 "grids": [grid], "modes": ["off", "stuck", "random"], "variants": [variant],
                 "detectors": det,
                 "thesis_results": {grid: THESIS_RESULTS["table5_1"][grid]},
+                "cpu_s_per_run": cpu_s,
                 "tables": {variant: {grid: {m: row for m in ("off", "stuck", "random")}
                                      | {"nis_healthy": [],
                                         "healthy_max_avg": {"p50": 1.0, "p99": 2.0}}}}}
 
     files = {}
-    for v, g, n in (("thesis", "5x5", 3), ("thesis", "1p25x1", 2), ("robust", "1p25x1", 7),
-                    ("robust", "5x5", 9)):
+    for v, g, n, c in (("thesis", "5x5", 3, 1.5), ("thesis", "1p25x1", 2, 2.0),
+                       ("robust", "1p25x1", 7, 3.0), ("robust", "5x5", 9, 4.0)):
         files[v, g] = tmp_path / f"{v}_{g}.json"
-        files[v, g].write_text(json.dumps(part(v, g, n)))
+        files[v, g].write_text(json.dumps(part(v, g, n, c)))
     txt = css_section([], faults=list(files.values()))
     rows = [ln for ln in txt.splitlines() if ln.startswith("| 1°×1.25° | off")
             or ln.startswith("| 5°×5° | off")]
     assert len(rows) == 2 and rows[0].startswith("| 1°×1.25°")   # the thesis's grid order
     assert "| 2/800 (0.25 %) |" in rows[0] and "| 7/800 (0.88 %) |" in rows[0]
     assert "| 3/800 (0.38 %) |" in rows[1] and "| 9/800 (1.12 %) |" in rows[1]
+    # one run of the merged table costs the parts' sum: 10.5 CPU-s, 100 runs = 8.75 min
+    # on 2 cores, 500 = 43.75 min; 30 min on 2 cores = 3600 CPU-s hold 342 runs
+    assert ("takes 10.5 CPU-s: 100 runs are 9 min on 2 cores, the thesis's 500 would be "
+            "44 min, and 30 min on 2 cores hold 342 runs.") in txt
     with pytest.raises(InputError, match="same variant and grid"):
         css_section([], faults=[files["thesis", "5x5"], files["thesis", "5x5"]])
     with pytest.raises(InputError, match="lacks grids") as ei:
