@@ -356,13 +356,33 @@ def _merge_outputs(a: dict, b: dict, path) -> dict:
     return out
 
 
+def _split_fault_groups(groups: dict, faults: dict, files) -> None:
+    """Outputs of one table grouped by (experiment, runs, seed) into ``faults``: the group
+    with the most runs is the table; another group is kept (``faults["bases"]``) only as the
+    thesis-variant base of an ablation with its runs and seed, and refused otherwise."""
+    from ..errors import InputError
+
+    for exp in sorted({k[0] for k in groups}):
+        keys = sorted((k for k in groups if k[0] == exp), key=lambda k: -(k[1] or 0))
+        faults[exp] = groups[keys[0]]
+        for k in keys[1:]:
+            if not any((a["experiment"], a.get("runs"), a.get("seed")) == k
+                       for a in faults.get("ablations", [])):
+                raise InputError(f"a second output of {exp} with other runs or seed, and no "
+                                 "ablation of those runs: the parts of one table must come "
+                                 "from the same runs", file=", ".join(map(str, files)),
+                                 field="runs", value=f"{k[1]} (seed {k[2]})",
+                                 allowed=f"{keys[0][1]} (seed {keys[0][2]})")
+            faults.setdefault("bases", {})[k] = groups[k]
+
+
 def _check_complete(faults: dict, files) -> None:
     """Every variant of a merged fault table has every grid (a part left out is refused)."""
     from ..errors import InputError
 
-    for key, d in faults.items():
-        if key == "ablations":
-            continue
+    parts = [d for k, d in faults.items() if k not in ("ablations", "bases")]
+    for d in parts + list((faults.get("bases") or {}).values()):
+        key = d["experiment"]
         for v in d["variants"]:
             missing = [g for g in d["grids"] if g not in d["tables"].get(v, {})]
             if missing:
@@ -475,19 +495,24 @@ def _run_cost(s) -> str:
 
 def _fault_ablations(faults) -> list[str]:
     """Ablations of the thesis filter (``--thesis-filter``) beside the thesis-variant table of
-    the same experiment, runs and seed (run i flies the same spacecraft)."""
+    the same experiment, runs and seed (run i flies the same spacecraft): the main table's,
+    or an output of fewer runs given for that purpose (``faults["bases"]``)."""
     abl = faults.get("ablations") or []
     if not abl:
         return []
     out = ["#### Ablations of the thesis filter", "",
            "One setting of the thesis filter changed (`lightcurve css faults --experiment … "
-           "--variant thesis --thesis-filter NAME=VALUE`), same runs and seed as the table "
-           "above; false detections and correct detections, thesis variant → ablation.", "",
-           "| experiment | change | grid | failure | false | correct | median time to detection "
-           "(s) |", "|---|---|---|---|---|---|---|"]
+           "--variant thesis --thesis-filter NAME=VALUE`), on runs 0 to runs − 1 of the seed "
+           "of the table above; false detections and correct detections, thesis variant on "
+           "the same runs → ablation.", "",
+           "| experiment | change | runs | grid | failure | false | correct | median time to "
+           "detection (s) |", "|---|---|---|---|---|---|---|---|"]
+    bases = faults.get("bases") or {}
     for a in abl:
         base = faults.get(a["experiment"])
-        same = (base is not None and base["runs"] == a["runs"] and base["seed"] == a["seed"])
+        if base is None or base["runs"] != a["runs"] or base["seed"] != a["seed"]:
+            base = bases.get((a["experiment"], a["runs"], a["seed"]))
+        same = base is not None and "thesis" in base["tables"]
         change = ", ".join(f"`{k} = {v}`" for k, v in a["thesis_filter"].items())
         for g in a["grids"]:
             for m in a["modes"]:
@@ -500,7 +525,8 @@ def _fault_ablations(faults) -> list[str]:
 
                 t_new = _f((r["ttd_s"] or {}).get("p50"), ".1f")
                 t_old = _f(((b or {}).get("ttd_s") or {}).get("p50"), ".1f")
-                out.append(f"| {a['experiment']} | {change} | {_GRID_NAME.get(g, g)} | {m} | "
+                out.append(f"| {a['experiment']} | {change} | {a['runs']} | "
+                           f"{_GRID_NAME.get(g, g)} | {m} | "
                            f"{arrow('false', 'false_total')} | {arrow('correct', 'total')} | "
                            + (t_new if b is None else f"{t_old} → {t_new}") + " |")
     out.append("")
@@ -747,7 +773,7 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
     ``vmm``: the JSON of ``lightcurve css vmm -o FILE`` (DiGregorio) or None.
     Experiments without a folder are listed as not run."""
     studies = _load(study_dirs)
-    fault_files, faults = list(faults or ()), {}
+    fault_files, faults, groups = list(faults or ()), {}, {}
     for f in fault_files:
         from ..io.safe_open import read_json
 
@@ -760,10 +786,10 @@ def css_section(study_dirs, *, timing=None, tables4=None, sun_models=None,
                              value=d.get("experiment"), allowed=", ".join(_FAULT_TITLE))
         if d.get("thesis_filter"):
             faults.setdefault("ablations", []).append(d)
-        elif d["experiment"] in faults:
-            faults[d["experiment"]] = _merge_outputs(faults[d["experiment"]], d, f)
-        else:
-            faults[d["experiment"]] = d
+            continue
+        key = (d["experiment"], d.get("runs"), d.get("seed"))
+        groups[key] = _merge_outputs(groups[key], d, f) if key in groups else d
+    _split_fault_groups(groups, faults, fault_files)
     _check_complete(faults, fault_files)
     timing = _json_line(timing)
     tables4 = _json_line(tables4)

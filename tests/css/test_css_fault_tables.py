@@ -148,8 +148,23 @@ def test_cli_table_options_are_checked_and_the_generator_reads_the_output(tmp_pa
     summ["tables"]["thesis"]["1p25x1"]["stuck"] = {**row, "correct": 1}
     abl.write_text(json.dumps(summ))
     txt = css_section([], faults=[out, abl])
-    assert ("| table5_2 | `skip_in_shadow = True` | 1°×1.25° | stuck | 2/800 (0.25 %) → 2/800 "
-            "(0.25 %) | 5/100 (5.00 %) → 1/100 (1.00 %) | 12.0 → 12.0 |") in txt
+    assert ("| table5_2 | `skip_in_shadow = True` | 100 | 1°×1.25° | stuck | 2/800 (0.25 %) → "
+            "2/800 (0.25 %) | 5/100 (5.00 %) → 1/100 (1.00 %) | 12.0 → 12.0 |") in txt
+    # an ablation of fewer runs is shown against the thesis-variant output of those runs,
+    # which is not merged into the table; without that ablation it is refused
+    base50 = tmp_path / "b50.json"
+    base50.write_text(json.dumps({**{k: v for k, v in summ.items() if k != "thesis_filter"},
+                                  "runs": 50, "tables": {"thesis": {"1p25x1": {
+                                      **summ["tables"]["thesis"]["1p25x1"],
+                                      "stuck": {**row, "correct": 3, "total": 48}}}}}))
+    abl50 = tmp_path / "a50.json"
+    abl50.write_text(json.dumps({**summ, "runs": 50}))
+    txt = css_section([], faults=[out, base50, abl50])
+    assert ("| table5_2 | `skip_in_shadow = True` | 50 | 1°×1.25° | stuck | 2/800 (0.25 %) → "
+            "2/800 (0.25 %) | 3/48 (6.25 %) → 1/100 (1.00 %) | 12.0 → 12.0 |") in txt
+    assert "100 runs (thesis: 500), seed 0." in txt and "50 runs (thesis" not in txt
+    with pytest.raises(InputError, match="runs"):
+        css_section([], faults=[out, base50, abl])
 
 
 def test_thesis_filter_ablation_switches():
