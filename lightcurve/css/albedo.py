@@ -310,6 +310,14 @@ def cap_cells_nb(centers, cnormals, rho_area, lat_c, nlat, nlon, lon_w0, dlon, d
     return U, a_out, w_out, m, count
 
 
+@numba.njit(cache=True, inline="always")
+def _columns_nb(v):
+    """The three columns of an (N,3) array as contiguous (N,) arrays (the layout of the
+    sensor loops below)."""
+    return (np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]),
+            np.ascontiguousarray(v[:, 2]))
+
+
 @numba.njit(cache=True)
 def cells_vectors_nb(U, a, m, nE, cos_fov, hE, edge_m):
     """Per-sensor albedo vector sums V_κ = Σ a_j û_j (N,3) over the first ``m`` cells of
@@ -320,12 +328,8 @@ def cells_vectors_nb(U, a, m, nE, cos_fov, hE, edge_m):
     cells' axes.  The sensors are the inner loop (vectorised); each sum runs over the cells
     in grid order."""
     N = nE.shape[0]
-    nx = np.ascontiguousarray(nE[:, 0])
-    ny = np.ascontiguousarray(nE[:, 1])
-    nz = np.ascontiguousarray(nE[:, 2])
-    hx = np.ascontiguousarray(hE[:, 0])
-    hy = np.ascontiguousarray(hE[:, 1])
-    hz = np.ascontiguousarray(hE[:, 2])
+    nx, ny, nz = _columns_nb(nE)
+    hx, hy, hz = _columns_nb(hE)
     vx = np.zeros(N)
     vy = np.zeros(N)
     vz = np.zeros(N)
@@ -359,12 +363,8 @@ def cells_coefficient_cov_nb(U, w, m, nE, cos_fov, hE, diag_only=False):
     only.  The sensors are the inner loops; each sum runs over the cells in grid order."""
     N = nE.shape[0]
     Ra = np.zeros((N, N))
-    nx = np.ascontiguousarray(nE[:, 0])
-    ny = np.ascontiguousarray(nE[:, 1])
-    nz = np.ascontiguousarray(nE[:, 2])
-    hx = np.ascontiguousarray(hE[:, 0])
-    hy = np.ascontiguousarray(hE[:, 1])
-    hz = np.ascontiguousarray(hE[:, 2])
+    nx, ny, nz = _columns_nb(nE)
+    hx, hy, hz = _columns_nb(hE)
     cvec = np.zeros(N)
     for j in range(m):
         wj = w[j]
