@@ -1215,8 +1215,8 @@ def thesis_calibration_table(case: CalibrationCase, filters=("1p25x1", "5x5", "1
 
 def _calibration_mc_case(arg):
     """One Monte Carlo case of :func:`thesis_calibration_monte_carlo` (a pool task)."""
-    seed_seq, config, filters, variants, albedo_dir = arg
-    case = simulate_thesis_calibration_case(seed_seq, config)
+    seed_seq, config, filters, variants, albedo_dir, duration_s = arg
+    case = simulate_thesis_calibration_case(seed_seq, config, duration_s=duration_s)
     return {v: thesis_calibration_table(case, filters, albedo_dir=albedo_dir, variant=v)
             for v in variants}
 
@@ -1224,17 +1224,19 @@ def _calibration_mc_case(arg):
 def thesis_calibration_monte_carlo(config="dual_pyramid", filters=("1p25x1", "5x5", "10x10",
                                                                    "reduced"),
                                    n_runs=300, *, seed=4, variants=("thesis", "robust"),
-                                   workers=1, progress=None, albedo_dir=None) -> dict:
+                                   workers=1, progress=None, albedo_dir=None,
+                                   duration_s=None) -> dict:
     """Monte Carlo of tables 4.1-4.3 (O'Keefe 2015 figs. 4.4, 4.7, 4.10: 300 runs): case i
     (i = 1…``n_runs``) is :func:`simulate_thesis_calibration_case` seeded ``(seed, i)`` for
     ``config``, and each variant's filters run on it (:func:`thesis_calibration_table`).
     ``workers`` local processes (:func:`lightcurve.studies.runner.map_in_pool`, numba threads
-    sized to the cores); ``progress``: called after each case.  Returns {variant: {filter:
-    [table entry of each case]}} in case order."""
+    sized to the cores); ``progress``: called after each case; ``duration_s``: the case
+    length (None: one orbit, as in the thesis).  Returns {variant: {filter: [table entry of
+    each case]}} in case order."""
     from ..studies.runner import map_in_pool
 
     filters, variants = tuple(filters), tuple(variants)
-    jobs = [(np.random.SeedSequence([int(seed), 1 + i]), config, filters, variants, albedo_dir)
-            for i in range(int(n_runs))]
+    jobs = [(np.random.SeedSequence([int(seed), 1 + i]), config, filters, variants, albedo_dir,
+             duration_s) for i in range(int(n_runs))]
     runs = map_in_pool(_calibration_mc_case, jobs, int(workers), progress)
     return {v: {f: [r[v][f] for r in runs] for f in filters} for v in variants}

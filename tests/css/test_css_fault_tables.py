@@ -306,3 +306,20 @@ def test_generator_merges_a_table_computed_in_parts_by_grid(tmp_path):
         css_section([], faults=[files["thesis", "5x5"], files["thesis", "1p25x1"],
                                 files["robust", "1p25x1"]])
     assert ei.value.field == "grids" and ei.value.value == "5x5"
+
+
+def test_tables_4_monte_carlo_cases_are_seeded_by_index():
+    """Case i of the Tables 4.1-4.3 Monte Carlo (thesis_calibration_monte_carlo) is the
+    §4.4 case seeded (seed, i), i from 1, whatever the variant: its table entries equal those
+    of the case simulated and filtered directly (the docs name their cases this way)."""
+    from lightcurve.css.calibration import (simulate_thesis_calibration_case,
+                                            thesis_calibration_monte_carlo,
+                                            thesis_calibration_table)
+
+    mc = thesis_calibration_monte_carlo("cube", ("reduced",), 2, seed=7)
+    assert set(mc) == {"thesis", "robust"} and len(mc["thesis"]["reduced"]) == 2
+    case = simulate_thesis_calibration_case(np.random.SeedSequence([7, 2]), "cube")
+    for v in ("thesis", "robust"):
+        direct = thesis_calibration_table(case, ("reduced",), variant=v)["reduced"]
+        assert mc[v]["reduced"][1] == direct
+    assert mc["thesis"]["reduced"][0] != mc["thesis"]["reduced"][1]
