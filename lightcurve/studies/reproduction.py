@@ -502,9 +502,9 @@ def _fault_ablations(faults) -> list[str]:
         return []
     out = ["#### Ablations of the thesis filter", "",
            "One setting of the thesis filter changed (`lightcurve css faults --experiment … "
-           "--variant thesis --thesis-filter NAME=VALUE`), on runs 0 to runs − 1 of the seed "
-           "of the table above; false detections and correct detections, thesis variant on "
-           "the same runs → ablation.", "",
+           "--variant thesis --thesis-filter NAME=VALUE`), on the first *runs* runs of the table "
+           "above (same seed: run i flies the same spacecraft); false detections and correct "
+           "detections, thesis variant on those runs → ablation.", "",
            "| experiment | change | runs | grid | failure | false | correct | median time to "
            "detection (s) |", "|---|---|---|---|---|---|---|---|"]
     bases = faults.get("bases") or {}
