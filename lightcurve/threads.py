@@ -13,13 +13,16 @@ rules here:
   it in its environment, a task on another Dask cluster sets it for its own thread.
 
 numba's threading layer is numba's choice (tbb, else omp, else workqueue; the user's
-``NUMBA_THREADING_LAYER`` wins), with OpenMP's waiting threads made to sleep
-(:func:`configure_threading`, called on import of lightcurve): GNU OpenMP threads spin while
-they wait, and on a busy 2-core machine (load 14) the particle filter at 10⁵ particles used
-14.4 s of CPU with 2 spinning OpenMP threads against 2.4 s with ``OMP_WAIT_POLICY=PASSIVE``
-(wall 39 s against 7–9 s; workqueue: 2.5–2.7 s, 7.5–8.4 s). OpenMP is kept rather than
-workqueue because workqueue aborts when two Python threads launch parallel kernels at once
-(a Dask worker with several threads); details in docs/bpf.md.
+``NUMBA_THREADING_LAYER`` wins), with OpenMP's waiting threads made to spin briefly and then
+sleep (:func:`configure_threading`, called on import of lightcurve). GNU OpenMP's default
+spins for about 300,000 iterations (an effectively unbounded spin with
+``OMP_WAIT_POLICY=ACTIVE``): on a busy machine spinning threads take the cores other
+processes need, and a thread that sleeps at once (``OMP_WAIT_POLICY=PASSIVE``) pays a futex
+wake-up at every one of the particle filter's ≈ 15 parallel regions per epoch. A bounded spin
+of :data:`SPIN_COUNT` iterations (``GOMP_SPINCOUNT``) covers the short gaps between the regions
+and then sleeps. OpenMP is kept rather than workqueue because workqueue aborts when two
+Python threads launch parallel kernels at once (a Dask worker with several threads).
+Measurements behind both choices: docs/bpf.md.
 """
 
 from __future__ import annotations
@@ -34,11 +37,20 @@ __all__ = ["available_cores", "user_thread_limit", "threads_per_worker", "limit_
 _USER_LIMIT = os.environ.get("NUMBA_NUM_THREADS")
 
 
+#: GNU OpenMP spin iterations before a waiting thread sleeps (``GOMP_SPINCOUNT``; module
+#: docstring)
+SPIN_COUNT = 3000
+
+
 def configure_threading() -> str:
-    """Make OpenMP threads sleep while they wait (``OMP_WAIT_POLICY=PASSIVE``) unless the user
-    set a policy; called on import of lightcurve, before numba loads its OpenMP layer (a later
-    call has no effect on a runtime already loaded). Returns the policy in force."""
-    return os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    """Make waiting OpenMP threads spin for :data:`SPIN_COUNT` iterations and then sleep
+    (``GOMP_SPINCOUNT``), unless the user set ``OMP_WAIT_POLICY`` or ``GOMP_SPINCOUNT``;
+    called on import of lightcurve, before numba loads its OpenMP layer (a later call has no
+    effect on a runtime already loaded). Returns the setting in force, e.g.
+    ``"GOMP_SPINCOUNT=3000"``."""
+    if "OMP_WAIT_POLICY" in os.environ:
+        return "OMP_WAIT_POLICY=" + os.environ["OMP_WAIT_POLICY"]
+    return "GOMP_SPINCOUNT=" + os.environ.setdefault("GOMP_SPINCOUNT", str(SPIN_COUNT))
 
 
 def available_cores() -> int:

@@ -46,8 +46,9 @@ from .rotations import qrot_xyz_nb
 
 __all__ = [
     "LAMBERT", "COOK_TORRANCE", "PHONG", "ASHIKHMIN_SHIRLEY", "COOK_TORRANCE_THESIS",
-    "ANALYTIC_IDS", "PARAM_COLUMNS", "fresnel_xyz", "beckmann_xyz", "cook_torrance_xyz",
-    "cook_torrance_fresnel_xyz", "facet_sum_xyz", "facet_sum_fresnel_xyz",
+    "ANALYTIC_IDS", "PARAM_COLUMNS", "fresnel_xyz", "beckmann_exponent", "beckmann_xyz",
+    "beckmann_exp_xyz", "cook_torrance_xyz", "cook_torrance_fresnel_xyz",
+    "cook_torrance_fresnel_exp_xyz", "facet_sum_xyz", "facet_sum_fresnel_xyz",
     "brdf_product_nb", "brdf_value_kernel", "brightness_kernel", "facet_products_kernel",
     "facet_flux_nb", "mag_kernel_nb", "flux_partials_nb", "partials_many_nb",
     "magnitude_partials_q_nb", "nchunks_nb",
@@ -95,14 +96,29 @@ def fresnel_xyz(c, f0):
 
 
 @nb.njit(cache=True, inline="always")
+def beckmann_exponent(nh, m):
+    """Exponent ``−tan²γ/m² = (cos²γ − 1)/(cos²γ m²)`` of the Beckmann distribution,
+    ``cos γ = n̂·ĥ`` (Bernard eq. 5.13)."""
+    nh2 = nh * nh
+    return (nh2 - 1.0) / (nh2 * m * m)
+
+
+@nb.njit(cache=True, inline="always")
 def beckmann_xyz(nh, m):
     """Beckmann distribution ``D = exp(−tan²γ/m²)/(π m² cos⁴γ)``, ``cos γ = n̂·ĥ > 0``
     (Bernard eq. 5.13–5.14) and its derivatives → ``(D, ∂D/∂(n̂·ĥ), ∂D/∂m)``.
 
     ``∂D/∂cos γ = D (2/(m² cos³γ) − 4/cos γ)``, ``∂D/∂m = D (2 tan²γ/m³ − 2/m)``.
     """
+    return beckmann_exp_xyz(nh, m, math.exp(beckmann_exponent(nh, m)))
+
+
+@nb.njit(cache=True, inline="always")
+def beckmann_exp_xyz(nh, m, e):
+    """:func:`beckmann_xyz` with its exponential given: ``e = exp(beckmann_exponent(nh, m))``
+    (for callers that evaluate the exponentials of many attitudes in a separate pass)."""
     nh2 = nh * nh
-    D = math.exp((nh2 - 1.0) / (nh2 * m * m)) / (math.pi * m * m * nh2 * nh2)
+    D = e / (math.pi * m * m * nh2 * nh2)
     tan2 = (1.0 - nh2) / nh2
     return D, D * (2.0 / (m * m * nh ** 3) - 4.0 / nh), D * (2.0 * tan2 / m ** 3 - 2.0 / m)
 
@@ -139,6 +155,16 @@ def cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis)
     Callers that use only ``P`` pay nothing for the derivatives (inlined, the unused arithmetic
     is removed by the compiler).
     """
+    e = math.exp(beckmann_exponent(nh, m)) if (nh > 0.0 and c > 0.0) else 0.0
+    return cook_torrance_fresnel_exp_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis, e)
+
+
+@nb.njit(cache=True, inline="always")
+def cook_torrance_fresnel_exp_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis, e):
+    """:func:`cook_torrance_fresnel_xyz` with the Beckmann exponential given:
+    ``e = exp(beckmann_exponent(nh, m))`` where ``nh > 0`` and ``c > 0`` (unused elsewhere), so
+    that a caller can evaluate the value of many attitudes with the exponentials in a separate
+    pass and the rest vectorised."""
     kd = xi * a * _INV_PI
     if thesis:
         diff = kd * ns * ns * no
@@ -154,7 +180,7 @@ def cook_torrance_fresnel_xyz(ns, no, nh, c, F, dF_dc, dF_df0, xi, a, m, thesis)
         d_a = xi * _INV_PI * ns * no
     if nh <= 0.0 or c <= 0.0:
         return diff, d_ns, d_no, 0.0, 0.0, d_xi, d_a, 0.0
-    D, dD_dnh, dD_dm = beckmann_xyz(nh, m)
+    D, dD_dnh, dD_dm = beckmann_exp_xyz(nh, m, e)
     G = 1.0
     dG_dns = 0.0
     dG_dno = 0.0

@@ -36,7 +36,8 @@ from numba import njit
 from .specialise import jit_copy
 
 __all__ = [
-    "qmul_xyz", "qrot_xyz_nb", "qrot_inv_xyz", "rotvec2q_xyz", "q2grp_xyz", "grp2q_xyz",
+    "qmul_xyz", "qrot_xyz_nb", "qrot_inv_xyz", "rotvec2q_xyz", "rotvec2q_sc_xyz",
+    "q2grp_xyz", "grp2q_xyz",
     "skew_nb", "qmul_nb", "qmul_into_nb", "qrot_nb", "qrot_inv_nb", "q2dcm_nb", "dcm2q_nb",
     "qnormalize_nb", "normalize_into_nb", "rotvec2q_nb", "q2rotvec_nb", "q2grp_nb", "grp2q_nb",
     "grp_rel_nb", "from_grp_rel_nb", "q2mrp_nb", "mrp2q_nb", "mrp_shadow_nb", "mrp_compose_nb",
@@ -138,11 +139,15 @@ def rotvec2q_xyz(tx, ty, tz):
     """Quaternion ``[cos(φ/2), θ sin(φ/2)/φ]`` of the rotation vector θ (rad; Bernard eq.
     3.8–3.13), with the series ``sin(φ/2)/φ ≈ ½ − φ²/48`` below φ = 1e-6 → 4-tuple."""
     phi = math.sqrt(tx * tx + ty * ty + tz * tz)
-    if phi > 1e-6:
-        s = math.sin(0.5 * phi) / phi
-    else:
-        s = 0.5 - phi * phi / 48.0
-    return math.cos(0.5 * phi), s * tx, s * ty, s * tz
+    return rotvec2q_sc_xyz(tx, ty, tz, phi, math.sin(0.5 * phi), math.cos(0.5 * phi))
+
+
+@njit(cache=True, inline="always")
+def rotvec2q_sc_xyz(tx, ty, tz, phi, sh, ch):
+    """:func:`rotvec2q_xyz` with ``φ = |θ|``, ``sh = sin(φ/2)`` and ``ch = cos(φ/2)`` given (for
+    callers that evaluate the sines and cosines of many rotations in a separate pass)."""
+    s = sh / phi if phi > 1e-6 else 0.5 - phi * phi / 48.0
+    return ch, s * tx, s * ty, s * tz
 
 
 @njit(cache=True, inline="always")

@@ -478,7 +478,7 @@ class _NumbaOps(_HostOps):
         BK.bpf_predict_nb(run.Q, run.W, dt, run.mode, run.J, run.Ji,
                           run.p.dynamics.nsub(dt) if (run.mode and dt != 0.0) else 1, z, L,
                           zeta, s, m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          run.mpred, run.dq, run.dq_mode(zeta))
+                          run.mpred, run.dq, run.dq_mode(zeta), run.pwork)
 
     innov = staticmethod(CP.innovation_loglik)
 
@@ -963,6 +963,8 @@ class _Run:
         # exp(ζ_i) of the jitter, kept through the tempering stages' re-predictions (numba)
         self.dq = np.empty((nz if (backend == "numba" and cfg.progressive) else 0, 4))
         self.dq_ok = False
+        # scratch of the vectorised prediction kernel (numba)
+        self.pwork = np.empty(BK.predict_work_size(N) if backend == "numba" else 0)
         self.ubuf = np.empty(N) if cfg.resampling == "multinomial" else None
         self._init_cloud(initial_cloud)
         self.ext = _Extra(p, bias, facets, N, self.draws, cfg.param_discount)
@@ -1357,7 +1359,7 @@ def _predict_any(backend, p, ext, k, Q, W, zeta, J, Ji, out):
         n_arr, a_arr, ids, prm = m._karrs
         BK.bpf_predict_nb(Q, W, 0.0, 0, J, Ji, 1, np.zeros((0, 6)), np.zeros((6, 6)), zeta,
                           m.s_eci[k], m.o_eci[k], n_arr, a_arr, ids, prm, float(m.offset[k]),
-                          out, np.empty((0, 4)), 0)
+                          out, np.empty((0, 4)), 0, np.empty(0))
     else:
         Qm = Q
         if zeta.shape[0]:

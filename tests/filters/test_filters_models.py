@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -11,6 +12,7 @@ from transition_oracle import discretize, error_F
 from lightcurve import rotations as rot
 from lightcurve.core import dynamics as CD
 from lightcurve.core import particles as CP
+from lightcurve.core.rotations import rotvec2q_xyz
 from lightcurve.filters import _bpf_kernels as BK
 from lightcurve.filters._common import apply_grp, grp_rel
 from lightcurve.filters.models import ControlledDynamics, MagnitudeModel, UncontrolledDynamics
@@ -163,13 +165,15 @@ def test_bpf_fused_kernel_equals_separate_steps(curve):
     k = 7
     L = np.tril(rng.standard_normal((6, 6))) * 0.5
     BK.bpf_predict_nb(Q1, W1, 5.0, 0, np.eye(3), np.eye(3), 1, noise, L, zeta, m.s_eci[k],
-                     m.o_eci[k], n, a, ids, p, float(m.offset[k]), out, np.empty((0, 4)), 0)
+                     m.o_eci[k], n, a, ids, p, float(m.offset[k]), out, np.empty((0, 4)), 0,
+                     np.empty(0))
     # exp(ζ) formed and kept (dq_mode 1), then read back (2): the same numbers, bit for bit
     dq = np.empty((N, 4))
     for mode in (1, 2):
         Q3, W3, out3 = Q.copy(), W.copy(), np.empty(N)
         BK.bpf_predict_nb(Q3, W3, 5.0, 0, np.eye(3), np.eye(3), 1, noise, L, zeta, m.s_eci[k],
-                         m.o_eci[k], n, a, ids, p, float(m.offset[k]), out3, dq, mode)
+                         m.o_eci[k], n, a, ids, p, float(m.offset[k]), out3, dq, mode,
+                         np.empty(0))
         assert np.array_equal(Q3, Q1) and np.array_equal(W3, W1)
         assert np.array_equal(out3, out)
     np.testing.assert_allclose(dq, rot.rotvec_to_quat(zeta), atol=1e-15)
@@ -182,6 +186,81 @@ def test_bpf_fused_kernel_equals_separate_steps(curve):
     fin = np.isfinite(ref)
     np.testing.assert_allclose(out[fin], ref[fin], atol=1e-10)
     assert np.array_equal(np.isfinite(out), fin)
+
+
+@numba.njit
+def _predict_rows(Q, W, dt, mode, J, Ji, nsub, noise, Lnoise, zeta, s, o, normals, areas, ids,
+                  params, offset, m_out):
+    """The prediction particle by particle through the row function (the CUDA kernel's)."""
+    N = Q.shape[0]
+    Fr = np.zeros(normals.shape[0])
+    predict = not np.isnan(s[0])
+    hI = (0.0, 0.0, 0.0)
+    cI = -1.0
+    if predict:
+        hI, cI = BK.flux_invariants(s, o, ids, params, Fr)
+    for i in range(N):
+        BK.predict_row(i, Q, W, dt, mode, dt / max(nsub, 1), nsub, CD.mat9(J), CD.mat9(Ji), noise,
+                       Lnoise, noise.shape[0] == N, zeta, zeta.shape[0] == N, predict, s, o, hI,
+                       cI, Fr, normals, areas, ids, params, offset, m_out)
+
+
+def test_vectorised_prediction_is_the_row_function_bit_for_bit(curve):
+    # the block kernel reorders the work (libm calls in their own passes, the rest vectorised
+    # across particles) but must keep every particle's operations: equal to the bit to the row
+    # function, for every branch (rate step or RK4, process noise, jitter formed / kept / read,
+    # dt = 0, no prediction, Cook–Torrance in both forms, Lambert, Phong, a skipped facet) and
+    # for a cloud that ends in a partial block of a partial chunk
+    from lightcurve.core.photometry import COOK_TORRANCE_THESIS, LAMBERT, PHONG
+
+    m = MagnitudeModel(load_shape("cube_1u_mixed"), curve)
+    rng = np.random.default_rng(21)
+    N = 2 * 2048 + 77
+    Q = _rand_q(rng, N)
+    W = rng.standard_normal((N, 3)) * 0.05
+    J = np.diag([2.0, 3.0, 4.0])
+    n, a, ids0, p0 = m._karrs
+    ids1 = ids0.copy()
+    ids1[0], ids1[1], ids1[2], ids1[3] = COOK_TORRANCE_THESIS, LAMBERT, PHONG, -1
+    p1 = p0.copy()
+    p1[2, :3] = (0.3, 0.6, 8.0)
+    noise = rng.standard_normal((N, 6))
+    L = np.tril(rng.standard_normal((6, 6))) * 1e-3
+    zeta = rng.standard_normal((N, 3)) * 2e-3
+    zeta[:5] = 0.0                               # the series branch of exp(ζ) (|ζ| < 1e-6)
+    none6 = np.zeros((0, 6))
+    k = 11
+    s, o = m.s_eci[k], m.o_eci[k]
+    cases = 0
+    for mode, dt in ((0, 5.0), (1, 5.0), (0, 0.0)):
+        for nz, Lz in ((noise, L), (none6, np.zeros((6, 6)))):
+            for ze in (zeta, np.zeros((0, 3))):
+                for ids, p in ((ids0, p0), (ids1, p1)):
+                    for sv in (s, np.full(3, np.nan)):
+                        args = (dt, mode, J, np.linalg.inv(J), 3, nz, Lz, ze, sv, o, n, a, ids,
+                                p, float(m.offset[k]))
+                        Q1, W1, m1 = Q.copy(), W.copy(), np.full(N, -1.0)
+                        _predict_rows(Q1, W1, *args, m1)
+                        dq = np.empty((N if ze.shape[0] else 0, 4))
+                        for dq_mode in (0, 1, 2):
+                            Q2, W2, m2 = Q.copy(), W.copy(), np.full(N, -1.0)
+                            BK.bpf_predict_nb(Q2, W2, *args, m2, dq, dq_mode,
+                                              np.empty(BK.predict_work_size(N)))
+                            assert np.array_equal(Q2, Q1) and np.array_equal(W2, W1)
+                            assert np.array_equal(m2, m1)
+                            cases += 1
+                        if ze.shape[0]:          # dq_mode 1 kept exp(ζ_i), formed as rotvec2q
+                            assert np.array_equal(dq, np.array(
+                                [rotvec2q_xyz(*z) for z in ze]))
+    assert cases == 3 * 2 * 2 * 2 * 2 * 3
+    # a too-short scratch buffer is replaced, not overrun
+    Q3, W3, m3 = Q.copy(), W.copy(), np.empty(N)
+    BK.bpf_predict_nb(Q3, W3, 5.0, 0, J, J, 1, noise, L, zeta, s, o, n, a, ids0, p0,
+                      float(m.offset[k]), m3, np.empty((0, 4)), 0, np.empty(10))
+    Q4, W4, m4 = Q.copy(), W.copy(), np.empty(N)
+    _predict_rows(Q4, W4, 5.0, 0, J, J, 1, noise, L, zeta, s, o, n, a, ids0, p0,
+                  float(m.offset[k]), m4)
+    assert np.array_equal(Q3, Q4) and np.array_equal(m3, m4)
 
 
 def test_numpy_reference_photometry_matches_kernel(curve):
