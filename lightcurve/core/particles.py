@@ -42,7 +42,7 @@ __all__ = [
     "cumulative_weights",
     "systematic_resample_into", "sorted_resample_into", "gather_rows", "column_ranges",
     "roughening_sigma_nb", "mean_cov_rows", "weighted_mean_cov_rows", "liu_west_rows",
-    "philox4x32", "philox_normals", "philox_uniforms", "ziggurat_normal",
+    "philox4x32", "philox_normals", "philox_normals_into", "philox_uniforms", "ziggurat_normal",
 ]
 
 _CHUNK = 2048      # particles per reduction chunk (fixed: results independent of threads)
@@ -774,17 +774,18 @@ def ziggurat_normal(c0, c1, c2, c3, k0, k1, zx, zr):
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def philox_normals(k0, k1, call, out):
+def philox_normals_into(k0, k1, call, out, buf):
     """Fill ``out`` (N, r) with standard normals: entry (i, j) is the ziggurat normal
     (:func:`ziggurat_normal`) of the Philox4x32-10 counter ``(i, j, call mod 2³², call div
     2³²)`` under the key (k0, k1) — a pure function of (key, i, j, call), independent of the
-    number of threads.
+    number of threads. ``buf``: scratch of at least N doubles.
 
     Two passes per column and chunk: the first attempt of every draw (one Philox block, the
-    layer's comparison: ≈ 99 % of the draws end there) branch-free, so the compiler vectorises
-    it across particles, with NaN where the attempt is rejected; then :func:`ziggurat_normal`
-    for those entries (it repeats the rejected attempt and goes on, so every entry is exactly
-    its value).
+    layer's comparison: ≈ 99 % of the draws end there) branch-free into the contiguous
+    ``buf`` (so the compiler vectorises it across particles), with NaN where the attempt is
+    rejected; then the column is written, with :func:`ziggurat_normal` for the rejected
+    entries (it repeats the rejected attempt and goes on, so every entry is exactly its
+    value).
     """
     N, r = out.shape
     kk0 = np.uint64(k0)
@@ -798,15 +799,23 @@ def philox_normals(k0, k1, call, out):
         lo, hi = chunk_bounds(c, N, nch)
         for j in range(r):
             cj = np.uint64(j)
-            for i in range(lo, hi):
-                a, b, cc, _d = philox4x32(np.uint64(i) & _MASK, cj, cl, ch, kk0, kk1)
+            for t in range(hi - lo):
+                a, b, cc, _d = philox4x32(np.uint64(lo + t) & _MASK, cj, cl, ch, kk0, kk1)
                 u = 2.0 * _u01_open(a, b) - 1.0
                 k = cc & np.uint64(127)
-                out[i, j] = u * zx[k] if abs(u) < zr[k] else np.nan
-            for i in range(lo, hi):
-                if np.isnan(out[i, j]):
-                    out[i, j] = ziggurat_normal(np.uint64(i) & _MASK, cj, cl, ch, kk0, kk1, zx,
-                                                zr)
+                buf[lo + t] = u * zx[k] if abs(u) < zr[k] else np.nan
+            for t in range(hi - lo):
+                v = buf[lo + t]
+                if np.isnan(v):
+                    v = ziggurat_normal(np.uint64(lo + t) & _MASK, cj, cl, ch, kk0, kk1, zx,
+                                        zr)
+                out[lo + t, j] = v
+
+
+@nb.njit(cache=True)
+def philox_normals(k0, k1, call, out):
+    """:func:`philox_normals_into` with a scratch of its own (one allocation per call)."""
+    philox_normals_into(k0, k1, call, out, np.empty(out.shape[0]))
 
 
 @nb.njit(cache=True, parallel=True)

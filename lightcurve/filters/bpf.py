@@ -234,6 +234,7 @@ class _Draws:
             self.k0, self.k1 = int(k[0]), int(k[1])
             self.call = 0
             self._one = np.empty(1)
+            self._nbuf = np.empty(0)
 
     def normals_into(self, out):
         if out.size == 0:
@@ -241,7 +242,9 @@ class _Draws:
         if self.kind == "numpy":
             self.rng.standard_normal(out=out)
         else:
-            CP.philox_normals(self.k0, self.k1, self.call, out)
+            if self._nbuf.shape[0] < out.shape[0]:     # scratch, allocated once per run
+                self._nbuf = np.empty(out.shape[0])
+            CP.philox_normals_into(self.k0, self.k1, self.call, out, self._nbuf)
             self.call += 1
         return out
 
