@@ -187,6 +187,21 @@ def test_thread_budget(monkeypatch):
     assert threads.threads_per_worker(2, cores=2) == 1
 
 
+def test_openmp_waits_spin_briefly_unless_the_user_chose(monkeypatch):
+    # lightcurve's default: spin SPIN_COUNT iterations, then sleep (docs/bpf.md); a user's
+    # OMP_WAIT_POLICY or GOMP_SPINCOUNT is left as it is
+    for k in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT"):
+        monkeypatch.delenv(k, raising=False)
+    assert threads.configure_threading() == f"GOMP_SPINCOUNT={threads.SPIN_COUNT}"
+    assert threads.os.environ["GOMP_SPINCOUNT"] == str(threads.SPIN_COUNT)
+    monkeypatch.setenv("GOMP_SPINCOUNT", "50")
+    assert threads.configure_threading() == "GOMP_SPINCOUNT=50"
+    monkeypatch.delenv("GOMP_SPINCOUNT")
+    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")
+    assert threads.configure_threading() == "OMP_WAIT_POLICY=PASSIVE"
+    assert "GOMP_SPINCOUNT" not in threads.os.environ
+
+
 def test_pool_workers_get_their_share_of_the_cores():
     from lightcurve.studies.runner import iter_results
 
