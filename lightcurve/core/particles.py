@@ -739,6 +739,16 @@ def _u01_open(a, b):
 
 
 @nb.njit(cache=True, inline="always")
+def _ziggurat_attempt(a, b, c, zr):
+    """One ziggurat attempt's layer test from three Philox words → ``(u, i, accepted)``: the
+    uniform u ∈ (−1, 1) from a, b, the layer i from c; the draw is ``u·zx[i]`` when accepted
+    (:func:`ziggurat_normal`)."""
+    u = 2.0 * _u01_open(a, b) - 1.0
+    i = np.int64(c & np.uint64(127))
+    return u, i, abs(u) < zr[i]
+
+
+@nb.njit(cache=True, inline="always")
 def ziggurat_normal(c0, c1, c2, c3, k0, k1, zx, zr):
     """One standard normal by the ziggurat method (Doornik 2005 variant, 128 layers) from the
     Philox4x32-10 stream of the counter (c0, c1 + 2¹⁶·attempt, c2, c3) under (k0, k1).
@@ -752,9 +762,8 @@ def ziggurat_normal(c0, c1, c2, c3, k0, k1, zx, zr):
     while True:
         a, b, c, d = philox4x32(c0, (c1 + (att << np.uint64(16))) & _MASK, c2, c3, k0, k1)
         att += np.uint64(1)
-        u = 2.0 * _u01_open(a, b) - 1.0
-        i = np.int64(c & np.uint64(127))
-        if abs(u) < zr[i]:
+        u, i, accepted = _ziggurat_attempt(a, b, c, zr)
+        if accepted:
             return u * zx[i]
         if i == 0:                      # the tail beyond r (Marsaglia 1964)
             while True:
@@ -801,9 +810,8 @@ def philox_normals_into(k0, k1, call, out, buf):
             cj = np.uint64(j)
             for t in range(hi - lo):
                 a, b, cc, _d = philox4x32(np.uint64(lo + t) & _MASK, cj, cl, ch, kk0, kk1)
-                u = 2.0 * _u01_open(a, b) - 1.0
-                k = cc & np.uint64(127)
-                buf[lo + t] = u * zx[k] if abs(u) < zr[k] else np.nan
+                u, k, accepted = _ziggurat_attempt(a, b, cc, zr)
+                buf[lo + t] = u * zx[k] if accepted else np.nan
             for t in range(hi - lo):
                 v = buf[lo + t]
                 if np.isnan(v):

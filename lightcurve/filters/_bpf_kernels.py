@@ -171,8 +171,8 @@ _BLOCK = 128
 (_Q, _W, _Z, _D, _PHI, _SN, _CS, _V0, _NPHI, _NSN, _NCS, _ZPHI, _ZSN, _ZCS, _SB, _NS, _NO,
  _NH, _ARG, _EX, _ACC) = (0, 4, 7, 10, 14, 15, 16, 17, 23, 24, 25, 26, 27, 28, 29, 38, 39, 40,
                           41, 42, 43)
-_SLOTS = 44
-"""Scratch rows per chunk of :func:`bpf_predict_nb`."""
+_SLOTS = _ACC + 1
+"""Scratch rows per chunk of :func:`bpf_predict_nb` (the facet sum is the last)."""
 
 
 def predict_work_size(N):
