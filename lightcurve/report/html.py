@@ -122,6 +122,9 @@ def fig94_table_html(cells: list, not_run=()) -> str:
             o = c["outside_3sigma"]
             title = (f"{c['runs']} runs, {c['failures']} failed; median RSS "
                      f"{c['rss_att_deg_median']:.3g}°, p95 {c['rss_att_deg_p95']:.3g}°")
+            if c.get("color_probability"):
+                title += "; colour in a new 100-run Monte Carlo: " + ", ".join(
+                    f"{k} {100 * v:.0f} %" for k, v in c["color_probability"].items())
             tc = c.get("thesis_color")
             thesis = ""
             if tc:
@@ -247,6 +250,14 @@ def write_study_report(path, summary: dict, envelopes=()) -> None:
         head = (f"<p><b>Bernard (2021) Fig. {html.escape(str(summary.get('thesis_figure')))}, "
                 f"cell by cell: {agr['agree']} of {agr['compared']} run cells agree ({byf}); "
                 f"variant {html.escape(str(summary.get('variant')))}.</b></p>")
+        if "self_agree" in agr:
+            head += (f"<p>Monte Carlo spread of the colours (hover a cell for its colour "
+                     f"probabilities): a perfect reproduction of these filters would agree with "
+                     f"itself on {agr['self_agree']:.1f} of {agr['compared']} cells on average; "
+                     f"the published table, read as one 100-run Monte Carlo of ours, on "
+                     f"{agr['expected_agree']:.1f}. {agr['within_noise']} of "
+                     f"{len(agr['disagree'])} disagreeing cells have the published colour with "
+                     f"probability ≥ 5 % in a 100-run Monte Carlo of ours (within noise).</p>")
     if ind:
         head += (f"<p><b>INDICATIVE</b>: {summary['runs_per_cell']} runs per cell; the thesis's "
                  "rule is defined for 100 runs and its thresholds are scaled to the run count "

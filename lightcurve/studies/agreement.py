@@ -11,6 +11,15 @@ text; not compared).
 such cell, e.g. the particle filter or a σθ the thesis did not tabulate); :func:`agreement`
 counts, per filter, the cells both ran (published green/yellow/red and ours finished) and
 those whose colours match.
+
+Monte Carlo spread (cells carrying ``color_probability``,
+:func:`lightcurve.studies.metrics.color_probability`): ``expected_agree`` is the expected
+number of matches if the published table were one 100-run Monte Carlo of *our* filter (the sum
+over the compared cells of P(published colour)); ``self_agree`` the expected number of matches
+between two independent 100-run Monte Carlos of our filter (Σ over cells of Σ_c P(c)²) — what
+a perfect reproduction would reach on average. A disagreeing cell whose published colour has
+P ≥ :data:`NOISE_LEVEL` is within our Monte Carlo noise (a test with a 5 % false-alarm rate
+per cell when the two filters are the same).
 """
 
 from __future__ import annotations
@@ -21,11 +30,14 @@ from pathlib import Path
 from ..errors import InputError
 
 __all__ = ["ThesisTable", "load_thesis_table", "thesis_color", "agreement", "TABLE_COLORS",
-           "COMPARED"]
+           "COMPARED", "NOISE_LEVEL"]
 
 TABLE_COLORS = ("green", "yellow", "red", "grey", "unknown")
 #: published colours that are compared with ours
 COMPARED = ("green", "yellow", "red")
+#: a published colour with at least this probability under our Monte Carlo spread is "within
+#: Monte Carlo noise" (module docstring)
+NOISE_LEVEL = 0.05
 _SIGMA_THETA = (3.0, 5.0, 10.0)
 _FILTERS = ("mekf", "ukf")
 
@@ -99,9 +111,14 @@ def agreement(cells) -> dict:
 
     Returns ``{"compared": n, "agree": k, "by_filter": {filter: {"compared", "agree"}},
     "disagree": [cell keys…]}``; a cell counts when its published colour is green, yellow or
-    red and it has finished runs here.
+    red and it has finished runs here. When every compared cell carries ``color_probability``
+    the result also has ``expected_agree``, ``self_agree`` and ``within_noise`` (disagreeing
+    cells whose published colour has P ≥ :data:`NOISE_LEVEL`), and each disagreeing entry its
+    ``thesis_color_probability`` (module docstring).
     """
     out = {"compared": 0, "agree": 0, "by_filter": {}, "disagree": []}
+    spread = True
+    expected = selfa = 0.0
     for c in cells:
         tc = c.get("thesis_color")
         if tc not in COMPARED or not c.get("runs"):
@@ -109,12 +126,25 @@ def agreement(cells) -> dict:
         f = out["by_filter"].setdefault(c["filter"], {"compared": 0, "agree": 0})
         out["compared"] += 1
         f["compared"] += 1
+        prob = c.get("color_probability") or None
+        if prob is None:
+            spread = False
+        else:
+            expected += float(prob.get(tc, 0.0))
+            selfa += sum(float(v) ** 2 for v in prob.values())
         if c["color"] == tc:
             out["agree"] += 1
             f["agree"] += 1
         else:
-            out["disagree"].append({k: c[k] for k in ("filter", "dynamics", "sites",
-                                                       "sigma_theta_deg", "sigma_omega_deg_s",
-                                                       "r_percent")}
-                                   | {"color": c["color"], "thesis_color": tc})
+            d = {k: c[k] for k in ("filter", "dynamics", "sites", "sigma_theta_deg",
+                                   "sigma_omega_deg_s", "r_percent")}
+            d |= {"color": c["color"], "thesis_color": tc}
+            if prob is not None:
+                d["thesis_color_probability"] = float(prob.get(tc, 0.0))
+            out["disagree"].append(d)
+    if spread and out["compared"]:
+        out["expected_agree"] = expected
+        out["self_agree"] = selfa
+        out["within_noise"] = sum(d["thesis_color_probability"] >= NOISE_LEVEL
+                                  for d in out["disagree"])
     return out

@@ -17,18 +17,30 @@ count per 100 runs, ``c·100/n``, and the 100-run rule applied to that (red abov
 above 5 or two components at exactly 5). With 5 runs one run outside is already 20 per 100
 (red), with 10 runs one run is yellow and two are red. A table from fewer than 100 runs per
 cell is *indicative* (:data:`FULL_RUNS`).
+
+Monte Carlo spread of a colour: a cell's colour is itself a random outcome of its runs.
+:func:`color_probability` gives, from the runs' six outside-3σ flags, the probability of each
+colour in an *independent* Monte Carlo of ``n`` runs of the same filter on the same cell: the
+posterior predictive of the Bayesian bootstrap (Rubin 1981, Ann. Statist. 9, 130–134) — run
+weights w ~ Dirichlet(1, …, 1) over the observed runs, then ``n`` new runs drawn from them
+(multinomial), whose six counts are coloured by :func:`traffic_light`. For one component
+with k of R runs outside this is the beta-binomial BB(n, k, R − k). Outcomes that no observed
+run shows (a run outside in a component none was outside in) get probability zero.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["run_metrics", "outside_3sigma", "traffic_light", "cell_summary", "rss_envelope",
-           "COLORS", "FULL_RUNS"]
+__all__ = ["run_metrics", "outside_3sigma", "traffic_light", "traffic_lights", "color_probability",
+           "cell_summary", "rss_envelope", "COLORS", "FULL_RUNS", "COLOR_DRAWS"]
 
 COLORS = ("green", "yellow", "red")
 #: the run count the thesis's traffic-light rule is defined for (§9.3.1: 100 runs per cell)
 FULL_RUNS = 100
+#: draws of :func:`color_probability` (Monte Carlo standard error of a probability ≤ 0.5/√4000
+#: = 0.008)
+COLOR_DRAWS = 4000
 
 
 def outside_3sigma(att_error_deg, att_sigma_deg, omega_error_rad_s, omega_sigma_rad_s) -> np.ndarray:
@@ -85,6 +97,25 @@ def _reflection_metrics(estimate) -> dict:
             "final_bias_sigma_mag": [float(x) for x in np.asarray(bs)[-1]]}
 
 
+def traffic_lights(outside_counts, n_runs: int = FULL_RUNS) -> np.ndarray:
+    """Colour indices into :data:`COLORS` (0 green, 1 yellow, 2 red) of many cells at once.
+
+    ``outside_counts``: (..., 6) counts of runs outside 3σ out of ``n_runs`` each; the rule of
+    :func:`traffic_light` (module docstring) on every row. Returns an int array of shape (...).
+    """
+    c = np.asarray(outside_counts)
+    if c.shape[-1:] != (6,):
+        raise ValueError(f"outside_counts must have 6 components in the last axis, got {c.shape}")
+    c = c.astype(np.int64)
+    n = int(n_runs)
+    if n < 1:
+        return np.where(np.any(c != 0, axis=-1), 2, 0)
+    p100 = c * FULL_RUNS     # compare c·100/n with the thresholds in integers: c·100 vs t·n
+    red = np.any(p100 > 10 * n, axis=-1)
+    yellow = np.any(p100 > 5 * n, axis=-1) | (np.sum(p100 == 5 * n, axis=-1) >= 2)
+    return np.where(red, 2, np.where(yellow, 1, 0))
+
+
 def traffic_light(outside_counts, n_runs: int = FULL_RUNS) -> str:
     """Colour of Bernard fig. 9.4 from the six counts of runs outside 3σ out of ``n_runs``.
 
@@ -93,15 +124,34 @@ def traffic_light(outside_counts, n_runs: int = FULL_RUNS) -> str:
     ``n_runs = 100`` this is the thesis's rule on the raw counts.
     """
     c = np.asarray(outside_counts, int).reshape(6)
-    n = int(n_runs)
-    if n < 1:
-        return "green" if not np.any(c) else "red"
-    p100 = c * FULL_RUNS     # compare c·100/n with the thresholds in integers: c·100 vs t·n
-    if np.any(p100 > 10 * n):
-        return "red"
-    if np.any(p100 > 5 * n) or int(np.sum(p100 == 5 * n)) >= 2:
-        return "yellow"
-    return "green"
+    return COLORS[int(traffic_lights(c, n_runs))]
+
+
+def color_probability(outside, n_runs: int = FULL_RUNS, *, draws: int = COLOR_DRAWS,
+                      seed: int = 0) -> dict:
+    """Probability of each colour in an independent ``n_runs``-run Monte Carlo of a cell.
+
+    ``outside``: (R, 6) 0/1 flags of the cell's R finished runs (:func:`run_metrics`
+    ``outside``). Bayesian-bootstrap posterior predictive (module docstring) with ``draws``
+    draws from a generator seeded with ``seed`` (the result depends only on the flags, the
+    draw count and the seed). Returns ``{"green": p, "yellow": p, "red": p}`` (summing to 1),
+    or an empty dict without runs.
+    """
+    f = np.asarray(outside, dtype=np.int64)
+    if f.ndim != 2 or f.shape[1] != 6:
+        raise ValueError(f"outside must be (runs, 6) flags, got shape {f.shape}")
+    if f.shape[0] == 0:
+        return {}
+    n, total = int(n_runs), int(draws)
+    rng = np.random.default_rng(seed)
+    hist = np.zeros(len(COLORS), np.int64)
+    block = max(1, 4_000_000 // f.shape[0])          # bounded memory for studies of many runs
+    for start in range(0, total, block):
+        m = min(block, total - start)
+        w = rng.dirichlet(np.ones(f.shape[0]), size=m)   # (m, R) run weights
+        picks = rng.multinomial(n, w)                     # (m, R) new runs drawn per old run
+        hist += np.bincount(traffic_lights(picks @ f, n), minlength=len(COLORS))
+    return {name: float(k) / total for name, k in zip(COLORS, hist)}
 
 
 def _pct(x, q):
@@ -123,11 +173,15 @@ def cell_summary(cell: dict, runs: list, failures: int) -> dict:
     rss = [r["rss_att_deg"] for r in runs]
     rssw = [r["rss_omega_deg_s"] for r in runs]
     rt = [r["runtime_s"] for r in runs]
+    flags = np.asarray([r["outside"] for r in runs], int).reshape(n, 6)
     out = dict(cell)
     out.update({
         "runs": n,
         "outside_3sigma": [int(x) for x in counts],
         "color": traffic_light(counts, n),
+        # the colour's Monte Carlo spread: P(colour) in an independent Monte Carlo of the
+        # thesis's size (FULL_RUNS runs; color_probability)
+        "color_probability": color_probability(flags, FULL_RUNS),
         "rss_att_deg_median": _pct(rss, 50),
         "rss_att_deg_p95": _pct(rss, 95),
         # share of finished runs ending below 5° RSS attitude error ("converged"; the

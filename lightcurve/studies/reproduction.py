@@ -25,7 +25,10 @@ Bernard section — it reads the ``summary.json`` of ``thesis-fig9-4`` and
 and ``thesis-bpf-*`` (Fig. 9.5–9.7), and the JSON line of ``benchmarks/reflection_kf.py``
 (§10.7/§10.8). Rules, stated once: a table agrees when at least 85 % of the cells both ran have
 the same colour; fewer than 100 runs per cell make it *indicative*; "better / more accurate"
-compares median final RSS attitude errors of the UKF; a "significant" change is a median ratio
+compares median final RSS attitude errors of the UKF; the Monte Carlo spread of each colour is
+:func:`lightcurve.studies.metrics.color_probability` (computed from the run files when a
+summary predates it), and a disagreeing cell whose published colour has a probability of at
+least 5 % in a 100-run Monte Carlo of our filter is "within Monte Carlo noise"; a "significant" change is a median ratio
 beyond 0.7–1/0.7; "robust" = share of runs ending below 5° RSS; "not suitable" = every such
 cell red.
 """
@@ -38,7 +41,8 @@ from pathlib import Path
 
 from ..io.atomic import atomic_write_text
 
-__all__ = ["css_section", "bernard_section", "load_summaries", "write_reproduction", "main"]
+__all__ = ["css_section", "bernard_section", "load_summaries", "add_color_spread",
+           "write_reproduction", "main"]
 
 _EXPERIMENT_TITLE = {
     "fig3_09": "Fig. 3.9 — tumbling, dual pyramid (§3.3.1)",
@@ -870,7 +874,8 @@ SIGNIFICANT = 0.7
 
 def load_summaries(dirs) -> dict:
     """``{study name: summary dict}`` of the study output folders ``dirs`` (missing or
-    unreadable summaries are skipped)."""
+    unreadable summaries are skipped); each summary gains ``_folder``, the folder it was read
+    from."""
     from ..io.safe_open import read_json
 
     out = {}
@@ -881,8 +886,31 @@ def load_summaries(dirs) -> dict:
         except ValueError:  # InputError included
             continue
         if isinstance(s, dict) and "study" in s:
+            s["_folder"] = str(d)   # where its run files are (add_color_spread)
             out[s["study"]] = s
     return out
+
+
+def add_color_spread(summary: dict, folder=None) -> None:
+    """Give every cell of ``summary`` its ``color_probability`` (from the run files under
+    ``folder``, default the folder :func:`load_summaries` read it from, where the summary
+    predates it) and recompute the agreement with them."""
+    from .agreement import agreement
+    from .metrics import FULL_RUNS, color_probability
+    from .runner import read_outside_flags
+    from .study import GRID_KEYS
+
+    cells = summary.get("cells", [])
+    folder = summary.get("_folder") if folder is None else folder
+    if folder is None or all("color_probability" in c for c in cells):
+        return
+    flags = read_outside_flags(folder, int(summary.get("runs_per_cell", FULL_RUNS)))
+    for c in cells:
+        f = flags.get(tuple(c.get(k, "none" if k == "reflection" else None) for k in GRID_KEYS))
+        if f is not None and len(f) == c.get("runs"):
+            c["color_probability"] = color_probability(f, FULL_RUNS)
+    if "agreement" in summary:
+        summary["agreement"] = agreement(cells)
 
 
 def _cell(summary, **key):
@@ -937,6 +965,39 @@ def _ablations(sums, name):
     return {n[len(pre):]: s for n, s in sorted(sums.items()) if n.startswith(pre)}
 
 
+def _spread_rows(sums):
+    """The Monte Carlo spread of the five tables' colours (module docstring)."""
+    rows = []
+    for name, fig, what in _TABLES:
+        a = (sums.get(name) or {}).get("agreement")
+        if not a or "self_agree" not in a:
+            continue
+        n = a["compared"]
+        rows.append(f"| Fig. {fig} ({what}) | {a['agree']}/{n} | {a['self_agree']:.1f}/{n} "
+                    f"({100 * a['self_agree'] / n:.0f} %) | {a['expected_agree']:.1f}/{n} | "
+                    f"{a['within_noise']} of {len(a['disagree'])} |")
+    if not rows:
+        return []
+    return ["", "**Monte Carlo spread of the colours.** A cell's colour is itself a random "
+            "outcome of its 100 runs. From each cell's runs, the probability of each colour in "
+            "an independent 100-run Monte Carlo of the same filter (Bayesian bootstrap, "
+            "`lightcurve.studies.metrics.color_probability`) gives: *self-agreement*, the "
+            "cells on which two such Monte Carlos of our filter agree on average — what a "
+            "perfect reproduction would reach, the ceiling for the 85 % aim; *thesis as a draw "
+            "of ours*, the expected agreement if the published table were one such Monte Carlo "
+            "of our filter; and the disagreeing cells whose published colour has a probability "
+            "of at least 5 % (within Monte Carlo noise; 5 % false-alarm rate per cell).", "",
+            "| table | agree | self-agreement (ceiling) | thesis as a draw of ours | "
+            "disagreeing cells within noise |", "|---|---|---|---|---|"] + rows
+
+
+def _p_cell(d):
+    p = d.get("thesis_color_probability")
+    if p is None:
+        return "–"
+    return f"{100 * p:.1f} %" + (" (noise)" if p >= 0.05 else "")
+
+
 def _disagreements(sums):
     out = []
     for name, fig, _ in _TABLES:
@@ -947,10 +1008,11 @@ def _disagreements(sums):
         out.append(f"\n**Fig. {fig}: cells that disagree** (ours / thesis; runs outside 3σ "
                    "θx θy θz ωx ωy ωz; *flipped by*: the ablations on the same seeds — one "
                    "switch each, two where the label joins two — whose colour for the cell is "
-                   "the thesis's)\n")
+                   "the thesis's; *P(thesis)*: probability of the thesis's colour in an "
+                   "independent 100-run Monte Carlo of our filter, \"noise\" from 5 %)\n")
         out.append("| filter | dynamics | sites | σθ (°) | σω (°/s) | r (%) | ours | thesis | "
-                   "outside 3σ | flipped by |")
-        out.append("|---|---|---|---|---|---|---|---|---|---|")
+                   "outside 3σ | P(thesis) | flipped by |")
+        out.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for d in s["agreement"]["disagree"]:
             key = {k: d[k] for k in _KEYS}
             c = _cell(s, **key)
@@ -965,7 +1027,7 @@ def _disagreements(sums):
             out.append(f"| {d['filter'].upper()} | {d['dynamics']} | {d['sites']} | "
                        f"{d['sigma_theta_deg']:g} | {d['sigma_omega_deg_s']:g} | "
                        f"{d['r_percent']:g} | {d['color']} | {d['thesis_color']} | {o} | "
-                       f"{why} |")
+                       f"{_p_cell(d)} | {why} |")
         if abl:
             out.append("")
             out.append("Ablation tables (agreement over the cells each ablation ran): " + "; ".join(
@@ -1183,6 +1245,9 @@ def bernard_section(study_dirs=(), reflection_kf_json=None) -> str:
     ``study_dirs``: study output folders; ``reflection_kf_json``: path of the JSON line printed
     by ``benchmarks/reflection_kf.py`` (or None)."""
     sums = load_summaries(study_dirs)
+    for name, _, _ in _TABLES:   # the published tables' colour spread (run files if needed)
+        if name in sums:
+            add_color_spread(sums[name])
     kf = None
     if reflection_kf_json:
         from ..io.safe_open import read_text
@@ -1200,6 +1265,7 @@ def bernard_section(study_dirs=(), reflection_kf_json=None) -> str:
            "### Monte Carlo tables (Fig. 9.4, Appendix B), cell by cell", "",
            "| table | ours | thesis | verdict |", "|---|---|---|---|"]
     out += _table_rows(sums)
+    out += _spread_rows(sums)
     out += _disagreements(sums)
     out += ["", "### The seven conclusions of §9.4", ""]
     out += _claim_table(_bernard_claims(sums))

@@ -291,6 +291,35 @@ def read_run(path) -> dict:
     return out
 
 
+def read_outside_flags(out_dir, runs: int) -> dict:
+    """The outside-3σ flags of a study folder's finished runs 0…runs−1, per cell.
+
+    Reads only the run files' attributes (:func:`write_run`), for summaries written before
+    they carried ``color_probability``. Returns ``{tuple of the cell's GRID_KEYS values: (R, 6)
+    int array}``, runs in index order; failed runs and unreadable files are left out.
+    """
+    from ..io.safe_open import open_hdf5
+
+    per = {}
+    d = Path(out_dir) / "runs"
+    for p in sorted(d.glob("*.h5")) if d.is_dir() else ():
+        if p.name.startswith("."):
+            continue
+        try:
+            with open_hdf5(p, track=False) as h:
+                if h.attrs.get("format") != RUN_FORMAT or str(h.attrs["status"]) != "ok":
+                    continue
+                i = int(h.attrs["run"])
+                if i >= runs:
+                    continue
+                cell = json.loads(str(h.attrs["cell_json"]))
+                out = json.loads(str(h.attrs["metrics_json"]))["outside"]
+        except (OSError, KeyError, ValueError):   # InputError included
+            continue
+        per.setdefault(tuple(cell.get(k) for k in GRID_KEYS), {})[i] = out
+    return {k: np.asarray([v[i] for i in sorted(v)], int).reshape(-1, 6) for k, v in per.items()}
+
+
 def finished_runs(out_dir) -> set:
     """Run ids with a stored file under ``DIR/runs`` (temporary files are ignored)."""
     d = Path(out_dir) / "runs"

@@ -4,6 +4,10 @@
   of each figure (Fig. 9.4 has 2 grey cells; B.3's controlled two-site halves are lost).
 * Traffic light: the 100-run rule unchanged at 100 runs; with n runs a count c reads as
   c·100/n (5 runs with 4 diverged is red, not green).
+* The Monte Carlo spread of a colour: the vectorised rule is the rule row by row (an
+  independent transcription of §9.4.1 in the test); one component's colour probabilities are
+  beta-binomial tails (scipy) within a 4.5σ Monte Carlo bound; the agreement's expected and
+  self-agreement sums; a summary that predates the spread gets it from its run files.
 * A small thesis-variant study: grey cells are not run, every cell carries ``thesis_color``,
   the summary the agreement counts and ``indicative``; the report shows the thesis colour; all
   filters of one run share the initial-estimate seed (§9.3.1), the robust variant does not.
@@ -13,11 +17,13 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from lightcurve._paths import data_dir
 from lightcurve.studies.agreement import agreement, load_thesis_table
-from lightcurve.studies.metrics import traffic_light
+from lightcurve.studies.metrics import (COLORS, color_probability, traffic_light,
+                                        traffic_lights)
 from lightcurve.studies.study import load_study
 
 STUDIES = data_dir("pipelines") / "studies"
@@ -73,6 +79,59 @@ def test_traffic_light_scales_with_the_run_count():
     assert traffic_light([0] * 6, 1) == "green" and traffic_light([1] + [0] * 5, 1) == "red"
 
 
+def _rule_100(c):
+    """§9.4.1 at 100 runs, transcribed independently: red when more than ten samples are
+    outside for any component; yellow when any component has six to nine (ten: yellow here,
+    module docstring of metrics) or two or more components have exactly five; else green."""
+    if any(x > 10 for x in c):
+        return "red"
+    if any(6 <= x <= 10 for x in c) or sum(1 for x in c if x == 5) >= 2:
+        return "yellow"
+    return "green"
+
+
+def test_traffic_lights_is_the_rule_on_every_row():
+    rng = np.random.default_rng(7)
+    counts = rng.choice([0, 1, 3, 4, 5, 6, 9, 10, 11, 40], size=(5000, 6),
+                        p=[.2, .05, .05, .1, .25, .1, .05, .05, .1, .05])
+    got = traffic_lights(counts, 100)
+    assert got.shape == (5000,)
+    assert [COLORS[i] for i in got] == [_rule_100(c) for c in counts]
+    # other run counts: c out of n is read as c·100/n; 1000 runs with 10·c outside is the
+    # 100-run colour of c, and a count per 100 that is not an integer never equals five
+    assert [COLORS[i] for i in traffic_lights(counts * 10, 1000)] == [_rule_100(c) for c in counts]
+    assert COLORS[int(traffic_lights([1, 1, 0, 0, 0, 0], 21))] == "green"
+    assert [traffic_light(c, 20) for c in counts[:50]] == \
+        [COLORS[i] for i in traffic_lights(counts[:50], 20)]
+
+
+@pytest.mark.parametrize("k", [3, 8, 14])
+def test_color_probability_of_one_component_is_beta_binomial(k):
+    # one component with k of R runs outside: the predictive count is BB(100, k, R - k)
+    # (Dirichlet weights summed over the k runs are Beta(k, R - k)). 20,000 draws: standard
+    # error at most 0.0035; the 4.5σ bound has a two-sided false-alarm rate of 7e-6.
+    from scipy.stats import betabinom
+
+    R = 100
+    f = np.zeros((R, 6), int)
+    f[:k, 0] = 1
+    bb = betabinom(100, k, R - k)
+    p = color_probability(f, 100, draws=20_000, seed=3)
+    assert sum(p.values()) == pytest.approx(1.0)
+    assert p["red"] == pytest.approx(bb.sf(10), abs=0.016)
+    assert p["yellow"] == pytest.approx(bb.cdf(10) - bb.cdf(5), abs=0.016)
+    # the same runs outside in two components: exactly five in both is yellow too
+    f[:k, 1] = 1
+    p2 = color_probability(f, 100, draws=20_000, seed=3)
+    assert p2["yellow"] == pytest.approx(bb.cdf(10) - bb.cdf(4), abs=0.016)
+    assert p2["green"] == pytest.approx(bb.cdf(4), abs=0.016)
+    # reproducible; no runs outside: green for sure
+    assert color_probability(f, 100, draws=500, seed=3) == color_probability(f, 100, draws=500,
+                                                                             seed=3)
+    assert color_probability(np.zeros((40, 6)), 100, draws=200) == {"green": 1.0, "yellow": 0.0,
+                                                                     "red": 0.0}
+
+
 def test_agreement_counts():
     cells = [dict(filter="mekf", dynamics="controlled", sites=1, sigma_theta_deg=3.0,
                   sigma_omega_deg_s=0.02, r_percent=1.0, runs=100, color="red",
@@ -91,6 +150,49 @@ def test_agreement_counts():
     assert a["by_filter"] == {"mekf": {"compared": 1, "agree": 1},
                               "ukf": {"compared": 1, "agree": 0}}
     assert a["disagree"][0]["thesis_color"] == "green"
+    assert "self_agree" not in a     # no colour probabilities: no spread
+    # with the spread: Σ P(published colour), Σ Σ P², disagreeing cells with P ≥ 5 %
+    cells[0]["color_probability"] = {"green": 0.0, "yellow": 0.2, "red": 0.8}
+    cells[1]["color_probability"] = {"green": 0.06, "yellow": 0.5, "red": 0.44}
+    a = agreement(cells)
+    assert a["expected_agree"] == pytest.approx(0.8 + 0.06)
+    assert a["self_agree"] == pytest.approx(0.04 + 0.64 + 0.0036 + 0.25 + 0.1936)
+    assert a["within_noise"] == 1 and a["disagree"][0]["thesis_color_probability"] == 0.06
+    cells[1]["color_probability"] = {"green": 0.04, "yellow": 0.5, "red": 0.46}
+    assert agreement(cells)["within_noise"] == 0
+
+
+def test_reproduction_gives_old_summaries_their_colour_spread(tmp_path):
+    # a summary written before color_probability existed: its spread from the run files
+    from lightcurve.studies.reproduction import add_color_spread, load_summaries
+    from lightcurve.studies.runner import write_run
+
+    key = dict(filter="ukf", dynamics="controlled", sites=1, sigma_theta_deg=3.0,
+               sigma_omega_deg_s=0.02, r_percent=1.0, reflection="none")
+    rng = np.random.default_rng(0)
+    flags = (rng.random((100, 6)) < 0.07).astype(int)
+    for i, fl in enumerate(flags):
+        write_run(tmp_path, {"run_id": f"c_r{i:05d}", "status": "ok", "error": "", "run": i,
+                             "sim_seed": 1, "filter_seed": 2, "wall_s": 0.0, "cell": key,
+                             "metrics": {"outside": [int(x) for x in fl]},
+                             **{n: np.zeros((1, 3)) for n in ("att_error_deg", "att_sigma_deg",
+                                                              "omega_error_rad_s",
+                                                              "omega_sigma_rad_s")},
+                             "t": np.zeros(1)}, "h")
+    counts = flags.sum(axis=0)
+    cell = dict(key, runs=100, outside_3sigma=[int(x) for x in counts],
+                color=traffic_light(counts), thesis_color="green")
+    summ = {"study": "thesis-fig9-4", "runs_per_cell": 100, "cells": [cell],
+            "agreement": agreement([cell])}
+    (tmp_path / "summary.json").write_text(json.dumps(summ))
+    s = load_summaries([tmp_path])["thesis-fig9-4"]
+    assert "color_probability" not in s["cells"][0]
+    add_color_spread(s)
+    assert s["cells"][0]["color_probability"] == color_probability(flags, 100)
+    a = s["agreement"]
+    assert a["expected_agree"] == pytest.approx(s["cells"][0]["color_probability"]["green"])
+    assert a["self_agree"] == pytest.approx(sum(v * v for v in
+                                                s["cells"][0]["color_probability"].values()))
 
 
 def _small_study(tmp_path, variant):
