@@ -291,18 +291,27 @@ def read_run(path) -> dict:
     return out
 
 
-def read_outside_flags(out_dir, runs: int) -> dict:
+def read_outside_flags(out_dir, runs: int, cells=None) -> dict:
     """The outside-3σ flags of a study folder's finished runs 0…runs−1, per cell.
 
     Reads only the run files' attributes (:func:`write_run`), for summaries written before
-    they carried ``color_probability``. Returns ``{tuple of the cell's GRID_KEYS values: (R, 6)
-    int array}``, runs in index order; failed runs and unreadable files are left out.
+    they carried ``color_probability``; ``cells`` (dicts with the GRID_KEYS) limits the reading
+    to those cells' files. Returns ``{tuple of the cell's GRID_KEYS values: (R, 6) int array}``,
+    runs in index order; failed runs and unreadable files are left out.
     """
     from ..io.safe_open import open_hdf5
+    from .study import Cell
 
     per = {}
     d = Path(out_dir) / "runs"
-    for p in sorted(d.glob("*.h5")) if d.is_dir() else ():
+    if not d.is_dir():
+        files = []
+    elif cells is None:
+        files = sorted(d.glob("*.h5"))
+    else:
+        tags = {Cell(**{k: c[k] for k in GRID_KEYS}).tag for c in cells}
+        files = sorted(p for t in tags for p in d.glob(f"{t}_r*.h5"))
+    for p in files:
         if p.name.startswith("."):
             continue
         try:

@@ -71,3 +71,35 @@ def test_cli_writes_the_file(tmp_path):
     text = out.read_text()
     assert text.startswith("# Reproduction of the source documents")
     assert "indicative: 10 runs/cell" in text
+
+
+def test_monte_carlo_spread_block_and_ablations_within_noise(tmp_path):
+    # cells carrying color_probability: the spread table (self-agreement Σ Σ P², expected
+    # agreement Σ P(thesis), cells within noise) and, per disagreeing cell, P(thesis) and the
+    # ablations whose colour differs but under which the thesis's has P >= 5 %
+    def spread(c, g, y, r):
+        c["color_probability"] = {"green": g, "yellow": y, "red": r}
+        return c
+
+    base = [spread(_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3),
+                   0.9, 0.1, 0.0),
+            spread(_cell("ukf", "controlled", 1, 5.0, 0.02, 1.0, "red", "yellow", 0.3),
+                   0.0, 0.02, 0.98),
+            spread(_cell("ukf", "controlled", 1, 10.0, 0.02, 1.0, "yellow", "green", 0.3),
+                   0.3, 0.6, 0.1)]
+    abl_a = [spread(_cell("ukf", "controlled", 1, 5.0, 0.02, 1.0, "green", "yellow", 0.3),
+                    0.8, 0.2, 0.0)]
+    abl_b = [spread(_cell("ukf", "controlled", 1, 5.0, 0.02, 1.0, "green", "yellow", 0.3),
+                    0.97, 0.03, 0.0)]
+    dirs = [_write(tmp_path, "thesis-fig9-4", base),
+            _write(tmp_path, "thesis-fig9-4-ablation-a", abl_a),
+            _write(tmp_path, "thesis-fig9-4-ablation-b", abl_b)]
+    md = bernard_section(dirs)
+    # self-agreement 0.82 + 0.9608 + 0.46 = 2.2408; expected 0.9 + 0.02 + 0.3 = 1.22
+    assert "| Fig. 9.4 (LEO, fast spin) | 1/3 | 2.2/3 (75 %) |" in md
+    assert "| 1.2/3 | 1 of 2 |" in md
+    row5 = next(ln for ln in md.splitlines() if ln.startswith("| UKF | controlled | 1 | 5 |"))
+    assert "| 2.0 % | none of the tested ablations; within the noise of: a (green, 0 max; " \
+           "P(thesis) 20 %) |" in row5
+    row10 = next(ln for ln in md.splitlines() if ln.startswith("| UKF | controlled | 1 | 10 |"))
+    assert "| 30.0 % (noise) |" in row10

@@ -171,8 +171,11 @@ def test_reproduction_gives_old_summaries_their_colour_spread(tmp_path):
                sigma_omega_deg_s=0.02, r_percent=1.0, reflection="none")
     rng = np.random.default_rng(0)
     flags = (rng.random((100, 6)) < 0.07).astype(int)
+    from lightcurve.studies.study import Cell
+
+    tag = Cell(**key).tag      # run files are <cell tag>_r<run>.h5
     for i, fl in enumerate(flags):
-        write_run(tmp_path, {"run_id": f"c_r{i:05d}", "status": "ok", "error": "", "run": i,
+        write_run(tmp_path, {"run_id": f"{tag}_r{i:05d}", "status": "ok", "error": "", "run": i,
                              "sim_seed": 1, "filter_seed": 2, "wall_s": 0.0, "cell": key,
                              "metrics": {"outside": [int(x) for x in fl]},
                              **{n: np.zeros((1, 3)) for n in ("att_error_deg", "att_sigma_deg",
@@ -186,6 +189,9 @@ def test_reproduction_gives_old_summaries_their_colour_spread(tmp_path):
             "agreement": agreement([cell])}
     (tmp_path / "summary.json").write_text(json.dumps(summ))
     s = load_summaries([tmp_path])["thesis-fig9-4"]
+    assert "color_probability" not in s["cells"][0]
+    other = dict(key, sites=2)
+    add_color_spread(s, keys=[other])          # another cell only: nothing read
     assert "color_probability" not in s["cells"][0]
     add_color_spread(s)
     assert s["cells"][0]["color_probability"] == color_probability(flags, 100)
@@ -210,7 +216,8 @@ def _small_study(tmp_path, variant):
     return load_study(f)
 
 
-def test_thesis_variant_study_grey_cells_colours_and_shared_initial_estimate(tmp_path):
+def test_thesis_variant_study_grey_cells_colours_and_shared_initial_estimate(tmp_path, capsys):
+    from lightcurve.cli import main
     from lightcurve.studies.runner import run_study
 
     st = _small_study(tmp_path, "thesis")
@@ -231,8 +238,21 @@ def test_thesis_variant_study_grey_cells_colours_and_shared_initial_estimate(tmp
     assert s["agreement"]["compared"] == 2 and len(s["not_run_grey"]) == 2
     js = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert all("thesis_color" in c for c in js["cells"])
+    # one run per cell: a new 100-run Monte Carlo repeats that run's flags 100 times, so the
+    # colour probability is 1 for the colour of the run's counts × 100
+    for c in js["cells"]:
+        assert c["color_probability"][traffic_light([100 * x for x in c["outside_3sigma"]])] == 1
+    a = js["agreement"]
+    assert a["self_agree"] == pytest.approx(2.0) and 0 <= a["within_noise"] <= len(a["disagree"])
     html = (tmp_path / "out" / "report.html").read_text()
     assert "thesis: red" in html and "not run" in html and "INDICATIVE" in html
+    assert "Monte Carlo spread of the colours" in html and "colour in a new 100-run" in html
+    # the command line resumes (nothing left to run) and prints the agreement and the spread
+    capsys.readouterr()
+    assert main(["compare", str(tmp_path / "small-thesis.toml"), "--runs", "1", "--workers",
+                 "1", "-q", "-o", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "run cells agree" in out and "would agree with itself on 2.0 of 2 cells" in out
 
 
 @pytest.mark.parametrize("name", ["thesis-fig9-4", "thesis-fig-b1-meo-cubesat",
@@ -299,3 +319,25 @@ def test_eta_window_ablations_size_eta_from_the_section_9_2_4_drift(path):
         assert dyn == "uncontrolled"
         eta = _filter_eta(st.scenario_texts[(dyn, ns)], str(f), 360.0)
         assert eta == pytest.approx(d * (3.0 / 360.0 ** 3) ** 0.5, rel=1e-12)
+
+
+def test_reach_probability_is_poisson_binomial():
+    # equal cells: binomial; mixed cells: enumeration of the 2^6 agree/disagree patterns
+    import itertools
+
+    from scipy.stats import binom
+
+    from lightcurve.studies.reproduction import _reach_probability
+
+    def cell(p):
+        return {"thesis_color": "green", "runs": 100, "color_probability": p}
+
+    s = {"cells": [cell({"green": 0.9, "yellow": 0.1, "red": 0.0})] * 20
+         + [dict(cell({"green": 0.5, "yellow": 0.5, "red": 0.0}), thesis_color="grey")]}
+    assert _reach_probability(s) == pytest.approx(binom.sf(16, 20, 0.82), rel=1e-12)
+    probs = [{"green": a, "yellow": 1 - a, "red": 0.0} for a in (1.0, 0.9, 0.7, 0.5, 0.6, 0.2)]
+    q = [a * a + (1 - a) ** 2 for a in (1.0, 0.9, 0.7, 0.5, 0.6, 0.2)]
+    want = sum(np.prod([qi if b else 1 - qi for qi, b in zip(q, bits)])
+               for bits in itertools.product([0, 1], repeat=6) if sum(bits) >= 6 * 0.85)
+    assert _reach_probability({"cells": [cell(p) for p in probs]}) == pytest.approx(want,
+                                                                                   rel=1e-12)
