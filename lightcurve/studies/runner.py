@@ -310,7 +310,7 @@ def read_outside_flags(out_dir, runs: int, cells=None) -> dict:
         files = sorted(d.glob("*.h5"))
     else:
         tags = {Cell(**{k: c[k] for k in GRID_KEYS}).tag for c in cells}
-        files = sorted(p for t in tags for p in d.glob(f"{t}_r*.h5"))
+        files = sorted(p for p in d.glob("*.h5") if p.name.partition("_r")[0] in tags)
     for p in files:
         if p.name.startswith("."):
             continue
