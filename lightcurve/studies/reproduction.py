@@ -25,12 +25,12 @@ Bernard section — it reads the ``summary.json`` of ``thesis-fig9-4`` and
 and ``thesis-bpf-*`` (Fig. 9.5–9.7), and the JSON line of ``benchmarks/reflection_kf.py``
 (§10.7/§10.8). Rules, stated once: a table agrees when at least 85 % of the cells both ran have
 the same colour; fewer than 100 runs per cell make it *indicative*; "better / more accurate"
-compares median final RSS attitude errors of the UKF; the Monte Carlo spread of each colour is
-:func:`lightcurve.studies.metrics.color_probability` (computed from the run files when a
+compares median final RSS attitude errors of the UKF; the Monte Carlo spread of each colour
+is :func:`lightcurve.studies.metrics.color_probability` (computed from the run files when a
 summary predates it), and a disagreeing cell whose published colour has a probability of at
-least 5 % in a 100-run Monte Carlo of our filter is "within Monte Carlo noise"; a "significant" change is a median ratio
-beyond 0.7–1/0.7; "robust" = share of runs ending below 5° RSS; "not suitable" = every such
-cell red.
+least 5 % in a 100-run Monte Carlo of our filter is "within Monte Carlo noise"; a
+"significant" change is a median ratio beyond 0.7–1/0.7; "robust" = share of runs ending
+below 5° RSS; "not suitable" = every such cell red.
 """
 
 from __future__ import annotations
