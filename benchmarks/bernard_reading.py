@@ -32,22 +32,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lightcurve.studies.agreement import agreement  # noqa: E402
-from lightcurve.studies.reproduction import (_KEYS, _TABLES, add_color_spread,  # noqa: E402
-                                             load_summaries)
+from lightcurve.studies.agreement import agreement, spread_text  # noqa: E402
+from lightcurve.studies.reproduction import (_KEYS, _TABLES, _cell,  # noqa: E402
+                                             add_color_spread, load_summaries)
 
 #: (filter, dynamics) → suffix of the study whose cell applies the reading
 READING = {("mekf", "controlled"): "",
            ("mekf", "uncontrolled"): "-ablation-glints-hidden",
            ("ukf", "controlled"): "-ablation-ukf-alpha",
            ("ukf", "uncontrolled"): "-ablation-glints-hidden-ukf-alpha"}
-
-
-def _find(summary, key):
-    for c in summary.get("cells", []):
-        if all(c.get(k) == key[k] for k in _KEYS):
-            return c
-    return None
 
 
 def compose(sums: dict, name: str):
@@ -61,7 +54,7 @@ def compose(sums: dict, name: str):
         if c.get("thesis_color") is None:
             continue
         src = sums[name + READING[(c["filter"], c["dynamics"])]]
-        rc = _find(src, c)
+        rc = _cell(src, **{k: c[k] for k in _KEYS})
         if rc is None:
             return None
         cells.append(dict(rc, thesis_color=c["thesis_color"]))
@@ -104,9 +97,7 @@ def main(argv=None) -> int:
               f"{agr['agree']}/{agr['compared']} ({100 * agr['agree'] / agr['compared']:.0f} %)")
         print("  " + "; ".join(f"{k} {a_}/{n}" for k, (n, a_) in halves.items()))
         if "self_agree" in agr:
-            print(f"  spread: self-agreement {agr['self_agree']:.1f}, thesis as a draw "
-                  f"{agr['expected_agree']:.1f}, disagreeing cells within noise "
-                  f"{agr['within_noise']} of {len(agr['disagree'])}")
+            print("  " + spread_text(agr))
         for d in agr["disagree"]:
             print(f"  {d['filter'].upper():4s} {d['dynamics']:12s} {d['sites']} "
                   f"{d['sigma_theta_deg']:4g} {d['sigma_omega_deg_s']:4g} {d['r_percent']:3g}  "

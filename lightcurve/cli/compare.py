@@ -39,11 +39,9 @@ def _cmd_compare(args) -> int:
               f"variant: {agr['agree']} of {agr['compared']} run cells agree ({pct:.0f} %; "
               f"{byf}){ind}")
         if "self_agree" in agr:
-            print(f"Monte Carlo spread of the colours: a perfect reproduction of these filters "
-                  f"would agree with itself on {agr['self_agree']:.1f} of {agr['compared']} cells "
-                  f"on average; the published table, read as a 100-run Monte Carlo of ours, on "
-                  f"{agr['expected_agree']:.1f}; {agr['within_noise']} of "
-                  f"{len(agr['disagree'])} disagreeing cells are within its noise (P >= 5 %)")
+            from ..studies.agreement import spread_text
+
+            print(spread_text(agr))
     return report_written(Path(args.output) / "summary.json", Path(args.output) / "report.html")
 
 

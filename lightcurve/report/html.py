@@ -251,13 +251,10 @@ def write_study_report(path, summary: dict, envelopes=()) -> None:
                 f"cell by cell: {agr['agree']} of {agr['compared']} run cells agree ({byf}); "
                 f"variant {html.escape(str(summary.get('variant')))}.</b></p>")
         if "self_agree" in agr:
-            head += (f"<p>Monte Carlo spread of the colours (hover a cell for its colour "
-                     f"probabilities): a perfect reproduction of these filters would agree with "
-                     f"itself on {agr['self_agree']:.1f} of {agr['compared']} cells on average; "
-                     f"the published table, read as one 100-run Monte Carlo of ours, on "
-                     f"{agr['expected_agree']:.1f}. {agr['within_noise']} of "
-                     f"{len(agr['disagree'])} disagreeing cells have the published colour with "
-                     f"probability ≥ 5 % in a 100-run Monte Carlo of ours (within noise).</p>")
+            from ..studies.agreement import spread_text
+
+            head += (f"<p>{html.escape(spread_text(agr))} Hover a box for its colour "
+                     "probabilities.</p>")
     if ind:
         head += (f"<p><b>INDICATIVE</b>: {summary['runs_per_cell']} runs per cell; the thesis's "
                  "rule is defined for 100 runs and its thresholds are scaled to the run count "

@@ -30,7 +30,7 @@ from pathlib import Path
 from ..errors import InputError
 
 __all__ = ["ThesisTable", "load_thesis_table", "thesis_color", "agreement", "TABLE_COLORS",
-           "COMPARED", "NOISE_LEVEL"]
+           "COMPARED", "NOISE_LEVEL", "spread_text"]
 
 TABLE_COLORS = ("green", "yellow", "red", "grey", "unknown")
 #: published colours that are compared with ours
@@ -148,3 +148,14 @@ def agreement(cells) -> dict:
         out["within_noise"] = sum(d["thesis_color_probability"] >= NOISE_LEVEL
                                   for d in out["disagree"])
     return out
+
+
+def spread_text(agr: dict) -> str:
+    """One sentence on the Monte Carlo spread of an :func:`agreement` result that carries it
+    (``self_agree``; module docstring), for the command line and the study report."""
+    return (f"Monte Carlo spread of the colours: a perfect reproduction of these filters would "
+            f"agree with itself on {agr['self_agree']:.1f} of {agr['compared']} cells on "
+            f"average; the published table, read as one 100-run Monte Carlo of ours, on "
+            f"{agr['expected_agree']:.1f}; {agr['within_noise']} of {len(agr['disagree'])} "
+            f"disagreeing cells have the published colour with probability >= "
+            f"{100 * NOISE_LEVEL:.0f} % in such a Monte Carlo (within noise).")
