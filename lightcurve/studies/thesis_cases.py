@@ -23,7 +23,10 @@ the choice is made once here (never per case or per cell).
   §9.3.3 says the tasking "will be presented on a case-by-case basis" but gives no other case:
   for every other two-site case (LEO nadir and inertial; all MEO; GEO fast spin and inertial)
   we choose once the §10.1 switching pattern, the pattern the text reports as improving
-  two-site results (§9.4.4).
+  two-site results (§9.4.4). Because the tasking of the Monte Carlo tables is not stated, the
+  fast-spin cases of Fig. 9.4 and Figs. B.1–B.4 also have tasking-ablation files with the other
+  pattern (``pipelines/studies/ablations/scenarios/tasking-<pattern>-*.toml``;
+  :data:`ABLATION_TASKING`).
 * Scaled MEO/GEO shapes (eq. 9.2): ``A₂ = A₁ (v_r,2ᵀv_r,2)/(v_r,1ᵀv_r,1)``. The text does not
   say at which epoch the two ranges are taken (§9.1.2 leaves it open): we take the mean of
   the squared Socorro range over the one-site window (0–360 s every 5 s) of the LEO fast-spin
@@ -33,8 +36,8 @@ the choice is made once here (never per case or per cell).
 
 Run ``python -m lightcurve.studies.thesis_cases`` from the repository root to (re)write
 ``shapes/cube_1u.toml``, ``shapes/cube_meo.toml``, ``shapes/cube_geo.toml`` and every
-``pipelines/thesis/*.toml`` this module defines; tests check that the committed files equal
-this module's output.
+``pipelines/thesis/*.toml`` and ``pipelines/studies/ablations/scenarios/tasking-*.toml``
+this module defines; tests check that the committed files equal this module's output.
 """
 
 from __future__ import annotations
@@ -287,9 +290,18 @@ def scenario_name(case: Case, shape_tag: str, dynamics: str, nsites: int) -> str
     return "-".join(parts)
 
 
-def scenario_toml(case: Case, shape_tag: str, shape: str, dynamics: str, nsites: int) -> str:
-    """The scenario TOML text of one case, shape, dynamics and site count."""
+def scenario_toml(case: Case, shape_tag: str, shape: str, dynamics: str, nsites: int,
+                  tasking: str | None = None) -> str:
+    """The scenario TOML text of one case, shape, dynamics and site count.
+
+    ``tasking`` (a :data:`TASKING` key, two sites only) replaces the case's own tasking: the
+    file is then a tasking ablation (:func:`ablation_scenario_files`); its scenario name has
+    the suffix ``-tasking-<tasking>``."""
     name = scenario_name(case, shape_tag, dynamics, nsites)
+    if tasking is not None:
+        if nsites != 2 or tasking not in TASKING:
+            raise ValueError(f"a tasking ablation needs two sites and one of {sorted(TASKING)}")
+        name += f"-tasking-{tasking}"
     osrc, orbit = ORBITS[case.regime]
     second = SECOND_SITE[case.regime]
     ch = "ch. 10" if case.reflection else "ch. 9"
@@ -322,8 +334,15 @@ def scenario_toml(case: Case, shape_tag: str, shape: str, dynamics: str, nsites:
         lines += ["[[sites]]   # §9.3.3: one-site cases use Socorro", 'name = "socorro"',
                   f"windows_s = [[0.0, {DURATION_S!r}]]", ""]
     else:
-        w1, w2, txt = TASKING[case.tasking]
-        lines += [f"# two-site tasking: {txt}; source: {case.tasking_source}",
+        w1, w2, txt = TASKING[tasking or case.tasking]
+        src = case.tasking_source
+        if tasking is not None:
+            txt = (f"{second} {_windows_text(w2)}, socorro {_windows_text(w1)} "
+                   f"({_PATTERN[tasking]})")
+            src = (f"ABLATION of {scenario_name(case, shape_tag, dynamics, nsites)}.toml "
+                   f"(its tasking: {TASKING[case.tasking][2]}; source: {case.tasking_source}); "
+                   "§9.3.3 leaves the Monte Carlo tables' tasking open")
+        lines += [f"# two-site tasking: {txt}; source: {src}",
                   "[[sites]]", 'name = "socorro"', f"windows_s = {_fmt(w1)}", "",
                   "[[sites]]", f'name = "{second}"', f"windows_s = {_fmt(w2)}", ""]
     eclipse = ("the LEO object is in the Earth's umbra at the epoch; the thesis's measurement "
@@ -350,6 +369,38 @@ def scenario_files() -> dict:
     return out
 
 
+_PATTERN = {"fig9-15": "the pattern of Fig. 9.15, §9.4.4",
+            "switching": "the switching pattern of Fig. 9.16 and §10.1"}
+
+
+def _windows_text(w) -> str:
+    return " and ".join(f"{a:g}-{b:g}" for a, b in w) + " s"
+
+
+#: tasking ablations: the fast-spin cases of Fig. 9.4 and Figs. B.1–B.4 with the other
+#: tasking of :data:`TASKING` (the tasking of their Monte Carlo tables is not stated, §9.3.3)
+ABLATION_TASKING = {"leo-ic1-fast-spin": "switching", "meo-fast-spin": "fig9-15",
+                    "geo-fast-spin": "fig9-15"}
+
+
+def ablation_scenario_files() -> dict:
+    """``{file name: TOML text}`` of the tasking ablations (pipelines/studies/ablations/scenarios,
+    ``tasking-<pattern>-<base stem>.toml``): every two-site scenario of the cases in
+    :data:`ABLATION_TASKING` with the other tasking."""
+    out = {}
+    for case in CASES:
+        tk = ABLATION_TASKING.get(case.stem)
+        if tk is None:
+            continue
+        if tk == case.tasking:
+            raise ValueError(f"{case.stem}: the ablation tasking is the case's own")
+        for tag, shape in _shapes_of(case):
+            for dyn in case.dynamics:
+                out[f"tasking-{tk}-" + scenario_name(case, tag, dyn, 2) + ".toml"] = \
+                    scenario_toml(case, tag, shape, dyn, 2, tasking=tk)
+    return out
+
+
 def shape_files() -> dict:
     """``{file name: TOML text}`` of the CubeSat and the two eq. 9.2 scaled cubes (shapes/)."""
     return {"cube_1u.toml": shape_toml("cube_1u"),
@@ -358,13 +409,15 @@ def shape_files() -> dict:
 
 
 def write_all(root=".") -> list:
-    """Write :func:`shape_files` into ``root/shapes`` and :func:`scenario_files` into
-    ``root/pipelines/thesis``; returns the written paths."""
+    """Write :func:`shape_files` into ``root/shapes``, :func:`scenario_files` into
+    ``root/pipelines/thesis`` and :func:`ablation_scenario_files` into
+    ``root/pipelines/studies/ablations/scenarios``; returns the written paths."""
     from ..io.atomic import atomic_write_text
 
     root = Path(root)
     written = []
-    for folder, files in (("shapes", shape_files()), ("pipelines/thesis", scenario_files())):
+    for folder, files in (("shapes", shape_files()), ("pipelines/thesis", scenario_files()),
+                          ("pipelines/studies/ablations/scenarios", ablation_scenario_files())):
         d = root / folder
         d.mkdir(parents=True, exist_ok=True)
         for name, text in files.items():

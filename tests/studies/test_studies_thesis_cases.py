@@ -2,7 +2,9 @@
 
 * The committed ``shapes/cube_*.toml`` and ``pipelines/thesis/*.toml`` equal the output of
   :mod:`lightcurve.studies.thesis_cases` (one source of the transcribed numbers), and no other
-  file lies in ``pipelines/thesis``.
+  file lies in ``pipelines/thesis``; the tasking ablations
+  (``pipelines/studies/ablations/scenarios/tasking-*``) are their base files with the other
+  two-site pattern's windows and nothing else changed.
 * Every alignment §9.3.3–9.3.5 states for an initial attitude holds at the epoch to ≤ 1°:
   computed with an independent plain-numpy eq. 3.7 (3-2-1 DCM) from the Euler angles typed
   here from the text, and the package's geometry (skyfield GCRS orbit, Sun, WGS84 site).
@@ -15,6 +17,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -25,6 +29,7 @@ from lightcurve.studies.scenario import load_scenario
 
 PIPE = data_dir("pipelines")
 THESIS = PIPE / "thesis"
+ABL = PIPE / "studies" / "ablations" / "scenarios"
 SHAPES = data_dir("shapes")
 
 
@@ -48,6 +53,45 @@ def test_committed_files_equal_the_generator():
     for name, text in files.items():
         assert (THESIS / name).read_text(encoding="utf-8") == text, name
     assert sorted(p.name for p in THESIS.glob("*.toml")) == sorted(files)
+    abl = tc.ablation_scenario_files()
+    for name, text in abl.items():
+        assert (ABL / name).read_text(encoding="utf-8") == text, name
+    assert sorted(p.name for p in ABL.glob("tasking-*.toml")) == sorted(abl)
+
+
+def test_tasking_ablations_change_the_windows_only():
+    """Each tasking-ablation file is its base two-site file with the other pattern's windows
+    (Fig. 9.15 <-> §10.1 switching, written out here) and nothing else changed; the object
+    stays above 3° elevation in every new window."""
+    import tomllib
+
+    fig915 = {"socorro": [[300.0, 400.0]], "second": [[0.0, 260.0]]}
+    switching = {"socorro": [[105.0, 200.0], [300.0, 400.0]],
+                 "second": [[0.0, 100.0], [205.0, 260.0]]}
+    files = sorted(ABL.glob("tasking-*.toml"))
+    assert len(files) == 10   # LEO 2 + MEO 2 shapes x 2 + GEO 2 shapes x 2 (two dynamics)
+    for f in files:
+        tasking, stem = re.fullmatch(r"tasking-(fig9-15|switching)-(.+)", f.stem).groups()
+        base = tomllib.loads((THESIS / f"{stem}.toml").read_text(encoding="utf-8"))
+        abl = tomllib.loads(f.read_text(encoding="utf-8"))
+        want = {"fig9-15": fig915, "switching": switching}[tasking]
+        other = switching if want is fig915 else fig915
+        for sc in (base, abl):
+            assert [s["name"] for s in sc["sites"]][0] == "socorro"
+        assert [s["windows_s"] for s in base["sites"]] == [other["socorro"], other["second"]]
+        assert [s["windows_s"] for s in abl["sites"]] == [want["socorro"], want["second"]]
+        assert abl["scenario"].pop("name") == f"{stem}-tasking-{tasking}"
+        base["scenario"].pop("name")
+        for sc in (base, abl):
+            for s in sc["sites"]:
+                s.pop("windows_s")
+        assert abl == base, f.name
+        sc = load_scenario(f)
+        for s in sc.sites:
+            t = np.concatenate([np.arange(a, b + 1e-9, 5.0) for a, b in s.windows_s])
+            r, v = sc.orbit.positions(sc.epoch_utc, t)
+            g = compute_geometry(sc.epoch_utc, t, 0, [s.site], r, v)
+            assert np.degrees(g.elevation_rad).min() > 3.0, (f.name, s.site.id)
 
 
 def test_no_assumption_markers_where_the_text_gives_values():
