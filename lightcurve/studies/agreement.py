@@ -20,6 +20,12 @@ between two independent 100-run Monte Carlos of our filter (Σ over cells of Σ_
 a perfect reproduction would reach on average. A disagreeing cell whose published colour has
 P ≥ :data:`NOISE_LEVEL` is within our Monte Carlo noise (a test with a 5 % false-alarm rate
 per cell when the two filters are the same).
+
+Order of a table (:func:`order_inversions`): a larger initial error (σθ or σω) with everything
+else equal is a harder case, so a colour better than that of a strictly easier cell of the same
+filter, dynamics, site count and noise level is out of order. Such a cell may still be right
+(a filter's larger initial covariance can help it), but an inversion in a published table is a
+sign of its own Monte Carlo noise.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from pathlib import Path
 from ..errors import InputError
 
 __all__ = ["ThesisTable", "load_thesis_table", "thesis_color", "agreement", "TABLE_COLORS",
-           "COMPARED", "NOISE_LEVEL", "spread_text"]
+           "COMPARED", "NOISE_LEVEL", "spread_text", "order_inversions"]
 
 TABLE_COLORS = ("green", "yellow", "red", "grey", "unknown")
 #: published colours that are compared with ours
@@ -159,3 +165,22 @@ def spread_text(agr: dict) -> str:
             f"{agr['expected_agree']:.1f}; {agr['within_noise']} of {len(agr['disagree'])} "
             f"disagreeing cells have the published colour with probability >= "
             f"{100 * NOISE_LEVEL:.0f} % in such a Monte Carlo (within noise).")
+
+
+def order_inversions(cells: dict) -> dict:
+    """Cells whose colour is better than that of a strictly easier cell (module docstring).
+
+    ``cells`` maps ``(filter, dynamics, sites, σθ, σω, r)`` (as :attr:`ThesisTable.cells`) to a
+    colour; only green / yellow / red cells take part. Returns ``{key: [easier keys]}``: for
+    each out-of-order cell, the cells with the same filter, dynamics, sites and r, σθ and σω
+    both no larger (one smaller), and a worse colour (green < yellow < red)."""
+    rank = {c: i for i, c in enumerate(COMPARED)}
+    col = {k: rank[c] for k, c in cells.items() if c in rank}
+    out = {}
+    for k, c in col.items():
+        worse = [e for e, ce in col.items()
+                 if e[:3] == k[:3] and e[5] == k[5] and e != k
+                 and e[3] <= k[3] and e[4] <= k[4] and ce > c]
+        if worse:
+            out[k] = sorted(worse)
+    return out

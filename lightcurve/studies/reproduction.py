@@ -40,7 +40,7 @@ import json
 from pathlib import Path
 
 from ..io.atomic import atomic_write_text
-from .agreement import NOISE_LEVEL
+from .agreement import NOISE_LEVEL, order_inversions
 
 __all__ = ["css_section", "bernard_section", "load_summaries", "add_color_spread",
            "write_reproduction", "main"]
@@ -1034,6 +1034,8 @@ def _disagreements(sums):
         if s is None or "agreement" not in s or not s["agreement"]["disagree"]:
             continue
         abl = _ablations(sums, name)
+        pub = {tuple(c[k] for k in _KEYS): c.get("thesis_color") for c in s.get("cells", [])}
+        inv = order_inversions(pub)
         for a in abl.values():   # the ablations' spread, on the disagreeing cells only
             add_color_spread(a, keys=s["agreement"]["disagree"])
         out.append(f"\n**Fig. {fig}: cells that disagree** (ours / thesis; runs outside 3σ "
@@ -1042,7 +1044,9 @@ def _disagreements(sums):
                    "the thesis's; *P(thesis)*: probability of the thesis's colour in an "
                    "independent 100-run Monte Carlo of our filter, \"noise\" from 5 %; "
                    "*within the noise of*: ablations with another colour under which the "
-                   "thesis's has a probability of at least 5 %)\n")
+                   "thesis's has a probability of at least 5 %; *published out of order*: "
+                   "the published colour is better than that of a strictly easier published "
+                   "cell, with a smaller initial error and all else equal)\n")
         out.append("| filter | dynamics | sites | σθ (°) | σω (°/s) | r (%) | ours | thesis | "
                    "outside 3σ | P(thesis) | flipped by |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -1066,6 +1070,10 @@ def _disagreements(sums):
                                                   else "no ablation run")
             if near:
                 why += "; within the noise of: " + ", ".join(near)
+            easier = inv.get(tuple(d[k] for k in _KEYS), [])
+            if easier:
+                why += "; published out of order: " + ", ".join(
+                    f"σθ {e[3]:g}°, σω {e[4]:g}°/s is {pub[e]}" for e in easier)
             out.append(f"| {d['filter'].upper()} | {d['dynamics']} | {d['sites']} | "
                        f"{d['sigma_theta_deg']:g} | {d['sigma_omega_deg_s']:g} | "
                        f"{d['r_percent']:g} | {d['color']} | {d['thesis_color']} | {o} | "

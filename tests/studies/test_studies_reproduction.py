@@ -103,3 +103,17 @@ def test_monte_carlo_spread_block_and_ablations_within_noise(tmp_path):
            "P(thesis) 20 %) |" in row5
     row10 = next(ln for ln in md.splitlines() if ln.startswith("| UKF | controlled | 1 | 10 |"))
     assert "| 30.0 % (noise) |" in row10
+
+
+def test_disagreeing_cell_out_of_published_order(tmp_path):
+    # the published σω = 0.2 cell is yellow while its easier σω = 0.02 neighbour is red: the
+    # disagreeing cell's row says so; a disagreeing cell in order does not
+    base = [_cell("mekf", "controlled", 2, 3.0, 0.02, 1.0, "red", "red", 1.0),
+            _cell("mekf", "controlled", 2, 3.0, 0.2, 1.0, "red", "yellow", 1.0),
+            _cell("mekf", "controlled", 2, 5.0, 0.02, 1.0, "green", "red", 1.0)]
+    md = bernard_section([_write(tmp_path, "thesis-fig9-4", base)])
+    row = next(ln for ln in md.splitlines() if ln.startswith("| MEKF | controlled | 2 | 3 | 0.2 |"))
+    assert row.endswith("| no ablation run; published out of order: σθ 3°, σω 0.02°/s is red |")
+    row = next(ln for ln in md.splitlines() if ln.startswith("| MEKF | controlled | 2 | 5 | 0.02 |"))
+    assert row.endswith("| no ablation run |")
+

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from lightcurve._paths import data_dir
-from lightcurve.studies.agreement import agreement, load_thesis_table
+from lightcurve.studies.agreement import agreement, load_thesis_table, order_inversions
 from lightcurve.studies.metrics import (COLORS, color_probability, traffic_light,
                                         traffic_lights)
 from lightcurve.studies.study import load_study
@@ -341,3 +341,35 @@ def test_reach_probability_is_poisson_binomial():
                for bits in itertools.product([0, 1], repeat=6) if sum(bits) >= 6 * 0.85)
     assert _reach_probability({"cells": [cell(p) for p in probs]}) == pytest.approx(want,
                                                                                    rel=1e-12)
+
+
+def test_order_inversions_of_the_published_tables():
+    """Bernard Fig. 9.4 (text lines 2793-2800): three cells have a better colour than the same
+    cell with the ten times smaller initial rate error, all of them two-site cells with
+    σω = 0.2°/s, read off the text here: EKF controlled 1 % σθ 3° (Yellow; 0.02°/s: Red), UKF
+    controlled 1 % σθ 10° (Green; Yellow) and UKF uncontrolled 10 % σθ 10° (Green; Red).
+    Figs. B.1-B.4 have none."""
+    t94 = load_thesis_table(TABLES / "bernard2021-fig9-4.toml")
+    inv = order_inversions(t94.cells)
+    assert inv == {
+        ("mekf", "controlled", 2, 3.0, 0.2, 1.0): [("mekf", "controlled", 2, 3.0, 0.02, 1.0)],
+        ("ukf", "controlled", 2, 10.0, 0.2, 1.0): [("ukf", "controlled", 2, 10.0, 0.02, 1.0)],
+        ("ukf", "uncontrolled", 2, 10.0, 0.2, 10.0): [
+            ("ukf", "uncontrolled", 2, 10.0, 0.02, 10.0)]}
+    for name in ("b1-meo-cubesat", "b2-meo-scaled", "b3-geo-cubesat", "b4-geo-scaled"):
+        assert order_inversions(load_thesis_table(TABLES / f"bernard2021-fig-{name}.toml").cells) == {}
+
+
+def test_order_inversions_rule():
+    k = ("ukf", "controlled", 1)
+    cells = {k + (3.0, 0.02, 1.0): "red", k + (5.0, 0.02, 1.0): "yellow",    # harder, better
+             k + (5.0, 0.2, 1.0): "green", k + (3.0, 0.2, 1.0): "grey",       # grey ignored
+             k + (10.0, 0.02, 10.0): "green",                                  # other r
+             ("mekf",) + k[1:] + (10.0, 0.2, 1.0): "green",                    # other filter
+             ("ukf", "controlled", 2, 10.0, 0.2, 1.0): "green"}                # other sites
+    assert order_inversions(cells) == {
+        k + (5.0, 0.02, 1.0): [k + (3.0, 0.02, 1.0)],
+        k + (5.0, 0.2, 1.0): [k + (3.0, 0.02, 1.0), k + (5.0, 0.02, 1.0)]}
+    # equal colours and equal errors are never out of order
+    assert order_inversions({k + (3.0, 0.02, 1.0): "red", k + (5.0, 0.2, 1.0): "red"}) == {}
+
