@@ -373,3 +373,31 @@ def test_order_inversions_rule():
     # equal colours and equal errors are never out of order
     assert order_inversions({k + (3.0, 0.02, 1.0): "red", k + (5.0, 0.2, 1.0): "red"}) == {}
 
+
+
+def test_alpha_sweep_study_is_the_base_ukf_cells_with_alpha(tmp_path):
+    """benchmarks/bernard_ukf_alpha.py: each α's study is the base study's UKF cells, seeds and
+    options with ``alpha`` added, and its table and scenarios are the base's files."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bernard_ukf_alpha.py"
+    if not path.is_file():
+        pytest.skip("benchmarks/ not beside the tests (installed package)")
+    spec = importlib.util.spec_from_file_location("bernard_ukf_alpha", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    base_path = STUDIES / "thesis-fig-b1-meo-cubesat.toml"
+    base = load_study(base_path)
+    f = tmp_path / "sweep.toml"
+    f.write_text(mod.variant_text(base_path, 0.25))
+    sw = load_study(f)
+    assert sw.name == "thesis-fig-b1-meo-cubesat-alpha-0.25" and sw.seed == base.seed
+    assert sw.options == dict(base.options, alpha=0.25)
+    assert set(sw.cells) == {c for c in base.cells if c.filter == "ukf"} and sw.cells
+    assert sw.thesis_table_text == base.thesis_table_text
+    assert {k: v.resolve() for k, v in sw.scenario_files.items()} == \
+        {k: v.resolve() for k, v in base.scenario_files.items()}
+    t0, t1 = list(base.tasks(2)), list(sw.tasks(2))
+    seeds = {(t.cell, t.run): (t.sim_seed, t.filter_seed, t.init_seed) for t in t0}
+    assert all(seeds[(t.cell, t.run)] == (t.sim_seed, t.filter_seed, t.init_seed) for t in t1)
