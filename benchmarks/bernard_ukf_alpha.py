@@ -30,8 +30,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from lightcurve.studies.agreement import table_key  # noqa: E402
 from lightcurve.studies.metrics import COLORS  # noqa: E402
-from lightcurve.studies.reproduction import _KEYS  # noqa: E402
 
 
 def variant_text(base: Path, alpha: float) -> str:
@@ -79,7 +79,7 @@ def main(argv=None) -> int:
                 cmd += ["--runs", str(a.runs)]
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
         s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-        cells = {tuple(c[k] for k in _KEYS): c for c in s["cells"]
+        cells = {table_key(c): c for c in s["cells"]
                  if c.get("thesis_color") in COLORS}
         agr = s["agreement"]
         row = {"alpha": alpha, "agree": agr["agree"], "compared": agr["compared"],

@@ -36,7 +36,8 @@ from pathlib import Path
 from ..errors import InputError
 
 __all__ = ["ThesisTable", "load_thesis_table", "thesis_color", "agreement", "TABLE_COLORS",
-           "COMPARED", "NOISE_LEVEL", "spread_text", "order_inversions"]
+           "COMPARED", "NOISE_LEVEL", "spread_text", "order_inversions", "TABLE_KEYS",
+           "table_key"]
 
 TABLE_COLORS = ("green", "yellow", "red", "grey", "unknown")
 #: published colours that are compared with ours
@@ -44,6 +45,9 @@ COMPARED = ("green", "yellow", "red")
 #: a published colour with at least this probability under our Monte Carlo spread is "within
 #: Monte Carlo noise" (module docstring)
 NOISE_LEVEL = 0.05
+#: the fields that identify a cell of a published table, in the order of the keys of
+#: :attr:`ThesisTable.cells`
+TABLE_KEYS = ("filter", "dynamics", "sites", "sigma_theta_deg", "sigma_omega_deg_s", "r_percent")
 _SIGMA_THETA = (3.0, 5.0, 10.0)
 _FILTERS = ("mekf", "ukf")
 
@@ -142,8 +146,7 @@ def agreement(cells) -> dict:
             out["agree"] += 1
             f["agree"] += 1
         else:
-            d = {k: c[k] for k in ("filter", "dynamics", "sites", "sigma_theta_deg",
-                                   "sigma_omega_deg_s", "r_percent")}
+            d = {k: c[k] for k in TABLE_KEYS}
             d |= {"color": c["color"], "thesis_color": tc}
             if prob is not None:
                 d["thesis_color_probability"] = float(prob.get(tc, 0.0))
@@ -165,6 +168,12 @@ def spread_text(agr: dict) -> str:
             f"{agr['expected_agree']:.1f}; {agr['within_noise']} of {len(agr['disagree'])} "
             f"disagreeing cells have the published colour with probability >= "
             f"{100 * NOISE_LEVEL:.0f} % in such a Monte Carlo (within noise).")
+
+
+def table_key(cell: dict) -> tuple:
+    """The :data:`TABLE_KEYS` values of a summary cell dict, as a key of
+    :attr:`ThesisTable.cells` and of :func:`order_inversions`."""
+    return tuple(cell[k] for k in TABLE_KEYS)
 
 
 def order_inversions(cells: dict) -> dict:

@@ -40,7 +40,7 @@ import json
 from pathlib import Path
 
 from ..io.atomic import atomic_write_text
-from .agreement import NOISE_LEVEL, order_inversions
+from .agreement import NOISE_LEVEL, TABLE_KEYS, order_inversions, table_key
 
 __all__ = ["css_section", "bernard_section", "load_summaries", "add_color_spread",
            "write_reproduction", "main"]
@@ -959,7 +959,7 @@ def _table_rows(sums):
     return rows
 
 
-_KEYS = ("filter", "dynamics", "sites", "sigma_theta_deg", "sigma_omega_deg_s", "r_percent")
+_KEYS = TABLE_KEYS
 
 
 def _ablations(sums, name):
@@ -1034,7 +1034,7 @@ def _disagreements(sums):
         if s is None or "agreement" not in s or not s["agreement"]["disagree"]:
             continue
         abl = _ablations(sums, name)
-        pub = {tuple(c[k] for k in _KEYS): c.get("thesis_color") for c in s.get("cells", [])}
+        pub = {table_key(c): c.get("thesis_color") for c in s.get("cells", [])}
         inv = order_inversions(pub)
         for a in abl.values():   # the ablations' spread, on the disagreeing cells only
             add_color_spread(a, keys=s["agreement"]["disagree"])
@@ -1070,7 +1070,7 @@ def _disagreements(sums):
                                                   else "no ablation run")
             if near:
                 why += "; within the noise of: " + ", ".join(near)
-            easier = inv.get(tuple(d[k] for k in _KEYS), [])
+            easier = inv.get(table_key(d), [])
             if easier:
                 why += "; published out of order: " + ", ".join(
                     f"σθ {e[3]:g}°, σω {e[4]:g}°/s is {pub[e]}" for e in easier)
