@@ -59,7 +59,7 @@ EXPONENTIAL_TABLE = np.array([
 """Exponential atmosphere table: rows ``[h0_km, rho0_kg_m3, H_km]``."""
 
 _H0_M = EXPONENTIAL_TABLE[:, 0] * 1e3
-_RHO0 = EXPONENTIAL_TABLE[:, 1]
+_RHO0 = np.ascontiguousarray(EXPONENTIAL_TABLE[:, 1])
 _H_M = EXPONENTIAL_TABLE[:, 2] * 1e3
 
 

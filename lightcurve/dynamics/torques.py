@@ -44,7 +44,7 @@ from ..core.constants import AU_M, MU_EARTH, OMEGA_EARTH, P_SUN_1AU
 from ..core.dynamics import gravity_gradient_batch_nb
 from ..core.specialise import jit_copy
 from . import _checks as ck
-from .atmosphere import altitude_m, density_kg_m3
+from .atmosphere import _H0_M, _H_M, _RHO0, R_EARTH_M, altitude_m, density_kg_m3
 from .rigid_body import check_inertia
 
 __all__ = [
@@ -69,6 +69,8 @@ __all__ = [
     "DragTorque",
     "ConstantTorque",
     "TorqueSum",
+    "SampledEnvironment",
+    "environment_torque_nb",
 ]
 
 
@@ -583,6 +585,214 @@ class TorqueSum:
         out = np.zeros((3, 3))
         for m in self.models:
             out = out + np.asarray(m.dtheta(t, q, omega), dtype=float)
+        return out
+
+    __call__ = torque
+
+
+# ----------------------------------------------------------------------------------------
+# the named torques of a sampled orbit, summed in one kernel (truth integrators)
+# ----------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _piece(knots, t):
+    """Index ``i`` of the knot interval with ``knots[i] <= t < knots[i+1]``, clipped to the end
+    pieces (``t`` at or beyond the last knot uses the last piece): scipy ``PPoly``'s rule."""
+    i = np.searchsorted(knots, t, side="right") - 1
+    if i < 0:
+        return 0
+    if i > knots.shape[0] - 2:
+        return knots.shape[0] - 2
+    return i
+
+
+@njit(cache=True, inline="always")
+def _cubic(c, i, s, k):
+    """Component ``k`` of piece ``i`` of a piecewise cubic with scipy ``PPoly`` coefficients
+    ``c`` (4, pieces, m) at the local coordinate ``s = t − knot_i``, summed lowest power first
+    as ``PPoly`` sums it, so that it equals ``CubicSpline.__call__`` bit for bit."""
+    res = 0.0
+    z = 1.0
+    for kp in range(4):
+        res = res + c[3 - kp, i, k] * z
+        if kp < 3:
+            z *= s
+    return res
+
+
+@njit(cache=True)
+def environment_torque_nb(t, q, knots, pos_c, vel_c, sun_c, dist_c, lit, use_gg, J, mu,
+                          use_drag, rho_scale, omega_earth, along_normal, use_srp, p_sun_1au,
+                          areas, normals, centers, c_spec, c_diff):
+    """Sum of the named environmental torques (N m, body axes) at time ``t`` (s) and unit
+    attitude ``q`` (4,), scalar first, inertial→body — the same sum, in the same order
+    (gravity gradient, drag, SRP) and through the same facet kernels as
+    :class:`GravityGradientTorque`, :class:`DragTorque` and :class:`SRPTorque` called on the
+    cubic splines of :class:`SampledEnvironment`; no validation (use :class:`SampledEnvironment`).
+
+    ``knots`` (n,) s; ``pos_c``, ``vel_c``, ``sun_c`` (4, n−1, 3) and ``dist_c`` (4, n−1, 1) the
+    ``CubicSpline`` coefficients of the ECI position (m), velocity (m/s), object→Sun direction
+    and object–Sun distance (m) on those knots; ``lit`` (n,) the lit fraction at the knots
+    (interpolated linearly, as ``numpy.interp``). ``rho_scale`` is C_D (drag, with the
+    exponential atmosphere of :func:`~lightcurve.dynamics.atmosphere.density_kg_m3`);
+    ``omega_earth`` rad/s; ``along_normal`` Bernard's eq. 4.21 drag form.
+    """
+    i = _piece(knots, t)
+    s = t - knots[i]
+    out = np.zeros(3)
+    r = np.empty(3)
+    if use_gg or use_drag:
+        for k in range(3):
+            r[k] = _cubic(pos_c, i, s, k)
+    if use_gg:
+        out = out + gravity_gradient_torque_nb(q, r, J, mu)
+    if use_drag:
+        v = np.empty(3)
+        for k in range(3):
+            v[k] = _cubic(vel_c, i, s, k)
+        # v_rel = v − [0, 0, ω_E] × r, in numpy.cross's order of operations
+        vrel = np.empty(3)
+        vrel[0] = v[0] - (0.0 * r[2] - omega_earth * r[1])
+        vrel[1] = v[1] - (omega_earth * r[0] - 0.0 * r[2])
+        vrel[2] = v[2] - (0.0 * r[1] - 0.0 * r[0])
+        h = np.sqrt(np.dot(r, r)) - R_EARTH_M
+        if not h >= 0.0:
+            raise ValueError("r_eci_m: altitude below 0 km is outside the exponential atmosphere table")
+        b = np.searchsorted(_H0_M, h, side="right") - 1
+        rho = _RHO0[b] * np.exp(-(h - _H0_M[b]) / _H_M[b])
+        out = out + drag_torque_nb(q, vrel, rho * rho_scale, areas, normals, centers, along_normal)
+    if use_srp:
+        u = np.empty(3)
+        for k in range(3):
+            u[k] = _cubic(sun_c, i, s, k)
+        u = u / np.sqrt(np.dot(u, u))
+        # numpy.interp on the knots, clipped to [0, 1] as SRPTorque does
+        if t >= knots[-1]:
+            f = lit[-1]
+        elif t <= knots[0]:
+            f = lit[0]
+        else:
+            j = np.searchsorted(knots, t, side="right") - 1
+            if knots[j] == t:
+                f = lit[j]
+            else:
+                f = (lit[j + 1] - lit[j]) / (knots[j + 1] - knots[j]) * (t - knots[j]) + lit[j]
+        f = min(max(f, 0.0), 1.0)
+        d = _cubic(dist_c, i, s, 0)
+        P = p_sun_1au * (AU_M / d) ** 2 * f
+        out = out + srp_torque_nb(q, u, P, areas, normals, centers, c_spec, c_diff)
+    return out
+
+
+class SampledEnvironment:
+    """The named torques of one orbit arc, sampled on a time grid and summed in
+    :func:`environment_torque_nb` (one compiled call per right-hand-side evaluation of a truth
+    integrator instead of one Python call per torque model).
+
+    Parameters
+    ----------
+    t_s : array (n,)
+        Sample times, s, strictly increasing (n >= 2).
+    r_eci_m, v_eci_m_s : arrays (n, 3)
+        ECI (GCRS) position (m) and velocity (m/s) at ``t_s``.
+    sun_rel_m : array (n, 3) or None
+        Object→Sun vector (m, ECI) at ``t_s``; needed for SRP.
+    lit : array (n,) or None
+        Lit fraction in [0, 1] at ``t_s``; needed for SRP.
+    gravity_gradient : bool
+        Include :class:`GravityGradientTorque` (needs ``J``; ``mu`` m³/s²).
+    drag : dict or None
+        ``{"areas_m2", "normals_body", "centers_body_m", "Cd", "omega_earth", "form"}`` as
+        :class:`DragTorque` takes them (the default exponential atmosphere).
+    srp : dict or None
+        ``{"areas_m2", "normals_body", "centers_body_m", "c_spec", "c_diff"}`` as
+        :class:`SRPTorque` takes them (``p_sun_1au`` optional).
+
+    :meth:`models` returns the equivalent torque model objects (for their attitude partials);
+    :meth:`torque` equals the sum of their ``torque`` to rounding.
+    """
+
+    def __init__(self, t_s, r_eci_m, v_eci_m_s, sun_rel_m=None, lit=None, *, gravity_gradient=False,
+                 J=None, mu: float = MU_EARTH, drag=None, srp=None):
+        t = ck.times(t_s, "t_s")
+        if t.size < 2 or np.any(np.diff(t) <= 0):
+            raise ValueError("t_s: need at least 2 strictly increasing sample times")
+        r = np.asarray(r_eci_m, dtype=float)
+        v = np.asarray(v_eci_m_s, dtype=float)
+        for name, a in (("r_eci_m", r), ("v_eci_m_s", v)):
+            if a.shape != (t.size, 3) or not np.all(np.isfinite(a)):
+                raise ValueError(f"{name}: expected finite values of shape ({t.size}, 3), got {a.shape}")
+        self.knots = np.ascontiguousarray(t)
+        self.position = CubicSpline(t, r, axis=0)
+        self.velocity = CubicSpline(t, v, axis=0)
+        self.use_gg = bool(gravity_gradient)
+        self.J = check_inertia(J) if self.use_gg else np.eye(3)
+        self.mu = ck.finite_scalar(mu, "mu", positive=True)
+        empty_f, empty_f3 = np.zeros(0), np.zeros((0, 3))
+        self.use_drag = drag is not None
+        self.use_srp = srp is not None
+        geom = drag if self.use_drag else srp
+        if geom is not None:
+            self.areas, self.normals, self.centers = ck.facets(
+                geom["areas_m2"], geom["normals_body"], geom["centers_body_m"])
+        else:
+            self.areas, self.normals, self.centers = empty_f, empty_f3, empty_f3
+        if self.use_drag and self.use_srp:
+            a2, n2, c2 = ck.facets(srp["areas_m2"], srp["normals_body"], srp["centers_body_m"])
+            if not (np.array_equal(a2, self.areas) and np.array_equal(n2, self.normals)
+                    and np.array_equal(c2, self.centers)):
+                raise ValueError("srp and drag: must share one facet geometry")
+        d = drag or {}
+        self.Cd = ck.finite_scalar(d.get("Cd", 2.2), "Cd", nonneg=True)
+        self.omega_earth = ck.finite_scalar(d.get("omega_earth", OMEGA_EARTH), "omega_earth")
+        self.drag_form = ck.one_of(d.get("form", "velocity"), "form", ("velocity", "normal"))
+        F = self.areas.shape[0]
+        if self.use_srp:
+            if sun_rel_m is None or lit is None:
+                raise ValueError("srp: needs sun_rel_m and lit samples")
+            rel = np.asarray(sun_rel_m, dtype=float)
+            f = np.asarray(lit, dtype=float)
+            if rel.shape != (t.size, 3) or not np.all(np.isfinite(rel)):
+                raise ValueError(f"sun_rel_m: expected finite values of shape ({t.size}, 3)")
+            if f.shape != (t.size,) or not np.all(np.isfinite(f)) or np.any(f < 0) or np.any(f > 1):
+                raise ValueError("lit: expected values in [0, 1], one per sample time")
+            dist = np.linalg.norm(rel, axis=1)
+            self.sun_dir = CubicSpline(t, rel / dist[:, None], axis=0)
+            self.sun_distance = CubicSpline(t, dist)
+            self.lit = np.ascontiguousarray(f)
+            self.c_spec = ck.per_facet(srp["c_spec"], F, "c_spec")
+            self.c_diff = ck.per_facet(srp["c_diff"], F, "c_diff")
+            if np.any(self.c_spec + self.c_diff > 1 + 1e-12):
+                raise ValueError("c_spec + c_diff: must not exceed 1")
+            self.p_sun_1au = ck.finite_scalar(srp.get("p_sun_1au", P_SUN_1AU), "p_sun_1au", nonneg=True)
+            sun_c, dist_c = self.sun_dir.c, self.sun_distance.c[..., None]
+        else:
+            self.lit, self.c_spec, self.c_diff, self.p_sun_1au = np.zeros(t.size), empty_f, empty_f, 0.0
+            sun_c = dist_c = np.zeros((4, t.size - 1, 1))
+        c3 = lambda a: np.ascontiguousarray(a, dtype=float)  # noqa: E731
+        self._args = (self.knots, c3(self.position.c), c3(self.velocity.c), c3(sun_c), c3(dist_c),
+                      self.lit, self.use_gg, np.ascontiguousarray(self.J), self.mu, self.use_drag,
+                      self.Cd, self.omega_earth, self.drag_form == "normal", self.use_srp,
+                      self.p_sun_1au, self.areas, self.normals, self.centers, self.c_spec,
+                      self.c_diff)
+
+    def torque(self, t, q, omega=None):
+        """Total named torque (N m, body axes) at time ``t`` (s) for one unit quaternion ``q`` (4,)."""
+        return environment_torque_nb(float(t), np.ascontiguousarray(q, dtype=float), *self._args)
+
+    def models(self):
+        """The equivalent :class:`GravityGradientTorque`, :class:`DragTorque` and
+        :class:`SRPTorque` objects on the same splines, in the order the kernel sums them."""
+        out = []
+        if self.use_gg:
+            out.append(GravityGradientTorque(self.J, self.position, self.mu))
+        if self.use_drag:
+            out.append(DragTorque(self.areas, self.normals, self.centers, self.position, self.velocity,
+                                  Cd=self.Cd, omega_earth=self.omega_earth, form=self.drag_form))
+        if self.use_srp:
+            knots, lit = self.knots, self.lit
+            out.append(SRPTorque(self.areas, self.normals, self.centers, self.c_spec, self.c_diff,
+                                 self.sun_dir, lit_fraction=lambda tt: np.interp(tt, knots, lit),
+                                 sun_distance_m=self.sun_distance, p_sun_1au=self.p_sun_1au))
         return out
 
     __call__ = torque

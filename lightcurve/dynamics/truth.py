@@ -57,19 +57,28 @@ def _truth_rhs_nb(x, T, J, Ji, eta):
     return out
 
 
-from scipy.interpolate import CubicSpline
 
 from ..geometry.eclipse import lit_fraction
 from ..geometry.time import sun_position_gcrs
 from . import _checks as ck
 from .integrators import integrate_truth
 from .rigid_body import check_inertia
-from .torques import DragTorque, GravityGradientTorque, SRPTorque
+from .torques import SampledEnvironment, environment_torque_nb
 
 __all__ = ["ControlledTruth", "UncontrolledTruth", "srp_coefficients_from_materials",
            "srp_coefficients_thesis"]
 
 _TORQUE_NAMES = ("gravity_gradient", "srp", "drag")
+
+
+@njit(cache=True)
+def _environment_rhs_nb(t, x, J, Ji, eta, *env):
+    """:func:`_truth_rhs_nb` with the torque of the named environmental torques,
+    :func:`~lightcurve.dynamics.torques.environment_torque_nb` ``(t, q/|q|, *env)``, in one
+    compiled call (the truth integrators evaluate it thousands of times per run)."""
+    q = x[:4] / np.sqrt(np.dot(x[:4], x[:4]))
+    T = environment_torque_nb(t, q, *env)
+    return _truth_rhs_nb(x, T, J, Ji, eta)
 
 
 def srp_coefficients_from_materials(materials):
@@ -294,6 +303,7 @@ class UncontrolledTruth(_TruthModel):
         self.shape, self.orbit, self.epoch_utc = shape, orbit, epoch_utc
         self.geometry_step_s = ck.finite_scalar(geometry_step_s, "geometry_step_s", positive=True)
         self._named_fns = []
+        self._environment = None
 
     def torque(self, t, q, omega):
         """Total external torque (N m, body axes) at time ``t``."""
@@ -310,7 +320,7 @@ class UncontrolledTruth(_TruthModel):
         Called by :meth:`simulate`; returns the list of torque model objects.
         """
         if not self.named_torques:
-            self._named_fns = []
+            self._named_fns, self._environment = [], None
             return []
         step = self.geometry_step_s
         n = max(4, int(np.ceil((t_end - t_start) / step)) + 1)
@@ -319,33 +329,28 @@ class UncontrolledTruth(_TruthModel):
             tg = np.append(tg, t_end)
         r, v = self.orbit.positions(self.epoch_utc, tg)
         r, v = np.asarray(r, dtype=float), np.asarray(v, dtype=float)
-        pos = CubicSpline(tg, r, axis=0)
-        vel = CubicSpline(tg, v, axis=0)
-        models = []
-        if "gravity_gradient" in self.named_torques:
-            models.append(GravityGradientTorque(self.J, pos))
+        sh = self.shape
+        facets = None if sh is None else {"areas_m2": sh.areas_m2, "normals_body": sh.normals_body,
+                                          "centers_body_m": sh.centers_body_m}
+        drag = srp = rel = lit = None
         if "drag" in self.named_torques:
-            sh = self.shape
+            drag = dict(facets)
             if self.torque_forms == "thesis":  # eq. 4.21: along the normal, orbital velocity
-                models.append(DragTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, pos, vel,
-                                         omega_earth=0.0, form="normal"))
-            else:
-                models.append(DragTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, pos, vel))
+                drag.update(omega_earth=0.0, form="normal")
         if "srp" in self.named_torques:
-            sh = self.shape
             rs = np.asarray(sun_position_gcrs(self.epoch_utc, tg), dtype=float)
             rel = rs - r
-            d = np.linalg.norm(rel, axis=1)
             lit = np.asarray(lit_fraction(r, rs), dtype=float)
             if self.torque_forms == "thesis":
                 cs, cd = srp_coefficients_thesis(sh.materials)
             else:
                 cs, cd = srp_coefficients_from_materials(sh.materials)
-            u = CubicSpline(tg, rel / d[:, None], axis=0)
-            dist = CubicSpline(tg, d)
-            models.append(SRPTorque(sh.areas_m2, sh.normals_body, sh.centers_body_m, cs, cd, u,
-                                    lit_fraction=lambda tt: np.interp(tt, tg, lit), sun_distance_m=dist))
-        self._named_fns = [m.torque for m in models]
+            srp = dict(facets, c_spec=cs, c_diff=cd)
+        self._environment = SampledEnvironment(
+            tg, r, v, rel, lit, gravity_gradient="gravity_gradient" in self.named_torques, J=self.J,
+            drag=drag, srp=srp)
+        models = self._environment.models()
+        self._named_fns = [self._environment.torque]
         return models
 
     def _rhs(self, eta):
@@ -353,6 +358,16 @@ class UncontrolledTruth(_TruthModel):
 
         eta = np.ascontiguousarray(eta, dtype=float).reshape(3)
         zero = np.zeros(3)
+
+        env = self._environment
+        if env is not None and not self.torque_fns:
+            args = env._args
+
+            def rhs(t, x):
+                return _environment_rhs_nb(float(t), np.ascontiguousarray(x, dtype=float), J, Ji, eta,
+                                           *args)
+
+            return rhs
 
         def rhs(t, x):
             q, w = x[:4], x[4:]
