@@ -271,6 +271,25 @@ def write_run(out_dir, result: dict, study_hash: str) -> Path:
     return path
 
 
+def run_record(result: dict) -> dict:
+    """The part of :func:`read_run`'s dict that :func:`summarize` uses (status, error, wall
+    time, metrics, ``t``, ``att_error_deg``) for the file :func:`write_run` makes of ``result``,
+    built in memory with the same conversions (strings, the metrics through JSON, float
+    arrays), so a summary of records equals a summary of the files."""
+    out = {k: str(result[k]) for k in ("run_id", "status", "error")}
+    out["wall_s"] = float(result["wall_s"])
+    if out["status"] == "ok":
+        out["metrics"] = json.loads(json.dumps(result["metrics"]))
+        for name in ("t", "att_error_deg"):
+            out[name] = np.array(result[name], dtype=float)
+    return out
+
+
+RECORDS_KEPT = 100_000
+"""Runs of one :func:`run_study` call whose :func:`run_record` is kept for the summary (about
+2.3 kB each for a 73-epoch run); later runs are read back from their files."""
+
+
 def read_run(path) -> dict:
     """Read a run file written by :func:`write_run` (same keys as :func:`execute_task`)."""
     from ..io.safe_open import open_hdf5, read_dataset
@@ -715,6 +734,7 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
         todo = (t for t in study.iter_tasks(n) if t.run_id not in done)
         limit_blas_threads()  # before any worker starts (inherited) and for inline runs
         failures = 0
+        fresh = {}  # the runs of this call, kept for the summary (not read back from disk)
         if n_done < total:
             fn = execute_task if device == "cpu" else functools.partial(execute_task,
                                                                         device=device)
@@ -725,6 +745,8 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
             try:
                 for res in it:
                     write_run(out, res, h)
+                    if len(fresh) < RECORDS_KEPT:
+                        fresh[res["run_id"]] = run_record(res)
                     if res["status"] != "ok":
                         failures += 1
                     bar.set_postfix(failures=failures, refresh=False)
@@ -734,7 +756,7 @@ def run_study(study: Study, out_dir, *, runs: int | None = None, workers: int | 
                 if close is not None:
                     close()  # stops the executor now (workers terminated if interrupted)
                 bar.close()
-        return summarize(study, out, runs=n, write_report=write_report)
+        return summarize(study, out, runs=n, write_report=write_report, records=fresh)
 
 
 def _code_fields() -> dict:
@@ -744,11 +766,13 @@ def _code_fields() -> dict:
     return {"package_version": fp["package_version"], "source_sha256": fp["source_sha256"]}
 
 
-def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: bool = True) -> dict:
+def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: bool = True,
+              records: dict | None = None) -> dict:
     """Aggregate the stored runs into ``DIR/summary.json`` (and ``DIR/report.html``).
 
     Only the runs 0…runs−1 of each cell are used (a study extended and then summarised with
-    fewer runs ignores the extra files). Cells keep the study's grid order.
+    fewer runs ignores the extra files). Cells keep the study's grid order. ``records`` maps
+    run ids to :func:`run_record` of runs just written (their files are not read again).
     """
     from .agreement import agreement, thesis_color
     from .metrics import FULL_RUNS, rss_envelope
@@ -759,10 +783,13 @@ def summarize(study: Study, out_dir, *, runs: int | None = None, write_report: b
     for c in study.cells:
         mets, fails, ts, rss, errors, walls = [], 0, [], [], [], []
         for i in range(n):
-            p = out / "runs" / f"{c.tag}_r{i:05d}.h5"
-            if not p.exists():
-                continue
-            r = read_run(p)
+            rid = f"{c.tag}_r{i:05d}"
+            r = records.get(rid) if records else None
+            if r is None:
+                p = out / "runs" / f"{rid}.h5"
+                if not p.exists():
+                    continue
+                r = read_run(p)
             walls.append(r["wall_s"])
             if r["status"] != "ok":
                 fails += 1

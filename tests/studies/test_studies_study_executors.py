@@ -63,6 +63,13 @@ def test_failures_recorded_and_study_goes_on(tmp_path, study_file, monkeypatch):
     assert [c["runs"] for c in s["cells"]] == [2, 2]
     bad = read_run(tmp_path / "o" / "runs" / f"{study.tasks()[1].run_id}.h5")
     assert bad["status"] == "failed" and "injected failure" in bad["error"]
+    # the summary run_study builds from the runs it just made (kept in memory) equals the
+    # summary of the stored files alone, failed runs included
+    from lightcurve.studies.runner import summarize
+
+    s_files = summarize(study, tmp_path / "o", write_report=False)
+    assert json.dumps(s_files, sort_keys=True) == json.dumps(s, sort_keys=True)
+    assert s["cells"][0]["runs"] == 2 and "first_error" in s["cells"][0]
 
 
 def test_existing_scheduler_address(tmp_path, make_study):
