@@ -22,7 +22,7 @@ def _cmd_reproduction(args) -> int:
                             tables4=args.css_tables4, sun_models=args.css_sun_models,
                             table44=args.css_table44, faults=list(args.css_faults or []),
                             vmm=args.css_vmm)]
-    write_reproduction(args.output, sections)
+    write_reproduction(args.output, sections, only=args.only)
     n = len(load_summaries(dirs))
     n_css = len(args.css or [])
     return report_written(args.output, detail=f" ({n} Bernard and {n_css} CSS study output(s) "
@@ -30,6 +30,8 @@ def _cmd_reproduction(args) -> int:
 
 
 def register(sub) -> None:
+    from ..studies.reproduction import SECTIONS
+
     p = add_command(
         sub, "reproduction", _cmd_reproduction,
         help="write docs/reproduction.md: every testable claim of the source documents, ours "
@@ -54,5 +56,9 @@ def register(sub) -> None:
                    help="JSON of 'lightcurve css vmm -o FILE' (DiGregorio's VMM vs SMM)")
     p.add_argument("--reflection-kf", default=None, metavar="FILE",
                    help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.7/10.8)")
+    p.add_argument("--only", choices=sorted(SECTIONS), default=None,
+                   help="write this source document's section only and keep the other sections "
+                   "as they stand in the existing output file (rerun one document's studies "
+                   "alone)")
     add_output(p, what="file", default="docs/reproduction.md",
                help="Markdown file to write")

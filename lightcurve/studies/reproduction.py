@@ -10,10 +10,12 @@ One function per section, each returning Markdown text:
   ablations that flip a disagreeing cell), the seven conclusions of §9.4, the particle filter of
   Fig. 9.5–9.7, the reflection models of §10.4/10.7/10.8 (rules below).
 
-:func:`write_reproduction` joins sections into the file (atomic write).  Command line::
+:func:`write_reproduction` joins sections into the file (atomic write); with ``--only
+bernard`` (or ``css``) it rewrites that section and keeps the other as it stands in the file.
+Command line::
 
     python -m lightcurve.studies.reproduction -o docs/reproduction.md --css DIR [DIR ...] \
-        --study DIR [DIR ...] [--reflection-kf FILE]
+        --study DIR [DIR ...] [--reflection-kf FILE] [--only {bernard,css}]
 
 (also ``lightcurve reproduction``), where each ``--css`` folder is the output of ``lightcurve
 css study`` and each ``--study`` folder the output of ``lightcurve compare`` (its
@@ -37,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from ..io.atomic import atomic_write_text
@@ -1329,9 +1332,59 @@ def bernard_section(study_dirs=(), reflection_kf_json=None) -> str:
     return "\n".join(out)
 
 
-def write_reproduction(path, sections) -> Path:
-    """Join Markdown sections under a title and write ``path`` atomically."""
-    text = "# Reproduction of the source documents\n\n" + "\n\n".join(sections).rstrip() + "\n"
+SECTIONS = {"bernard": "## Bernard (2021)", "css": "## Coarse sun sensors"}
+"""The sections of the file, by name, with the start of each one's heading, in file order."""
+
+_TITLE = "# Reproduction of the source documents\n\n"
+
+
+def _split_sections(text: str, path) -> dict:
+    """``{name: Markdown}`` of the sections of an existing reproduction file (:data:`SECTIONS`)."""
+    from ..errors import InputError
+
+    starts = {}
+    lines = text.splitlines(keepends=True)
+    for i, line in enumerate(lines):
+        for name, head in SECTIONS.items():
+            if line.startswith(head):
+                starts.setdefault(name, i)
+    missing = [n for n in SECTIONS if n not in starts]
+    if missing or not text.startswith(_TITLE):
+        raise InputError("not a reproduction file with every section", file=path, field="section",
+                         value=", ".join(missing) or "title", allowed="headings "
+                         + ", ".join(repr(h) for h in SECTIONS.values()))
+    order = sorted(starts, key=starts.get)
+    out = {}
+    for k, name in enumerate(order):
+        end = starts[order[k + 1]] if k + 1 < len(order) else len(lines)
+        out[name] = "".join(lines[starts[name]:end]).rstrip()
+    return out
+
+
+def write_reproduction(path, sections, only=None) -> Path:
+    """Join Markdown sections under a title and write ``path`` atomically.
+
+    ``sections``: Markdown texts in :data:`SECTIONS` order. ``only``: a section name — write
+    that section from ``sections`` and keep every other section as it stands in the existing
+    ``path`` (so the studies of one document can be rerun alone); the existing file must have
+    every section (``InputError`` otherwise, nothing written).
+    """
+    names = list(SECTIONS)
+    if only is not None:
+        from ..errors import InputError
+        from ..io.safe_open import read_text
+
+        if only not in SECTIONS:
+            raise InputError("unknown section", field="--only", value=only,
+                             allowed=", ".join(names))
+        if not Path(path).is_file():
+            raise InputError("--only keeps the other sections of an existing file; there is none",
+                             file=path, field="--only", value=only, allowed="an existing output file")
+        # the file this call rewrites, read on purpose (not tracked as an input)
+        kept = _split_sections(read_text(path, max_bytes=64 * 1024 * 1024, what="reproduction file",
+                                         track=False), path)
+        sections = [sections[names.index(only)] if n == only else kept[n] for n in names]
+    text = _TITLE + "\n\n".join(x.rstrip() for x in sections) + "\n"
     atomic_write_text(path, text)
     return Path(path)
 
@@ -1355,12 +1408,20 @@ def main(argv=None) -> int:
                    help="output folders of 'lightcurve compare' (the Bernard studies)")
     p.add_argument("--reflection-kf", default=None,
                    help="the JSON line printed by benchmarks/reflection_kf.py")
+    p.add_argument("--only", choices=sorted(SECTIONS), default=None,
+                   help="write this section only; keep the others from the existing output file")
     a = p.parse_args(argv)
     sections = [bernard_section(a.study, reflection_kf_json=a.reflection_kf),
                 css_section(a.css, timing=a.css_timing, tables4=a.css_tables4,
                             sun_models=a.css_sun_models, table44=a.css_table44,
                             faults=a.css_faults, vmm=a.css_vmm)]
-    write_reproduction(a.output, sections)
+    from ..errors import InputError
+
+    try:
+        write_reproduction(a.output, sections, only=a.only)
+    except InputError as exc:  # one line, exit 2, nothing written
+        print(f"python -m lightcurve.studies.reproduction: error: {exc}", file=sys.stderr)
+        return 2
     print(f"wrote {a.output}")
     return 0
 

@@ -117,3 +117,32 @@ def test_disagreeing_cell_out_of_published_order(tmp_path):
     row = next(ln for ln in md.splitlines() if ln.startswith("| MEKF | controlled | 2 | 5 | 0.02 |"))
     assert row.endswith("| no ablation run |")
 
+
+
+def test_only_one_section_keeps_the_other_byte_for_byte(tmp_path, capsys):
+    out = tmp_path / "reproduction.md"
+    # no file yet: --only has nothing to keep; one line, exit 2, nothing written
+    assert main(["reproduction", "--only", "bernard", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(out) in err and "--only" in err
+    assert not out.exists()
+    assert main(["reproduction", "-o", str(out)]) == 0
+    before = out.read_text()
+    css_before = before[before.index("## Coarse sun sensors"):]
+    # a hand-edited CSS section stays as it is when only the Bernard section is rewritten
+    edited = before.replace(css_before, css_before + "\nA line kept by --only.\n")
+    out.write_text(edited)
+    d = _write(tmp_path, "thesis-fig9-4",
+               [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3, runs=10)])
+    assert main(["reproduction", "--only", "bernard", "--study", str(d), "-o", str(out)]) == 0
+    after = out.read_text()
+    assert after[after.index("## Coarse sun sensors"):].rstrip() == edited[edited.index(
+        "## Coarse sun sensors"):].rstrip()
+    assert "indicative: 10 runs/cell" in after and "indicative" not in before
+    assert after.startswith("# Reproduction of the source documents\n\n## Bernard (2021)")
+    # a file without the sections is refused and left as it is
+    other = tmp_path / "other.md"
+    other.write_text("# Something else\n")
+    assert main(["reproduction", "--only", "css", "-o", str(other)]) == 2
+    assert other.read_text() == "# Something else\n"
+    assert "section" in capsys.readouterr().err
