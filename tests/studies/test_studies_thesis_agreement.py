@@ -401,3 +401,30 @@ def test_alpha_sweep_study_is_the_base_ukf_cells_with_alpha(tmp_path):
     t0, t1 = list(base.tasks(2)), list(sw.tasks(2))
     seeds = {(t.cell, t.run): (t.sim_seed, t.filter_seed, t.init_seed) for t in t0}
     assert all(seeds[(t.cell, t.run)] == (t.sim_seed, t.filter_seed, t.init_seed) for t in t1)
+
+
+def test_bernard_regeneration_reruns_every_study_the_document_read():
+    """benchmarks/bernard_reproduction.py: its study list holds every study output that
+    docs/reproduction.md's Bernard section names as read, and every ablation file."""
+    import importlib.util
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    path = root / "benchmarks" / "bernard_reproduction.py"
+    doc = root / "docs" / "reproduction.md"
+    if not (path.is_file() and doc.is_file()):
+        pytest.skip("benchmarks/ and docs/ not beside the tests (installed package)")
+    spec = importlib.util.spec_from_file_location("bernard_reproduction", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    names = [p.stem for p in mod.studies({"thesis-fig9-4-bpf"})]
+    assert len(names) == len(set(names))
+    line = next(x for x in doc.read_text(encoding="utf-8").splitlines()
+                if x.startswith("Study outputs used:"))
+    used = set(re.findall(r"`(thesis-[a-z0-9-]+)`", line))
+    assert len(used) >= 50 and used <= set(names), sorted(used - set(names))
+    assert {p.stem for p in (STUDIES / "ablations").glob("thesis-*.toml")} <= set(names)
+    assert names[:10] == sorted(n for n in names if n.startswith("thesis-fig") and "ablation" not in n)
+    assert "thesis-fig9-4-bpf" not in names and "thesis-fig9-4-bpf" in [
+        p.stem for p in mod.studies(set())]
