@@ -36,20 +36,21 @@ def register(sub) -> None:
         sub, "reproduction", _cmd_reproduction,
         help="write docs/reproduction.md: every testable claim of the source documents, ours "
         "vs theirs")
-    p.add_argument("--study", action="append", metavar="DIR",
-                   help="a study output folder (repeatable; identified by its study name)")
-    p.add_argument("--css", action="append", metavar="DIR",
-                   help="an output folder of 'lightcurve css study' (repeatable; O'Keefe, "
-                   "DiGregorio)")
+    p.add_argument("--study", action="extend", nargs="+", metavar="DIR",
+                   help="output folder(s) of 'lightcurve compare' (the Bernard studies, each "
+                   "identified by its study name; repeatable, several per option allowed)")
+    p.add_argument("--css", action="extend", nargs="+", metavar="DIR",
+                   help="output folder(s) of 'lightcurve css study' (O'Keefe, DiGregorio; "
+                   "repeatable, several per option allowed)")
     p.add_argument("--css-timing", default=None, metavar="FILE",
                    help="output of python benchmarks/css.py (O'Keefe Table 3.1)")
     p.add_argument("--css-tables4", default=None, metavar="FILE",
                    help="output of python benchmarks/css_tables_4.py (O'Keefe Tables 4.1-4.3)")
     p.add_argument("--css-table44", default=None, metavar="FILE",
                    help="output of python benchmarks/css_table_4_4.py (O'Keefe Table 4.4)")
-    p.add_argument("--css-faults", action="append", metavar="FILE",
+    p.add_argument("--css-faults", action="extend", nargs="+", metavar="FILE",
                    help="JSON of 'lightcurve css faults --experiment table5_1|table5_2 -o FILE' "
-                   "(O'Keefe Tables 5.1-5.2; repeatable)")
+                   "(O'Keefe Tables 5.1-5.2; repeatable, several per option allowed)")
     p.add_argument("--css-sun-models", default=None, metavar="FILE",
                    help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
     p.add_argument("--css-vmm", default=None, metavar="FILE",

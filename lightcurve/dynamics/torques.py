@@ -670,12 +670,10 @@ def environment_torque_nb(t, q, knots, pos_c, vel_c, sun_c, dist_c, lit, use_gg,
             f = lit[-1]
         elif t <= knots[0]:
             f = lit[0]
+        elif knots[i] == t:  # inside the knot span the spline's piece i is numpy.interp's
+            f = lit[i]
         else:
-            j = np.searchsorted(knots, t, side="right") - 1
-            if knots[j] == t:
-                f = lit[j]
-            else:
-                f = (lit[j + 1] - lit[j]) / (knots[j + 1] - knots[j]) * (t - knots[j]) + lit[j]
+            f = (lit[i + 1] - lit[i]) / (knots[i + 1] - knots[i]) * (t - knots[i]) + lit[i]
         f = min(max(f, 0.0), 1.0)
         d = _cubic(dist_c, i, s, 0)
         P = p_sun_1au * (AU_M / d) ** 2 * f

@@ -315,13 +315,18 @@ class UncontrolledTruth(_TruthModel):
         return T
 
     def build_named_torques(self, t_start: float, t_end: float):
-        """Sample the geometry over ``[t_start, t_end]`` (s) and build the named torque models.
+        """Sample the geometry over ``[t_start, t_end]`` (s) as :meth:`simulate` does and return
+        the named torque models (torque objects with their attitude partials) that the
+        compiled sum of the truth equals."""
+        self._sample_environment(t_start, t_end)
+        return [] if self._environment is None else self._environment.models()
 
-        Called by :meth:`simulate`; returns the list of torque model objects.
-        """
+    def _sample_environment(self, t_start: float, t_end: float) -> None:
+        """Sample the orbit, Sun and shadow over ``[t_start, t_end]`` (s) into the
+        :class:`SampledEnvironment` of the named torques (None without named torques)."""
         if not self.named_torques:
             self._named_fns, self._environment = [], None
-            return []
+            return
         step = self.geometry_step_s
         n = max(4, int(np.ceil((t_end - t_start) / step)) + 1)
         tg = t_start + np.arange(n) * step
@@ -349,9 +354,7 @@ class UncontrolledTruth(_TruthModel):
         self._environment = SampledEnvironment(
             tg, r, v, rel, lit, gravity_gradient="gravity_gradient" in self.named_torques, J=self.J,
             drag=drag, srp=srp)
-        models = self._environment.models()
         self._named_fns = [self._environment.torque]
-        return models
 
     def _rhs(self, eta):
         J, Ji = self.J, self.J_inv
@@ -381,7 +384,7 @@ class UncontrolledTruth(_TruthModel):
     def simulate(self, t_s):
         """Attitudes and rates at the measurement times ``t_s`` (s): ``(q (N,4), ω (N,3))``."""
         t, t0 = _times(t_s, self.t0)
-        self.build_named_torques(t0, float(t[-1]))
+        self._sample_environment(t0, float(t[-1]))
         x0 = np.concatenate([self.q0, self.omega0])
         if self.eta_sigma == 0.0:
             x = integrate_truth(x0, t, self._rhs(np.zeros(3)), self.rtol, self.atol, t0=t0)

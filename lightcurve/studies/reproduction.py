@@ -12,12 +12,12 @@ One function per section, each returning Markdown text:
 
 :func:`write_reproduction` joins sections into the file (atomic write); with ``--only
 bernard`` (or ``css``) it rewrites that section and keeps the other as it stands in the file.
-Command line::
+Command line (``python -m lightcurve.studies.reproduction`` takes the same arguments)::
 
-    python -m lightcurve.studies.reproduction -o docs/reproduction.md --css DIR [DIR ...] \
+    lightcurve reproduction -o docs/reproduction.md --css DIR [DIR ...] \
         --study DIR [DIR ...] [--reflection-kf FILE] [--only {bernard,css}]
 
-(also ``lightcurve reproduction``), where each ``--css`` folder is the output of ``lightcurve
+where each ``--css`` folder is the output of ``lightcurve
 css study`` and each ``--study`` folder the output of ``lightcurve compare`` (its
 ``summary.json``, identified by the study name).
 
@@ -37,7 +37,6 @@ below 5° RSS; "not suitable" = every such cell red.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -1390,40 +1389,11 @@ def write_reproduction(path, sections, only=None) -> Path:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m lightcurve.studies.reproduction",
-                                description="write docs/reproduction.md from study outputs")
-    p.add_argument("-o", "--output", required=True, help="Markdown file to write")
-    p.add_argument("--css", nargs="+", default=[], help="output folders of 'lightcurve css study'")
-    p.add_argument("--css-timing", help="output of python benchmarks/css.py (Table 3.1)")
-    p.add_argument("--css-tables4", help="output of python benchmarks/css_tables_4.py")
-    p.add_argument("--css-sun-models",
-                   help="JSON of 'lightcurve css sun-models --table -o FILE' (Table 4.5)")
-    p.add_argument("--css-table44", help="output of python benchmarks/css_table_4_4.py")
-    p.add_argument("--css-faults", nargs="+", default=[],
-                   help="JSON of 'lightcurve css faults --experiment table5_1|table5_2 -o FILE' "
-                   "(Tables 5.1-5.2)")
-    p.add_argument("--css-vmm", default=None,
-                   help="JSON of 'lightcurve css vmm -o FILE' (DiGregorio's VMM vs SMM)")
-    p.add_argument("--study", nargs="+", default=[],
-                   help="output folders of 'lightcurve compare' (the Bernard studies)")
-    p.add_argument("--reflection-kf", default=None,
-                   help="the JSON line printed by benchmarks/reflection_kf.py")
-    p.add_argument("--only", choices=sorted(SECTIONS), default=None,
-                   help="write this section only; keep the others from the existing output file")
-    a = p.parse_args(argv)
-    sections = [bernard_section(a.study, reflection_kf_json=a.reflection_kf),
-                css_section(a.css, timing=a.css_timing, tables4=a.css_tables4,
-                            sun_models=a.css_sun_models, table44=a.css_table44,
-                            faults=a.css_faults, vmm=a.css_vmm)]
-    from ..errors import InputError
+    """``python -m lightcurve.studies.reproduction ARGS`` is ``lightcurve reproduction ARGS``
+    (one parser, :mod:`lightcurve.cli.reproduction`): returns the exit status."""
+    from ..cli import main as cli_main
 
-    try:
-        write_reproduction(a.output, sections, only=a.only)
-    except InputError as exc:  # one line, exit 2, nothing written
-        print(f"python -m lightcurve.studies.reproduction: error: {exc}", file=sys.stderr)
-        return 2
-    print(f"wrote {a.output}")
-    return 0
+    return cli_main(["reproduction", *(sys.argv[1:] if argv is None else list(argv))])
 
 
 if __name__ == "__main__":  # pragma: no cover

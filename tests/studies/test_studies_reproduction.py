@@ -73,6 +73,31 @@ def test_cli_writes_the_file(tmp_path):
     assert "indicative: 10 runs/cell" in text
 
 
+def test_module_entry_point_is_the_cli_and_takes_both_spellings(tmp_path, capsys):
+    # `--study A B` (one option, several folders) and `--study A --study B` read the same
+    # studies, through `lightcurve reproduction` and through the module entry point alike
+    from lightcurve.studies.reproduction import main as module_main
+
+    a = _write(tmp_path, "thesis-fig9-4",
+               [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3, runs=10)])
+    b = _write(tmp_path, "thesis-fig-b1-meo-cubesat",
+               [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "red", "green", 0.3, runs=10)])
+    texts = []
+    for i, (entry, args) in enumerate([(main, ["reproduction", "--study", str(a), str(b)]),
+                                       (main, ["reproduction", "--study", str(a), "--study", str(b)]),
+                                       (module_main, ["--study", str(a), str(b)])]):
+        out = tmp_path / f"r{i}.md"
+        assert entry([*args, "-o", str(out)]) == 0
+        assert "(2 Bernard and 0 CSS study output(s) read)" in capsys.readouterr().out
+        texts.append(out.read_text())
+    assert texts[0] == texts[1] == texts[2]
+    assert "0/1 cells agree" in texts[0] and "1/1 cells agree" in texts[0]
+    # bad input through the module entry point: one line, exit 2, nothing written
+    assert module_main(["--only", "css", "-o", str(tmp_path / "none.md")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not (tmp_path / "none.md").exists()
+
+
 def test_monte_carlo_spread_block_and_ablations_within_noise(tmp_path):
     # cells carrying color_probability: the spread table (self-agreement Σ Σ P², expected
     # agreement Σ P(thesis), cells within noise) and, per disagreeing cell, P(thesis) and the
