@@ -7,8 +7,10 @@ The studies are the thesis studies under ``pipelines/studies/`` (the five tables
 BPF column over the whole Fig. 9.4 grid that the section does not read, ≈ 25 min on 2 cores).
 Each study runs with ``lightcurve compare STUDY -o OUT/<name> --workers W -q`` and resumes the
 runs already stored in ``OUT/<name>``, so an interrupted regeneration goes on where it stopped.
-With ``--reflection-kf`` the §10.7/§10.8 acceptance runs (``benchmarks/reflection_kf.py``) are
-run too (once; their JSON line is kept in ``OUT/reflection_kf.json``).
+With ``--reflection-kf`` the §10.4/§10.7/§10.8 runs (``benchmarks/reflection_kf.py``, a few
+seconds each) are run too, once per filter variant: the thesis variant with the eq. 5.8 diffuse
+term (``OUT/reflection_kf-thesis.json``), then the robust variant with the physical form
+(``OUT/reflection_kf-robust.json``); a file already there is reused.
 
 Prints one line per study (name, runs per cell, wall seconds) and the total; ``--list`` prints
 the studies and stops.
@@ -28,6 +30,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDIES = ROOT / "pipelines" / "studies"
+#: filter variant and Cook–Torrance form of each benchmarks/reflection_kf.py run (thesis first)
+KF_VARIANTS = (("thesis", "thesis"), ("robust", "physical"))
 
 
 def studies(skip) -> list[Path]:
@@ -76,17 +80,20 @@ def main() -> int:
         print(f"{p.stem}: {time.perf_counter() - t0:.0f} s", flush=True)
     extra = []
     if a.reflection_kf:
-        kf = a.output / "reflection_kf.json"
-        if not kf.exists():
-            t0 = time.perf_counter()
-            r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "reflection_kf.py")],
-                               env=env, capture_output=True, text=True)
-            if r.returncode != 0:
-                sys.stderr.write(r.stderr)
-                return r.returncode
-            kf.write_text(r.stdout)
-            print(f"reflection_kf: {time.perf_counter() - t0:.0f} s", flush=True)
-        extra = ["--reflection-kf", str(kf)]
+        extra = ["--reflection-kf"]
+        for variant, form in KF_VARIANTS:
+            kf = a.output / f"reflection_kf-{variant}.json"
+            if not kf.exists():
+                t0 = time.perf_counter()
+                r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "reflection_kf.py"),
+                                    "--variant", variant, "--cook-torrance", form],
+                                   env=env, capture_output=True, text=True)
+                if r.returncode != 0:
+                    sys.stderr.write(r.stderr)
+                    return r.returncode
+                kf.write_text(r.stdout)
+                print(f"reflection_kf ({variant}): {time.perf_counter() - t0:.0f} s", flush=True)
+            extra.append(str(kf))
     cmd = [sys.executable, "-m", "lightcurve", "reproduction", "--only", "bernard", "-o", str(a.doc)]
     for p in files:
         cmd += ["--study", str(a.output / p.stem)]

@@ -55,8 +55,10 @@ def register(sub) -> None:
                    help="JSON of 'lightcurve css sun-models --table -o FILE' (O'Keefe Table 4.5)")
     p.add_argument("--css-vmm", default=None, metavar="FILE",
                    help="JSON of 'lightcurve css vmm -o FILE' (DiGregorio's VMM vs SMM)")
-    p.add_argument("--reflection-kf", default=None, metavar="FILE",
-                   help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.7/10.8)")
+    p.add_argument("--reflection-kf", action="extend", nargs="+", metavar="FILE",
+                   help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.4/10.7/"
+                   "10.8; one file per filter variant, e.g. --variant thesis and robust; "
+                   "repeatable, several per option allowed)")
     p.add_argument("--only", choices=sorted(SECTIONS), default=None,
                    help="write this source document's section only and keep the other sections "
                    "as they stand in the existing output file (rerun one document's studies "

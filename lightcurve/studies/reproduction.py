@@ -15,7 +15,7 @@ bernard`` (or ``css``) it rewrites that section and keeps the other as it stands
 Command line (``python -m lightcurve.studies.reproduction`` takes the same arguments)::
 
     lightcurve reproduction -o docs/reproduction.md --css DIR [DIR ...] \
-        --study DIR [DIR ...] [--reflection-kf FILE] [--only {bernard,css}]
+        --study DIR [DIR ...] [--reflection-kf FILE [FILE ...]] [--only {bernard,css}]
 
 where each ``--css`` folder is the output of ``lightcurve
 css study`` and each ``--study`` folder the output of ``lightcurve compare`` (its
@@ -24,8 +24,10 @@ css study`` and each ``--study`` folder the output of ``lightcurve compare`` (it
 Bernard section — it reads the ``summary.json`` of ``thesis-fig9-4`` and
 ``thesis-fig-b1-…`` … ``thesis-fig-b4-…`` (thesis variant), their ``-robust`` twins and
 ``-ablation-<switch>`` runs, ``thesis-claims-*`` (the §9.4 conclusions that need other cases)
-and ``thesis-bpf-*`` (Fig. 9.5–9.7), and the JSON line of ``benchmarks/reflection_kf.py``
-(§10.7/§10.8). Rules, stated once: a table agrees when at least 85 % of the cells both ran have
+and ``thesis-bpf-*`` (Fig. 9.5–9.7), and the JSON lines of ``benchmarks/reflection_kf.py``
+(§10.4/§10.7/§10.8; one per filter variant, the thesis variant's rows first; "less accurate
+than with perfect knowledge" compares the median final RSS attitude error of the Model 3 runs
+with runs whose truth parameters are the filter's). Rules, stated once: a table agrees when at least 85 % of the cells both ran have
 the same colour; fewer than 100 runs per cell make it *indicative*; "better / more accurate"
 compares median final RSS attitude errors of the UKF; the Monte Carlo spread of each colour
 is :func:`lightcurve.studies.metrics.color_probability` (computed from the run files when a
@@ -1234,48 +1236,61 @@ def _bpf_rows(sums):
     return rows
 
 
-def _ch10_rows(kf):
-    rows = []
-    if not kf:
+def _ch10_rows(kfs):
+    """Claim rows of ch. 10 from the JSON lines of ``benchmarks/reflection_kf.py`` (``kfs``: a
+    list of parsed outputs, one per filter variant; thesis variant first)."""
+    if not kfs:
         return [("§10.7 / §10.8 (Models 1–3)", "–",
                  "not testable (no benchmarks/reflection_kf.py output given)")]
-    s107 = kf.get("sec10_7", {})
-    for m in ("mekf", "ukf"):
-        obs = s107.get(m + "_observable")
-        if obs is not None:
-            rows.append((f"§10.7 ({m.upper()}, attitude known): the filter estimates some of "
-                         "the parameters (σ shrinks ≥ 2× in most seeds)",
-                         f"{len(obs)} parameters: {', '.join(obs)}", _verdict(len(obs) > 0)))
-            mz = {k: v for k, v in s107.get(m, {}).items() if k.endswith("[5]")}
-            if mz:
-                ok = (mz.get("a[5]", {}).get("frac_shrink_ge2", 0) >= 0.5
-                      and mz.get("m[5]", {}).get("frac_shrink_ge2", 1) < 0.5)
-                rows.append((f"§10.7 ({m.upper()}): −Z facet a estimated, m not (ξ = 1 is "
-                             "held fixed here)", ", ".join(f"{k} shrink≥2 in "
-                                                           f"{100 * v['frac_shrink_ge2']:.0f} %"
-                                                           for k, v in mz.items()),
-                             _verdict(ok)))
-    s108 = kf.get("sec10_8", {})
-    for m in ("mekf", "ukf"):
-        m12 = [v for k, v in s108.items() if k.startswith("geo_") and k.endswith(m)
-               and ("model1" in k or "model2" in k)]
-        if m12:
-            succ = sum(v["success"] for v in m12)
-            runs = sum(v["runs"] for v in m12)
-            rows.append((f"§10.4: Models 1 and 2 not suitable for combined bias and attitude "
-                         f"estimation ({m.upper()}, GEO)", f"{succ}/{runs} runs succeed",
-                         _verdict(succ < 0.5 * runs)))
-        m3 = s108.get(f"leo_fast_sth3_model3_{m}")
-        m0 = s108.get(f"leo_fast_sth3_none_{m}")
-        if m3 and m0:
-            rows.append((f"§10.4: Model 3 combined estimation works, attitude less accurate than "
-                         f"with known parameters ({m.upper()}, LEO, σθ 3°)",
-                         f"success {m3['success']}/{m3['runs']}; median final RSS "
+    rows = []
+    for kf in sorted(kfs, key=lambda k: k.get("variant", "robust") != "thesis"):
+        var = f"{kf.get('variant', 'robust')} variant"
+        s107 = kf.get("sec10_7", {})
+        for m in ("mekf", "ukf"):
+            obs, per = s107.get(m + "_observable"), s107.get(m, {})
+            if obs is not None:
+                rows.append((f"§10.7, §10.4 ({m.upper()}, {var}, attitude known): some "
+                             "parameters are estimated (σ shrinks ≥ 2× in most seeds), not all",
+                             f"{len(obs)} of {len(per)} parameters: {', '.join(obs) or 'none'}",
+                             _verdict(0 < len(obs) < len(per))))
+                mz = {k: v for k, v in per.items() if k.endswith("[5]")}
+                if mz:
+                    ok = (mz.get("a[5]", {}).get("frac_shrink_ge2", 0) >= 0.5
+                          and mz.get("m[5]", {}).get("frac_shrink_ge2", 1) < 0.5)
+                    rows.append((f"§10.7 ({m.upper()}, {var}): −Z facet a estimated, m not "
+                                 "(ξ = 1 is held fixed here)",
+                                 ", ".join(f"{k} shrink≥2 in {100 * v['frac_shrink_ge2']:.0f} %"
+                                           for k, v in mz.items()), _verdict(ok)))
+        s108 = kf.get("sec10_8", {})
+        for m in ("mekf", "ukf"):
+            m12 = [v for k, v in s108.items() if k.startswith("geo_") and k.endswith(m)
+                   and ("model1" in k or "model2" in k)]
+            if m12:
+                succ = sum(v["success"] for v in m12)
+                runs = sum(v["runs"] for v in m12)
+                rows.append((f"§10.4: Models 1 and 2 not suitable for combined bias and attitude "
+                             f"estimation ({m.upper()}, {var}, GEO)", f"{succ}/{runs} runs succeed",
+                             _verdict(succ < 0.5 * runs)))
+            m3 = s108.get(f"leo_fast_sth3_model3_{m}")
+            if not m3:
+                continue
+            claim = (f"§10.4: Model 3 combined estimation works, attitude less accurate than "
+                     f"with perfect knowledge of the parameters ({m.upper()}, {var}, LEO, σθ 3°)")
+            mk, m0 = s108.get(f"leo_fast_sth3_known_{m}"), s108.get(f"leo_fast_sth3_none_{m}")
+            wrong = (f"; {_fmt(_median(m0['final_rss_deg']))}° with the parameters 10 % off "
+                     "and not estimated") if m0 else ""
+            if mk is None:
+                rows.append((claim, f"success {m3['success']}/{m3['runs']}" + wrong,
+                             "not testable (no run with the parameters known: rerun "
+                             "benchmarks/reflection_kf.py)"))
+                continue
+            rows.append((claim, f"success {m3['success']}/{m3['runs']}; median final RSS "
                          f"{_fmt(_median(m3['final_rss_deg']))}° vs "
-                         f"{_fmt(_median(m0['final_rss_deg']))}° without parameter states",
+                         f"{_fmt(_median(mk['final_rss_deg']))}° with the parameters known"
+                         + wrong,
                          _verdict(m3["success"] >= 0.5 * m3["runs"]
                                   and _median(m3["final_rss_deg"]) >=
-                                  _median(m0["final_rss_deg"]))))
+                                  _median(mk["final_rss_deg"]))))
     return rows
 
 
@@ -1291,24 +1306,37 @@ def _claim_table(rows):
     return out
 
 
+def _read_reflection_kf(path) -> dict:
+    """The JSON line printed by ``benchmarks/reflection_kf.py`` (its last line), read from
+    ``path``; InputError naming the file when it is not such an output."""
+    from ..errors import InputError
+    from ..io.safe_open import read_text
+
+    text = read_text(path, max_bytes=64 * 1024 * 1024, what="benchmark output").strip()
+    try:
+        kf = json.loads(text.splitlines()[-1])
+    except (ValueError, IndexError):
+        kf = None
+    if not isinstance(kf, dict) or kf.get("benchmark") != "reflection_kf":
+        raise InputError(f"{path}: not the JSON line of benchmarks/reflection_kf.py (its last "
+                         "line must be a JSON object with \"benchmark\": \"reflection_kf\")")
+    return kf
+
+
 def bernard_section(study_dirs=(), reflection_kf_json=None) -> str:
     """The Bernard (2021) section of docs/reproduction.md (module docstring) as Markdown.
 
-    ``study_dirs``: study output folders; ``reflection_kf_json``: path of the JSON line printed
-    by ``benchmarks/reflection_kf.py`` (or None)."""
+    ``study_dirs``: study output folders; ``reflection_kf_json``: path, or list of paths, of
+    the JSON lines printed by ``benchmarks/reflection_kf.py`` (one per filter variant; or
+    None). A file that is not such an output raises InputError."""
     sums = load_summaries(study_dirs)
     for name, _, _ in _TABLES:   # the published tables' colour spread (run files if needed)
         if name in sums:
             add_color_spread(sums[name])
-    kf = None
-    if reflection_kf_json:
-        from ..io.safe_open import read_text
-
-        try:
-            kf = json.loads(read_text(reflection_kf_json, max_bytes=64 * 1024 * 1024,
-                                      what="benchmark output").strip().splitlines()[-1])
-        except (ValueError, IndexError):  # InputError included
-            kf = None
+    kfs = [_read_reflection_kf(p) for p in ([] if not reflection_kf_json else
+                                            [reflection_kf_json]
+                                            if isinstance(reflection_kf_json, (str, Path))
+                                            else reflection_kf_json)]
     out = ["## Bernard (2021): attitude and reflection-parameter estimation from lightcurves", "",
            "Generated by `lightcurve reproduction` from the study outputs listed at the end; "
            "rules in `lightcurve/studies/reproduction.py`. Thesis variant = Bernard's ch. 7 "
@@ -1324,10 +1352,15 @@ def bernard_section(study_dirs=(), reflection_kf_json=None) -> str:
     out += ["", "### Particle filter, Fig. 9.5–9.7", ""]
     out += _claim_table(_bpf_rows(sums))
     out += ["", "### Reflection-parameter models, §10.4, §10.7, §10.8", ""]
-    out += _claim_table(_ch10_rows(kf))
+    out += _claim_table(_ch10_rows(kfs))
     out += ["", "Study outputs used: " + (", ".join(
         f"`{n}` ({s['runs_per_cell']} runs/cell, variant {s.get('variant', 'robust')})"
         for n, s in sorted(sums.items())) or "none"), ""]
+    if kfs:
+        out[-1:] = ["", "Outputs of `benchmarks/reflection_kf.py` used: " + ", ".join(
+            f"{k.get('variant', 'robust')} variant ({k.get('cook_torrance', 'physical')} "
+            f"Cook–Torrance form, {len(k.get('seeds', []))} seeds)"
+            for k in sorted(kfs, key=lambda k: k.get("variant", "robust") != "thesis")), ""]
     return "\n".join(out)
 
 

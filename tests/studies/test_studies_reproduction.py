@@ -171,3 +171,60 @@ def test_only_one_section_keeps_the_other_byte_for_byte(tmp_path, capsys):
     assert main(["reproduction", "--only", "css", "-o", str(other)]) == 2
     assert other.read_text() == "# Something else\n"
     assert "section" in capsys.readouterr().err
+
+
+def _kf(variant, m3_rss, known_rss=None):
+    """A hand-made benchmarks/reflection_kf.py output: 3 parameters of which 1 is estimated."""
+    per = {"a[0]": {"frac_shrink_ge2": 0.9}, "m[0]": {"frac_shrink_ge2": 0.1},
+           "a[5]": {"frac_shrink_ge2": 0.8}, "m[5]": {"frac_shrink_ge2": 0.0}}
+    s108 = {"geo_sth3_model1_ukf": {"success": 1, "runs": 10, "final_rss_deg": [1.0]},
+            "geo_sth3_model2_ukf": {"success": 2, "runs": 10, "final_rss_deg": [1.0]},
+            "leo_fast_sth3_model3_ukf": {"success": 8, "runs": 10, "final_rss_deg": m3_rss},
+            "leo_fast_sth3_none_ukf": {"success": 0, "runs": 10, "final_rss_deg": [2.0, 3.0]}}
+    if known_rss is not None:
+        s108["leo_fast_sth3_known_ukf"] = {"success": 10, "runs": 10, "final_rss_deg": known_rss}
+    return {"benchmark": "reflection_kf", "variant": variant,
+            "sec10_7": {"ukf": per, "ukf_observable": ["a[0]", "a[5]"]}, "sec10_8": s108}
+
+
+def test_chapter10_rows_per_variant_against_perfect_knowledge(tmp_path, capsys):
+    # §10.4: Model 3's attitude is "not as accurate as when there was a perfect knowledge of the
+    # shape model reflection parameters": compared with runs whose truth parameters are the
+    # filter's (median final RSS), not with runs that leave wrong parameters unestimated
+    paths = []
+    for variant, m3, known in (("robust", [0.8, 0.9], [0.5, 0.6]), ("thesis", [0.4, 0.5], [0.6, 0.7])):
+        p = tmp_path / f"kf-{variant}.json"
+        p.write_text("progress line\n" + json.dumps(_kf(variant, m3, known)) + "\n")
+        paths.append(p)
+    md = bernard_section([], reflection_kf_json=paths)
+    rows = [ln for ln in md.splitlines() if ln.startswith("| §10.")]
+    assert len(rows) == 8 and all("thesis variant" in r for r in rows[:4])   # thesis first
+    m3 = [r for r in rows if "perfect knowledge" in r]
+    assert m3[0].endswith("| disagrees |") and "0.45° vs 0.65° with the parameters known" in m3[0]
+    assert m3[1].endswith("| agrees |") and "0.85° vs 0.55° with the parameters known; 2.50° " \
+        "with the parameters 10 % off and not estimated" in m3[1]
+    some = next(r for r in rows if "some parameters are estimated" in r)
+    assert "| 2 of 4 parameters: a[0], a[5] | agrees |" in some
+    assert "| 3/20 runs succeed | agrees |" in md
+    assert "Outputs of `benchmarks/reflection_kf.py` used: thesis variant" in md
+    # an output from before the perfect-knowledge runs: that row is not testable
+    old = _kf("robust", [0.8, 0.9])
+    md = bernard_section([], reflection_kf_json=[_dump(tmp_path / "old.json", old)])
+    row = next(ln for ln in md.splitlines() if "perfect knowledge" in ln)
+    assert "not testable (no run with the parameters known" in row
+    # a file that is not such an output: one line naming it, exit 2, the document kept
+    out = tmp_path / "reproduction.md"
+    assert main(["reproduction", "-o", str(out)]) == 0
+    before = out.read_text()
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"benchmark": "css"}\n')
+    capsys.readouterr()
+    assert main(["reproduction", "--reflection-kf", str(paths[0]), str(bad), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(bad) in err[0] and "reflection_kf" in err[0]
+    assert out.read_text() == before
+
+
+def _dump(path, obj):
+    path.write_text(json.dumps(obj))
+    return path
