@@ -60,7 +60,9 @@ not run here either.
 
     [filters.ukf]                         # optional per-filter settings: the fields of the
     variant = "thesis"                    # filter's configuration (lightcurve.filters.config;
-    alpha = 1.0                           # MEKFConfig, UKFConfig, the particle filter's)
+    alpha = 1.0                           # MEKFConfig, UKFConfig, the particle filter's);
+                                          # without variant: [options] variant; the fields
+                                          # left out keep that variant's defaults
 
 Seeds (reproducible, independent of worker count and executor): the simulation seed of run
 ``i`` derives from the study seed, the *scenario* part of the cell key (dynamics, sites,
@@ -500,8 +502,12 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         cls = filter_config_class(method)
         values = dict(tab.data)
         if cls is not None:
-            filt[method] = cls.from_mapping(values, file=path,
-                                            table=f"filters.{method}").as_options()
+            # validated under the variant the runs will use (the table's own, else [options]
+            # variant, else robust); only the keys given are kept, so the fields left out keep
+            # that variant's defaults instead of the robust variant's
+            cls.from_mapping({"variant": opts.get("variant", "robust"), **values}, file=path,
+                             table=f"filters.{method}")
+            filt[method] = values
         else:
             bad = sorted(set(values) - set(BPF_KEYWORDS) - {"variant"})
             if bad:

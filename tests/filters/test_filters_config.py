@@ -107,3 +107,59 @@ alpha = 0.5
     f.write_text(text.replace("alpha = 0.5", "alpha = 0.5\nlambda = 2"))
     with pytest.raises(InputError, match="filters.ukf.lambda"):
         load_study(f)
+
+
+def test_study_filter_table_keeps_the_study_variant(tmp_path, monkeypatch):
+    # a per-filter table that does not name a variant changes only the fields it gives: the
+    # runs keep [options] variant = "thesis" and that variant's defaults (multinomial
+    # resampling, no progressive correction, no gate: Bernard ch. 6-7), not the robust ones
+    import lightcurve.filters as filters_pkg
+    from lightcurve._paths import data_dir
+    from lightcurve.filters.bpf import BPFConfig
+    from lightcurve.studies.runner import execute_task
+    from lightcurve.studies.study import load_study
+
+    scen = data_dir("pipelines") / "thesis" / "leo-ic1-fast-spin-{dynamics}-{sites}site.toml"
+    f = tmp_path / "s.toml"
+    f.write_text(f"""
+[study]
+name = "t"
+runs = 1
+scenario = "{scen.as_posix()}"
+[grid]
+filter = ["bpf", "ukf"]
+dynamics = ["controlled"]
+sites = [1]
+sigma_theta_deg = [60.0]
+sigma_omega_deg_s = [0.02]
+r_percent = [1.0]
+[options]
+variant = "thesis"
+particles = 100
+[filters.bpf]
+roughening = 0.1
+[filters.ukf]
+alpha = 0.5
+""")
+    st = load_study(f)
+    assert dict(st.options["filters"]) == {"bpf": (("roughening", 0.1),),
+                                           "ukf": (("alpha", 0.5),)}
+    seen = {}
+
+    def capture(curve, method, **kw):
+        seen[method] = kw
+        raise RuntimeError("captured")
+
+    monkeypatch.setattr(filters_pkg, "invert", capture)
+    for task in st.tasks():
+        assert execute_task(task)["status"] == "failed"
+    assert seen["bpf"]["variant"] == "thesis" and seen["bpf"]["roughening"] == 0.1
+    cfg = BPFConfig(**{k: v for k, v in seen["bpf"].items() if k in ("variant", "roughening",
+                                                                    "particles")})
+    assert (cfg.resampling, cfg.progressive, cfg.gating) == ("multinomial", False, False)
+    assert UKFConfig(variant=seen["ukf"]["variant"], alpha=seen["ukf"]["alpha"]) == \
+        UKFConfig(variant="thesis", alpha=0.5)
+    # still validated, under the study's variant
+    f.write_text(f.read_text().replace("roughening = 0.1", "roughening = -1.0"))
+    with pytest.raises(InputError, match="filters.bpf.roughening"):
+        load_study(f)

@@ -428,3 +428,31 @@ def test_bernard_regeneration_reruns_every_study_the_document_read():
     assert names[:10] == sorted(n for n in names if n.startswith("thesis-fig") and "ablation" not in n)
     assert "thesis-fig9-4-bpf" not in names and "thesis-fig9-4-bpf" in [
         p.stem for p in mod.studies(set())]
+
+
+def test_bpf_open_settings_sweep_changes_only_its_two_settings(tmp_path):
+    """benchmarks/bernard_bpf_open.py: each derived study is the BPF study with only 𝒢 and the
+    resampling level changed — same name stem, seeds, cells and tasks, the thesis variant kept
+    (the per-filter table must not switch the runs to the robust filter)."""
+    import importlib.util
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    path = root / "benchmarks" / "bernard_bpf_open.py"
+    if not path.is_file():
+        pytest.skip("benchmarks/ not beside the tests (installed package)")
+    spec = importlib.util.spec_from_file_location("bernard_bpf_open", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    base_file = STUDIES / "thesis-bpf-leo.toml"
+    f = tmp_path / "sweep.toml"
+    f.write_text(mod.variant_text(base_file, 0.05, 1.0))
+    base, sw = load_study(base_file), load_study(f)
+    assert sw.name == "thesis-bpf-leo-G0.05-ess1"
+    assert sw.options["variant"] == "thesis" == base.options["variant"]
+    assert dict(sw.options["filters"]) == {"bpf": (("ess_threshold", 1.0), ("roughening", 0.05))}
+    assert {k: v for k, v in sw.options.items() if k != "filters"} == base.options
+    t0, t1 = list(base.tasks(2)), list(sw.tasks(2))
+    assert [(t.cell, t.run, t.sim_seed, t.filter_seed) for t in t0] == \
+        [(t.cell, t.run, t.sim_seed, t.filter_seed) for t in t1]
+    assert mod.main(["--roughening", "-1", "-o", str(tmp_path / "o")]) == 2
