@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from study_sweep import derived_text, run_derived  # noqa: E402
+
 DEFAULT = ROOT / "pipelines" / "studies" / "thesis-bpf-leo.toml"
 #: the reference N_eff level (BPF_KEYWORDS' ess_threshold)
 ESS_REF = 0.5
@@ -40,14 +41,7 @@ ESS_REF = 0.5
 def variant_text(base: Path, roughening: float, ess: float) -> str:
     """The study TOML text of ``base`` with a ``[filters.bpf]`` table setting ``roughening``
     and ``ess_threshold``, a new study name, and the relative scenario path made absolute."""
-    txt = base.read_text(encoding="utf-8")
-
-    def absolute(m):
-        return f'{m.group(1)} = "{(base.parent / m.group(2)).resolve().as_posix()}"'
-
-    txt = re.sub(r'^(thesis_table|scenario) = "([^"]+)"', absolute, txt, flags=re.M)
-    txt = re.sub(r'^name = "[^"]+"', f'name = "{base.stem}-G{roughening:g}-ess{ess:g}"', txt,
-                 count=1, flags=re.M)
+    txt = derived_text(base, f"{base.stem}-G{roughening:g}-ess{ess:g}")
     if "[filters" in txt:
         raise SystemExit(f"{base}: expected no [filters.*] table (this sweep writes one)")
     return (txt.rstrip() + f"\n\n[filters.bpf]\nroughening = {roughening!r}\n"
@@ -85,15 +79,7 @@ def main(argv=None) -> int:
     rows = []
     for g, ess in settings:
         out = a.output / f"{a.study.stem}-G{g:g}-ess{ess:g}"
-        with tempfile.TemporaryDirectory() as td:
-            toml = Path(td) / f"{out.name}.toml"
-            toml.write_text(variant_text(a.study, g, ess), encoding="utf-8")
-            cmd = [sys.executable, "-m", "lightcurve", "compare", str(toml), "-o", str(out),
-                   "--workers", str(a.workers), "-q"]
-            if a.runs:
-                cmd += ["--runs", str(a.runs)]
-            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-        s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+        s = run_derived(variant_text(a.study, g, ess), out, workers=a.workers, runs=a.runs)
         cells = [{"sigma_theta_deg": c["sigma_theta_deg"],
                   "sigma_omega_deg_s": c["sigma_omega_deg_s"], "runs": c["runs"],
                   "below_5deg": c["below_5deg"], "max_outside_3sigma": max(c["outside_3sigma"]),

@@ -22,30 +22,22 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from lightcurve.studies.agreement import table_key  # noqa: E402
 from lightcurve.studies.metrics import COLORS  # noqa: E402
+from study_sweep import derived_text, run_derived  # noqa: E402
 
 
 def variant_text(base: Path, alpha: float) -> str:
     """The study TOML text of ``base`` with the UKF cells only, ``alpha`` in [options] and the
     relative paths (published table, scenario template) made absolute."""
-    txt = base.read_text(encoding="utf-8")
-    stem = base.stem
-
-    def absolute(m):
-        return f'{m.group(1)} = "{(base.parent / m.group(2)).resolve().as_posix()}"'
-
-    txt = re.sub(r'^(thesis_table|scenario) = "([^"]+)"', absolute, txt, flags=re.M)
-    txt = re.sub(r'^name = "[^"]+"', f'name = "{stem}-alpha-{alpha:g}"', txt, count=1,
-                 flags=re.M)
+    txt = derived_text(base, f"{base.stem}-alpha-{alpha:g}")
     txt, n = re.subn(r'^filter = \[[^\]]*\]', 'filter = ["ukf"]', txt, count=1, flags=re.M)
     if n != 1 or "[options]" not in txt or re.search(r"^alpha\s*=", txt, flags=re.M):
         raise SystemExit(f"{base}: expected a [grid] filter list, an [options] table and no "
@@ -70,15 +62,7 @@ def main(argv=None) -> int:
     rows, ref = [], None
     for alpha in a.alpha:
         out = a.output / f"{a.study.stem}-alpha-{alpha:g}"
-        with tempfile.TemporaryDirectory() as td:
-            toml = Path(td) / f"{a.study.stem}-alpha-{alpha:g}.toml"
-            toml.write_text(variant_text(a.study, alpha), encoding="utf-8")
-            cmd = [sys.executable, "-m", "lightcurve", "compare", str(toml), "-o", str(out),
-                   "--workers", str(a.workers), "-q"]
-            if a.runs:
-                cmd += ["--runs", str(a.runs)]
-            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-        s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+        s = run_derived(variant_text(a.study, alpha), out, workers=a.workers, runs=a.runs)
         cells = {table_key(c): c for c in s["cells"]
                  if c.get("thesis_color") in COLORS}
         agr = s["agreement"]
