@@ -27,6 +27,21 @@ from lightcurve.studies.metrics import (COLORS, color_probability, traffic_light
 from lightcurve.studies.study import load_study
 
 STUDIES = data_dir("pipelines") / "studies"
+
+
+def _benchmark(name):
+    """The module ``benchmarks/<name>.py`` of the source tree (skip when the tests run from an
+    installed package without it)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
+    if not path.is_file():
+        pytest.skip("benchmarks/ not beside the tests (installed package)")
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 TABLES = STUDIES / "tables"
 
 
@@ -378,15 +393,7 @@ def test_order_inversions_rule():
 def test_alpha_sweep_study_is_the_base_ukf_cells_with_alpha(tmp_path):
     """benchmarks/bernard_ukf_alpha.py: each α's study is the base study's UKF cells, seeds and
     options with ``alpha`` added, and its table and scenarios are the base's files."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bernard_ukf_alpha.py"
-    if not path.is_file():
-        pytest.skip("benchmarks/ not beside the tests (installed package)")
-    spec = importlib.util.spec_from_file_location("bernard_ukf_alpha", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _benchmark("bernard_ukf_alpha")
     base_path = STUDIES / "thesis-fig-b1-meo-cubesat.toml"
     base = load_study(base_path)
     f = tmp_path / "sweep.toml"
@@ -406,18 +413,13 @@ def test_alpha_sweep_study_is_the_base_ukf_cells_with_alpha(tmp_path):
 def test_bernard_regeneration_reruns_every_study_the_document_read():
     """benchmarks/bernard_reproduction.py: its study list holds every study output that
     docs/reproduction.md's Bernard section names as read, and every ablation file."""
-    import importlib.util
     import re
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[2]
-    path = root / "benchmarks" / "bernard_reproduction.py"
-    doc = root / "docs" / "reproduction.md"
-    if not (path.is_file() and doc.is_file()):
-        pytest.skip("benchmarks/ and docs/ not beside the tests (installed package)")
-    spec = importlib.util.spec_from_file_location("bernard_reproduction", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    doc = Path(__file__).resolve().parents[2] / "docs" / "reproduction.md"
+    if not doc.is_file():
+        pytest.skip("docs/ not beside the tests (installed package)")
+    mod = _benchmark("bernard_reproduction")
     names = [p.stem for p in mod.studies({"thesis-fig9-4-bpf"})]
     assert len(names) == len(set(names))
     line = next(x for x in doc.read_text(encoding="utf-8").splitlines()
@@ -434,16 +436,7 @@ def test_bpf_open_settings_sweep_changes_only_its_two_settings(tmp_path):
     """benchmarks/bernard_bpf_open.py: each derived study is the BPF study with only 𝒢 and the
     resampling level changed — same name stem, seeds, cells and tasks, the thesis variant kept
     (the per-filter table must not switch the runs to the robust filter)."""
-    import importlib.util
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[2]
-    path = root / "benchmarks" / "bernard_bpf_open.py"
-    if not path.is_file():
-        pytest.skip("benchmarks/ not beside the tests (installed package)")
-    spec = importlib.util.spec_from_file_location("bernard_bpf_open", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _benchmark("bernard_bpf_open")
     base_file = STUDIES / "thesis-bpf-leo.toml"
     f = tmp_path / "sweep.toml"
     f.write_text(mod.variant_text(base_file, 0.05, 1.0))
