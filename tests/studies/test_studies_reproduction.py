@@ -228,3 +228,28 @@ def test_chapter10_rows_per_variant_against_perfect_knowledge(tmp_path, capsys):
 def _dump(path, obj):
     path.write_text(json.dumps(obj))
     return path
+
+
+def test_second_observatory_claim_reads_both_slow_cases(tmp_path):
+    # §9.4.4: a second site "did greatly improve the attitude estimates of the nadir-pointing
+    # and inertially-fixed spacecraft" and not the fast one; ratio = two sites / one site of
+    # the UKF's median final RSS, significant below 0.7
+    f94 = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.30),
+           _cell("ukf", "controlled", 2, 3.0, 0.02, 1.0, "green", "green", 0.30)]
+    nadir = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "red", None, 4.0, runs=100),
+             _cell("ukf", "controlled", 2, 3.0, 0.02, 1.0, "red", None, 2.0, runs=100)]
+
+    def row(inert_two_site_rss):
+        inert = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "red", None, 5.0, runs=100),
+                 _cell("ukf", "controlled", 2, 3.0, 0.02, 1.0, "red", None, inert_two_site_rss,
+                       runs=100)]
+        d = tmp_path / str(inert_two_site_rss)
+        d.mkdir()
+        md = bernard_section([_write(d, "thesis-fig9-4", f94),
+                              _write(d, "thesis-claims-leo-nadir", nadir),
+                              _write(d, "thesis-claims-leo-inertial", inert)])
+        return next(ln for ln in md.splitlines() if ln.startswith("| a second observatory"))
+
+    assert row(3.0).endswith("| median RSS two sites / one site: fast 1.00, nadir 0.50, "
+                             "inertial 0.60 | agrees |")
+    assert row(4.0).endswith("nadir 0.50, inertial 0.80 | disagrees |")
