@@ -159,48 +159,56 @@ class BPFConfig(ConfigBase):
 
     def __post_init__(self):
         if self.variant not in VARIANTS:
-            raise ValueError(f"variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}")
+            raise InputError(f"variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}",
+                             field="variant")
         for k, v in _VARIANT_DEFAULTS[self.variant].items():
             if getattr(self, k) is None:
                 object.__setattr__(self, k, v)
         n = self.particles
         if isinstance(n, bool) or int(n) != n or n < 2:
-            raise ValueError(f"particles must be an integer >= 2, got {n}")
+            raise InputError(f"particles must be an integer >= 2, got {n}", field="particles")
         object.__setattr__(self, "particles", int(n))
         g = float(self.roughening)
         if not (g >= 0 and np.isfinite(g)):
-            raise ValueError(f"roughening must be finite and >= 0, got {self.roughening}")
+            raise InputError(f"roughening must be finite and >= 0, got {self.roughening}",
+                             field="roughening")
         if self.resampling not in RESAMPLERS:
-            raise ValueError(f"resampling must be one of {', '.join(RESAMPLERS)}, "
-                             f"got {self.resampling!r}")
+            raise InputError(f"resampling must be one of {', '.join(RESAMPLERS)}, "
+                             f"got {self.resampling!r}", field="resampling")
         if not 0.0 <= float(self.ess_threshold) <= 1.0:
-            raise ValueError(f"ess_threshold must lie in [0, 1], got {self.ess_threshold}")
+            raise InputError(f"ess_threshold must lie in [0, 1], got {self.ess_threshold}",
+                             field="ess_threshold")
         if int(self.max_stages) < 1:
-            raise ValueError(f"max_stages must be >= 1, got {self.max_stages}")
+            raise InputError(f"max_stages must be >= 1, got {self.max_stages}", field="max_stages")
         if self.temper_solver not in TEMPER_SOLVERS:
-            raise ValueError(f"temper_solver must be one of {', '.join(TEMPER_SOLVERS)}, "
-                             f"got {self.temper_solver!r}")
+            raise InputError(f"temper_solver must be one of {', '.join(TEMPER_SOLVERS)}, "
+                             f"got {self.temper_solver!r}", field="temper_solver")
         if self.rejuvenation not in REJUVENATIONS:
-            raise ValueError(f"rejuvenation must be one of {', '.join(map(repr, REJUVENATIONS))}, "
-                             f"got {self.rejuvenation!r}")
+            raise InputError(f"rejuvenation must be one of {', '.join(map(repr, REJUVENATIONS))}, "
+                             f"got {self.rejuvenation!r}", field="rejuvenation")
         h = self.kernel_bandwidth
         if h is not None and not 0.0 <= float(h) < 1.0:
-            raise ValueError(f"kernel_bandwidth must lie in [0, 1), got {h}")
+            raise InputError(f"kernel_bandwidth must lie in [0, 1), got {h}",
+                             field="kernel_bandwidth")
         if not float(self.joint_max_spread_deg) > 0.0:
-            raise ValueError(f"joint_max_spread_deg must be > 0, got {self.joint_max_spread_deg}")
+            raise InputError(f"joint_max_spread_deg must be > 0, got {self.joint_max_spread_deg}",
+                             field="joint_max_spread_deg")
         if not 0.0 < float(self.param_discount) <= 1.0:
-            raise ValueError(f"param_discount must lie in (0, 1], got {self.param_discount}")
+            raise InputError(f"param_discount must lie in (0, 1], got {self.param_discount}",
+                             field="param_discount")
         if self.mcmc_moves is not None and int(self.mcmc_moves) < 0:
-            raise ValueError(f"mcmc_moves must be >= 0, got {self.mcmc_moves}")
+            raise InputError(f"mcmc_moves must be >= 0, got {self.mcmc_moves}", field="mcmc_moves")
         if self.reference not in ("refined", "heaviest"):
-            raise ValueError(f"reference must be 'refined' or 'heaviest', got {self.reference!r}")
+            raise InputError(f"reference must be 'refined' or 'heaviest', got {self.reference!r}",
+                             field="reference")
         if self.rng not in RNGS:
-            raise ValueError(f"rng must be one of {', '.join(RNGS)}, got {self.rng!r}")
+            raise InputError(f"rng must be one of {', '.join(RNGS)}, got {self.rng!r}",
+                             field="rng")
         object.__setattr__(self, "keep_clouds", tuple(int(k) for k in self.keep_clouds))
         if int(self.cloud_size) < 1:
-            raise ValueError(f"cloud_size must be >= 1, got {self.cloud_size}")
+            raise InputError(f"cloud_size must be >= 1, got {self.cloud_size}", field="cloud_size")
         if self.device not in ("cpu", "gpu"):
-            raise ValueError(f"device must be 'cpu' or 'gpu', got {self.device!r}")
+            raise InputError(f"device must be 'cpu' or 'gpu', got {self.device!r}", field="device")
 
     @classmethod
     def thesis(cls, **kw) -> "BPFConfig":

@@ -86,10 +86,8 @@ class ConfigBase:
                 raise
             raise InputError(exc.bare_message, file=file, field=pre + str(exc.field),
                              value=exc.value, allowed=exc.allowed) from None
-        except (ValueError, TypeError) as exc:   # a class validating with "<field> must …"
-            key = str(exc).split(" ", 1)[0]
-            raise InputError(str(exc), file=file,
-                             field=pre + key if key in names else (table or None)) from None
+        except (ValueError, TypeError) as exc:   # a value of the wrong type (float("abc"), …)
+            raise InputError(str(exc), file=file, field=table or None) from None
 
     def as_options(self) -> dict:
         """The fields as keyword arguments of :func:`lightcurve.filters.invert`."""
