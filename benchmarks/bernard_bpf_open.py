@@ -17,7 +17,7 @@ text leaves open; it is not a configuration of the thesis cases.
     python benchmarks/bernard_bpf_open.py [STUDY] --roughening 0.2 0.05 0.5 1 \\
         --ess-threshold 1.0 -o OUT [--workers 2] [--runs 20]
 
-The first roughening value with the reference ESS level (0.5) is the reference row. Each
+The first roughening value with the filter's own ESS level (0.5) is the reference row. Each
 setting's output folder is ``OUT/<study>-G<𝒢>-ess<level>``; rerunning resumes the stored runs.
 """
 
@@ -29,13 +29,15 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from lightcurve.filters.bpf import BPFConfig  # noqa: E402
 from study_sweep import derived_text, run_derived  # noqa: E402
 
 DEFAULT = ROOT / "pipelines" / "studies" / "thesis-bpf-leo.toml"
-#: the reference N_eff level (BPF_KEYWORDS' ess_threshold)
-ESS_REF = 0.5
+#: the reference settings: the particle filter's own defaults (𝒢 and the N_eff level)
+G_REF, ESS_REF = BPFConfig.roughening, BPFConfig.ess_threshold
 
 
 def variant_text(base: Path, roughening: float, ess: float) -> str:
@@ -52,9 +54,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("study", type=Path, nargs="?", default=DEFAULT,
                     help="a BPF study TOML (default: pipelines/studies/thesis-bpf-leo.toml)")
-    ap.add_argument("--roughening", type=float, nargs="+", default=[0.2],
+    ap.add_argument("--roughening", type=float, nargs="+", default=[G_REF],
                     help="𝒢 values (≥ 0) run with the reference ESS level; the first is the "
-                    "reference (default: 0.2)")
+                    f"reference (default: {G_REF:g}, the filter's)")
     ap.add_argument("--ess-threshold", type=float, nargs="*", default=[],
                     help="N_eff/N levels in [0, 1] run with the first 𝒢 (1: resample at "
                     "every measurement, Gordon et al.'s bootstrap filter)")
