@@ -17,13 +17,15 @@ def _cmd_reproduction(args) -> int:
                                         write_reproduction)
 
     dirs = list(args.study or [])
-    sections = [bernard_section(dirs, reflection_kf_json=args.reflection_kf),
+    # every named folder must hold a study summary: checked before anything is written
+    sums = load_summaries(dirs, strict=True)
+    sections = [bernard_section(summaries=sums, reflection_kf_json=args.reflection_kf),
                 css_section(list(args.css or []), timing=args.css_timing,
                             tables4=args.css_tables4, sun_models=args.css_sun_models,
                             table44=args.css_table44, faults=list(args.css_faults or []),
                             vmm=args.css_vmm)]
     write_reproduction(args.output, sections, only=args.only)
-    n = len(load_summaries(dirs))
+    n = len(sums)
     n_css = len(args.css or [])
     return report_written(args.output, detail=f" ({n} Bernard and {n_css} CSS study output(s) "
                           "read)")

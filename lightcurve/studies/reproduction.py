@@ -877,22 +877,42 @@ AGREE_FRACTION = 0.85
 SIGNIFICANT = 0.7
 
 
-def load_summaries(dirs) -> dict:
-    """``{study name: summary dict}`` of the study output folders ``dirs`` (missing or
-    unreadable summaries are skipped); each summary gains ``_folder``, the folder it was read
-    from."""
+def load_summaries(dirs, *, strict: bool = False) -> dict:
+    """``{study name: summary dict}`` of the study output folders ``dirs``; each summary gains
+    ``_folder``, the folder it was read from.
+
+    ``strict=False``: a folder without a readable study summary is skipped, and of two folders
+    holding the same study the later one is kept. ``strict=True`` (folders a user named): each
+    of these raises :class:`~lightcurve.errors.InputError` naming the folder's summary.json.
+    """
+    from ..errors import InputError
     from ..io.safe_open import read_json
 
     out = {}
     for d in dirs:
         p = Path(d) / "summary.json"
-        try:  # a regular file of bounded size (lightcurve.io.safe_open); unreadable: skipped
+        try:  # a regular file of bounded size (lightcurve.io.safe_open)
             s = read_json(p, what="study summary")
         except ValueError:  # InputError included
+            if strict:
+                if not Path(d).is_dir():
+                    raise InputError("no such study output folder", file=d, field="--study",
+                                     allowed="a folder written by 'lightcurve compare STUDY -o "
+                                     "DIR'") from None
+                raise
             continue
-        if isinstance(s, dict) and "study" in s:
-            s["_folder"] = str(d)   # where its run files are (add_color_spread)
-            out[s["study"]] = s
+        if not (isinstance(s, dict) and "study" in s):
+            if strict:
+                raise InputError("not a study summary (no \"study\" key)", file=p,
+                                 field="study", allowed="the summary.json of 'lightcurve "
+                                 "compare'")
+            continue
+        if strict and s["study"] in out:
+            raise InputError("two folders hold the same study", file=p, field="study",
+                             value=s["study"], allowed="one output folder per study (the "
+                             f"other is {out[s['study']]['_folder']})")
+        s["_folder"] = str(d)   # where its run files are (add_color_spread)
+        out[s["study"]] = s
     return out
 
 
@@ -1328,13 +1348,14 @@ def _read_reflection_kf(path) -> dict:
     return kf
 
 
-def bernard_section(study_dirs=(), reflection_kf_json=None) -> str:
+def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None) -> str:
     """The Bernard (2021) section of docs/reproduction.md (module docstring) as Markdown.
 
-    ``study_dirs``: study output folders; ``reflection_kf_json``: path, or list of paths, of
-    the JSON lines printed by ``benchmarks/reflection_kf.py`` (one per filter variant; or
-    None). A file that is not such an output raises InputError."""
-    sums = load_summaries(study_dirs)
+    ``study_dirs``: study output folders (read with :func:`load_summaries`), or ``summaries``:
+    their summaries already read; ``reflection_kf_json``: path, or list of paths, of the JSON
+    lines printed by ``benchmarks/reflection_kf.py`` (one per filter variant; or None). A file
+    that is not such an output raises InputError."""
+    sums = load_summaries(study_dirs) if summaries is None else summaries
     for name, _, _ in _TABLES:   # the published tables' colour spread (run files if needed)
         if name in sums:
             add_color_spread(sums[name])

@@ -98,6 +98,37 @@ def test_module_entry_point_is_the_cli_and_takes_both_spellings(tmp_path, capsys
     assert not (tmp_path / "none.md").exists()
 
 
+def test_study_folders_named_by_the_user_must_hold_one_study_each(tmp_path, capsys):
+    # a --study folder without a study summary, a summary of something else, or a second
+    # folder of the same study: one line naming the file, exit 2, the existing document kept
+    import json
+
+    a = _write(tmp_path, "thesis-fig9-4",
+               [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3, runs=10)])
+    out = tmp_path / "r.md"
+    assert main(["reproduction", "--study", str(a), "-o", str(out)]) == 0
+    capsys.readouterr()
+    before = out.read_bytes()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "summary.json").write_text(json.dumps({"cells": []}))
+    twin = tmp_path / "twin"
+    twin.mkdir()
+    (twin / "summary.json").write_text((a / "summary.json").read_text())
+    for bad, words in ((tmp_path / "missing", "no such study output folder"),
+                       (empty, "summary.json"), (other, "not a study summary"),
+                       (twin, "two folders hold the same study")):
+        assert main(["reproduction", "--study", str(a), str(bad), "-o", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0] and str(bad) in err[0], err
+        assert out.read_bytes() == before
+    # the library call used by benchmarks keeps skipping what it cannot read
+    from lightcurve.studies.reproduction import load_summaries
+    assert list(load_summaries([a, empty, other, tmp_path / "missing"])) == ["thesis-fig9-4"]
+
+
 def test_monte_carlo_spread_block_and_ablations_within_noise(tmp_path):
     # cells carrying color_probability: the spread table (self-agreement Σ Σ P², expected
     # agreement Σ P(thesis), cells within noise) and, per disagreeing cell, P(thesis) and the
