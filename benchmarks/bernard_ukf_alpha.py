@@ -1,9 +1,9 @@
 """The thesis-variant UKF of one Bernard table at several scaled-unscented spreads α.
 
 Bernard §6.2.2 gives only the range of α ("a term between 0 and 1", eq. 6.21–6.23 with β = 2,
-κ ≥ 0); the thesis studies use α = 1 (β = 2, κ = 0). This sweep runs the UKF cells of one
-thesis study (``pipelines/studies/thesis-*.toml``: same seeds, cells, truth and options; only
-``filter = ["ukf"]`` and ``alpha`` differ) once per α with ``lightcurve compare`` and prints,
+κ ≥ 0); the thesis studies use the thesis variant's α = 0.25 (β = 2, κ = 0). This sweep runs
+the UKF cells of one thesis study (``pipelines/studies/thesis-*.toml``: same seeds, cells,
+truth and options; only ``filter = ["ukf"]`` and ``alpha`` differ) once per α with ``lightcurve compare`` and prints,
 per α: the agreement with the published table, the colour counts, the sum over cells of the
 largest outside-3σ count, the self-agreement of the Monte Carlo spread
 (:mod:`lightcurve.studies.agreement`), and the cells that change colour against the first α

@@ -69,9 +69,10 @@ def configs_from_args(args):
     if getattr(args, "variant", None) is None:
         opts.pop("variant", None)   # the file's scenario [filter] variant, else robust (invert)
     if cls is not None:
+        unset = [k for k, v in opts.items() if v is None]   # the variant's defaults (invert)
         opts = cls(**opts).as_options()    # validated here (InputError → exit 2)
-        if getattr(args, "variant", None) is None:
-            opts.pop("variant", None)
+        for k in unset:
+            opts.pop(k, None)
     return problem, opts
 
 
@@ -183,9 +184,10 @@ def register(sub) -> None:
                    "wander by 1 rad/s in 1 s; default 0)")
     add_variant(p, default=None)
     add_device(p)
-    p.add_argument("--alpha", type=number(1e-4, 1.0), default=1.0,
+    p.add_argument("--alpha", type=number(1e-4, 1.0), default=None,
                    help="UKF alpha in [1e-4, 1] (Bernard sec. 6: between 0 and 1; below 1e-4 "
-                   "the sigma-point weights lose all precision; default 1)")
+                   "the sigma-point weights lose all precision; default: 1 with --variant "
+                   "robust, 0.25 with --variant thesis)")
     p.add_argument("--beta", type=number(0.0, 100.0), default=2.0,
                    help="UKF beta in [0, 100] (Bernard sec. 6: non-negative, 2 for a Gaussian "
                    "prior; default 2)")

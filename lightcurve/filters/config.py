@@ -274,23 +274,35 @@ class MEKFConfig(ConfigBase):
         _choice("variant", self.variant, VARIANTS)
 
 
+#: the scaled-unscented α of each filter variant when none is given. Bernard §6.2.2 gives only
+#: its range (0 < α ≤ 1) and §7.2 (eq. 7.64) no value. Thesis variant: 0.25, the value at which
+#: the thesis-variant UKF leaves the fewest runs outside its own 3σ bounds over the Monte Carlo
+#: of Fig. 9.4 and B.1–B.4 (α = 1, 0.5, 0.25, 10⁻³ tried; docs/measurements.md) — a criterion
+#: that does not read the published colours, one value for every case. Robust variant: 1.
+UKF_DEFAULT_ALPHA = {"robust": 1.0, "thesis": 0.25}
+
+
 @dataclass(frozen=True)
 class UKFConfig(ConfigBase):
     """USQUE/GRP unscented filter settings (:mod:`lightcurve.filters.ukf`; Bernard eq.
     7.51–7.87): the scaled-unscented parameters α > 0, β, κ (λ = α²(n+κ) − n) and ``variant``.
+    ``alpha`` left None takes the variant's default (:data:`UKF_DEFAULT_ALPHA`) on
+    construction; ``replace(variant=...)`` keeps an α already set.
     """
 
     method: ClassVar[str] = "ukf"
-    alpha: float = 1.0
+    alpha: float | None = None
     beta: float = 2.0
     kappa: float = 0.0
     variant: str = "robust"
 
     def __post_init__(self):
+        _choice("variant", self.variant, VARIANTS)
+        if self.alpha is None:
+            object.__setattr__(self, "alpha", UKF_DEFAULT_ALPHA[self.variant])
         object.__setattr__(self, "alpha", _num("alpha", self.alpha, lo=0.0, lo_open=True))
         object.__setattr__(self, "beta", _num("beta", self.beta))
         object.__setattr__(self, "kappa", _num("kappa", self.kappa))
-        _choice("variant", self.variant, VARIANTS)
 
 
 _FILTER_CONFIGS: dict = {"mekf": MEKFConfig, "ukf": UKFConfig}

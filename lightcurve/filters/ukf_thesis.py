@@ -26,8 +26,9 @@ enters the update only through the predicted magnitudes — the same treatment a
 eq. 7.27 (``R + H Q_ζ Hᵀ``); with the perturbed points the update would subtract from P a
 variance (Q_ζ) it never contained.
 
-α, β, κ: §7.2 defines λ = α²(L + κ) − L (eq. 7.64) but gives no values; chosen once: α = 1,
-β = 2, κ = 0 (the package default), so λ = 0 and every non-central point weighs 1/(2L).
+α, β, κ: §7.2 defines λ = α²(L + κ) − L (eq. 7.64) but gives no values, §6.2.2 only the
+ranges (0 < α ≤ 1, β = 2 for a Gaussian, κ ≥ 0); chosen once for every case: α = 0.25, β = 2,
+κ = 0 (:data:`lightcurve.filters.config.UKF_DEFAULT_ALPHA` says how α was chosen).
 
 Extra states (reflection biases, Model 3 parameters): their columns propagate with their
 linear dynamics (``Φ_b``, identity) and their process noise is additive (``+ Q_b``, ``+ Q_z``):
@@ -68,11 +69,12 @@ def run_ukf_thesis(problem: FilterProblem, config=None, *, alpha=None, beta=None
                    bias=None, facets=None) -> Estimate:
     """Run Bernard's §7.2 UKF over every epoch (module docstring) → :class:`Estimate`.
 
-    ``config``: a :class:`~lightcurve.filters.config.UKFConfig` (its α, β, κ; default 1, 2, 0);
-    the keywords ``alpha``, ``beta``, ``kappa`` override it."""
+    ``config``: a :class:`~lightcurve.filters.config.UKFConfig` (its α, β, κ; default the
+    thesis variant's 0.25, 2, 0); the keywords ``alpha``, ``beta``, ``kappa`` override it."""
     from .config import UKFConfig
 
-    cfg = UKFConfig.resolve(config, alpha=alpha, beta=beta, kappa=kappa)
+    cfg = UKFConfig.resolve(UKFConfig(variant="thesis") if config is None else config,
+                            alpha=alpha, beta=beta, kappa=kappa)
     problem.meta.setdefault("variant", "thesis")
     L = StateLayout(not problem.attitude_known, bias, facets)
     if L.nx == 0:

@@ -35,7 +35,7 @@ grid of settings; every combination of the grid values is one *cell*, and each c
                                           # for truth and filters: "physical" (default) or
                                           # "thesis" (eq. 5.8 as printed)
     gate = "off"                          # innovation gate (default: the variant's)
-    alpha = 1.0                           # UKF α, β, κ (default 1, 2, 0)
+    alpha = 0.25                          # UKF α, β, κ (default: α 1 robust, 0.25 thesis; 2, 0)
     shared_init = true                    # one initial estimate for all filters of a run
                                           # (default: true with variant = "thesis")
     truth_acs_mode = "random_walk"        # controlled TRUTH model (default: the scenario's)

@@ -76,6 +76,37 @@ def test_cli_options_build_the_same_configs():
     problem, opts = cli_invert.configs_from_args(args)
     assert problem.seed == 3 and problem.sigma_theta_deg == 4.0
     assert UKFConfig(**opts) == UKFConfig(alpha=0.7, variant="thesis")
+    # without --alpha the variant chooses: thesis 0.25, robust 1, and a file's own variant
+    # (no --variant) is not overridden by a robust default
+    for variant, alpha in (("thesis", 0.25), ("robust", 1.0), (None, None)):
+        argv = ["invert", "x.h5", "-o", "out", "--method", "ukf"]
+        args = parser.parse_args(argv + (["--variant", variant] if variant else []))
+        _, opts = cli_invert.configs_from_args(args)
+        assert "alpha" not in opts
+        if variant:
+            assert UKFConfig(**opts).alpha == alpha
+
+
+def test_ukf_alpha_default_follows_the_variant(monkeypatch):
+    # Bernard §6.2.2 leaves α open: the thesis variant's one value is 0.25, the robust one's 1;
+    # an α given is kept whatever the variant; the thesis runner's own default is the thesis's
+    from lightcurve.filters import ukf_thesis
+    from lightcurve.filters.config import UKF_DEFAULT_ALPHA
+
+    assert UKF_DEFAULT_ALPHA == {"robust": 1.0, "thesis": 0.25}
+    assert UKFConfig(variant="thesis").alpha == 0.25 and UKFConfig().alpha == 1.0
+    assert UKFConfig(variant="thesis", alpha=1.0).alpha == 1.0
+    assert UKFConfig.from_mapping({"variant": "thesis"}).alpha == 0.25
+    seen = {}
+    monkeypatch.setattr(ukf_thesis, "_run", lambda p, L, a, b, k, *r: seen.update(a=a, b=b, k=k))
+    monkeypatch.setattr(ukf_thesis, "StateLayout", lambda *a: type("L", (), {"nx": 6})())
+
+    class P:
+        meta, attitude_known = {}, False
+    ukf_thesis.run_ukf_thesis(P())
+    assert seen == {"a": 0.25, "b": 2.0, "k": 0.0}
+    ukf_thesis.run_ukf_thesis(P(), alpha=0.5)
+    assert seen["a"] == 0.5
 
 
 def test_study_toml_filter_tables(tmp_path):

@@ -66,13 +66,15 @@ def rotq(v):
     return np.concatenate([[np.cos(th / 2)], np.sin(th / 2) * v / th])
 
 
-def oracle_ukf(curve, q, w, P, sig_zeta, n_epochs):
-    """Tables 7.3–7.4, controlled model, written out (module docstring)."""
+def oracle_ukf(curve, q, w, P, sig_zeta, n_epochs, alpha):
+    """Tables 7.3–7.4, controlled model, written out (module docstring); κ = 0, β = 2."""
     model = MagnitudeModel(curve.resolve_shape(), curve)
     L = 10
-    wm = np.full(2 * L + 1, 1.0 / (2 * L))
+    lam = alpha ** 2 * L - L                      # eq. 7.64 with κ = 0
+    wm = np.full(2 * L + 1, 1.0 / (2 * (L + lam)))
     wc = wm.copy()
-    wm[0], wc[0] = 0.0, 2.0                       # λ = 0, β = 2
+    wm[0] = lam / (L + lam)
+    wc[0] = wm[0] + 1.0 - alpha ** 2 + 2.0        # β = 2
     out = []
     for k in range(n_epochs):
         dt = 0.0 if k == 0 else curve.t[k] - curve.t[k - 1]
@@ -81,7 +83,7 @@ def oracle_ukf(curve, q, w, P, sig_zeta, n_epochs):
         Pa[:6, :6] = P
         Pa[6:9, 6:9] = sig_zeta ** 2 * np.eye(3)
         Pa[9, 9] = R
-        S = np.linalg.cholesky(L * Pa)
+        S = np.linalg.cholesky((L + lam) * Pa)
         chi = np.vstack([np.zeros(L), S.T, -S.T])
         Qp, Wp = [], []
         for c in chi:
@@ -109,13 +111,17 @@ def oracle_ukf(curve, q, w, P, sig_zeta, n_epochs):
     return out
 
 
-def test_thesis_ukf_equals_the_written_out_tables_7_3_and_7_4():
+@pytest.mark.parametrize("alpha", [None, 1.0])
+def test_thesis_ukf_equals_the_written_out_tables_7_3_and_7_4(alpha):
+    # None: the thesis variant's own α (0.25); 1.0: λ = 0, every non-central point 1/(2L)
     c = make_curve(n=6)
-    e = invert(c, "ukf", variant="thesis", seed=4, sigma_theta_deg=3.0)
+    e = invert(c, "ukf", variant="thesis", seed=4, sigma_theta_deg=3.0,
+               **({} if alpha is None else {"alpha": alpha}))
     assert e.meta["variant"] == "thesis" and e.meta["gate"]["mode"] == "off"
     p = build_problem(c, seed=4, sigma_theta_deg=3.0)
     assert p.dynamics.acs_mode == "jitter"         # the file's scenario
-    ref = oracle_ukf(c, p.q0, p.omega0, p.P0, np.radians(0.1), 3)
+    ref = oracle_ukf(c, p.q0, p.omega0, p.P0, np.radians(0.1), 3,
+                     0.25 if alpha is None else alpha)
     for k, (q, w, P) in enumerate(ref):
         s = np.sign(q @ e.q[k])
         np.testing.assert_allclose(s * e.q[k], q, atol=1e-10)
