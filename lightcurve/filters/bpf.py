@@ -137,6 +137,7 @@ class BPFConfig(ConfigBase):
     """
 
     method: ClassVar[str] = "bpf"
+    VARIANT_DEFAULTS: ClassVar[dict] = _VARIANT_DEFAULTS
     particles: int = 10_000
     variant: str = "robust"
     resampling: str | None = None

@@ -93,8 +93,19 @@ class ConfigBase:
         """The fields as keyword arguments of :func:`lightcurve.filters.invert`."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
+    #: ``{variant: {field: default}}``: the fields that, left None, take their variant's default
+    #: on construction (empty: no such field)
+    VARIANT_DEFAULTS: ClassVar[dict] = {}
+
     def replace(self, **changes):
-        """A copy with some fields changed (validated again)."""
+        """A copy with some fields changed (validated again). When ``variant`` changes, a field
+        of :attr:`VARIANT_DEFAULTS` that holds the old variant's default and is not changed
+        too takes the new variant's default (a value set away from the old default is kept)."""
+        old = getattr(self, "variant", None)
+        if self.VARIANT_DEFAULTS and changes.get("variant", old) != old:
+            for k, v in self.VARIANT_DEFAULTS.get(old, {}).items():
+                if k not in changes and getattr(self, k) == v:
+                    changes[k] = None
         return dataclasses.replace(self, **changes)
 
     @classmethod

@@ -65,6 +65,28 @@ def test_object_and_keyword_calls_give_the_same_estimate(curve, method):
     np.testing.assert_array_equal(p1.q0, p2.q0)
 
 
+def test_changing_the_variant_moves_the_variant_defaults(curve, monkeypatch):
+    # a configuration built for one variant and switched with replace(variant=...) (or with
+    # invert(..., config, variant=...)) runs the other variant's algorithm, not a mix: the
+    # fields at the old variant's default take the new one's, a departure is kept
+    import importlib
+
+    from lightcurve.filters.bpf import BPFConfig
+
+    inv = importlib.import_module("lightcurve.filters.invert")   # the package exports invert()
+
+    assert BPFConfig().replace(variant="thesis") == BPFConfig.thesis()
+    assert BPFConfig.thesis(particles=50).replace(variant="robust") == BPFConfig.robust(particles=50)
+    assert BPFConfig.robust(rejuvenation="joint").replace(variant="thesis").rejuvenation == "joint"
+    assert BPFConfig.robust().replace(particles=50).resampling == "systematic"
+    assert MEKFConfig(error="small_angle").replace(variant="thesis").error == "small_angle"
+    seen = {}
+    monkeypatch.setitem(inv._RUNNERS, "bpf", lambda fp, cfg, **kw: seen.setdefault("cfg", cfg))
+    monkeypatch.setattr(inv, "attach_measurements", lambda *a: None)
+    invert(curve, BPFConfig(particles=50), variant="thesis", seed=1)
+    assert seen["cfg"] == BPFConfig.thesis(particles=50)
+
+
 def test_cli_options_build_the_same_configs():
     from lightcurve.cli import invert as cli_invert
 
