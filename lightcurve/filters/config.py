@@ -298,10 +298,12 @@ class UKFConfig(ConfigBase):
     """USQUE/GRP unscented filter settings (:mod:`lightcurve.filters.ukf`; Bernard eq.
     7.51–7.87): the scaled-unscented parameters α > 0, β, κ (λ = α²(n+κ) − n) and ``variant``.
     ``alpha`` left None takes the variant's default (:data:`UKF_DEFAULT_ALPHA`) on
-    construction; ``replace(variant=...)`` keeps an α already set.
+    construction; ``replace(variant=...)`` moves an α at the old variant's default to the new
+    one's and keeps any other.
     """
 
     method: ClassVar[str] = "ukf"
+    VARIANT_DEFAULTS: ClassVar[dict] = {v: {"alpha": a} for v, a in UKF_DEFAULT_ALPHA.items()}
     alpha: float | None = None
     beta: float = 2.0
     kappa: float = 0.0

@@ -118,6 +118,8 @@ def test_ukf_alpha_default_follows_the_variant(monkeypatch):
     assert UKF_DEFAULT_ALPHA == {"robust": 1.0, "thesis": 0.25}
     assert UKFConfig(variant="thesis").alpha == 0.25 and UKFConfig().alpha == 1.0
     assert UKFConfig(variant="thesis", alpha=1.0).alpha == 1.0
+    assert UKFConfig().replace(variant="thesis").alpha == 0.25
+    assert UKFConfig(alpha=0.5).replace(variant="thesis").alpha == 0.5
     assert UKFConfig.from_mapping({"variant": "thesis"}).alpha == 0.25
     seen = {}
     monkeypatch.setattr(ukf_thesis, "_run", lambda p, L, a, b, k, *r: seen.update(a=a, b=b, k=k))
