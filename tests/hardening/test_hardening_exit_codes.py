@@ -373,6 +373,7 @@ def test_dask_local_success_is_silent_on_stderr(tmp_path):
     import sys
     from pathlib import Path
 
+    pytest.importorskip("distributed", reason="the 'distributed' extra is not installed")
     p = tmp_path / "a.h5"
     small_curve().write(p)
     root = Path(__file__).resolve().parents[2]

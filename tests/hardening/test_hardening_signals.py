@@ -125,6 +125,8 @@ def _read_to_eof(fd, timeout_s):
     (signal.SIGKILL, ("--dask-local", "2")),  # the LocalCluster's worker processes
 ], ids=["SIGTERM-pool", "SIGKILL-pool", "SIGKILL-dask-local"])
 def test_killed_compare_leaves_no_process_and_closes_the_pipe(sig, executor, tmp_path):
+    if "--dask-local" in executor:
+        pytest.importorskip("distributed", reason="the 'distributed' extra is not installed")
     (tmp_path / "tiny-controlled-1site.toml").write_text(SCENARIO)
     (tmp_path / "study.toml").write_text(STUDY)
     out = tmp_path / "out"
