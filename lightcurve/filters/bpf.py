@@ -162,9 +162,7 @@ class BPFConfig(ConfigBase):
         if self.variant not in VARIANTS:
             raise InputError(f"variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}",
                              field="variant")
-        for k, v in _VARIANT_DEFAULTS[self.variant].items():
-            if getattr(self, k) is None:
-                object.__setattr__(self, k, v)
+        self._fill_variant_defaults()
         n = self.particles
         if isinstance(n, bool) or int(n) != n or n < 2:
             raise InputError(f"particles must be an integer >= 2, got {n}", field="particles")

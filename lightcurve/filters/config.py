@@ -97,6 +97,13 @@ class ConfigBase:
     #: on construction (empty: no such field)
     VARIANT_DEFAULTS: ClassVar[dict] = {}
 
+    def _fill_variant_defaults(self):
+        """Set every field of :attr:`VARIANT_DEFAULTS` left None to the default of
+        ``self.variant`` (call from ``__post_init__`` after validating ``variant``)."""
+        for k, v in self.VARIANT_DEFAULTS.get(self.variant, {}).items():
+            if getattr(self, k) is None:
+                object.__setattr__(self, k, v)
+
     def replace(self, **changes):
         """A copy with some fields changed (validated again). When ``variant`` changes, a field
         of :attr:`VARIANT_DEFAULTS` that holds the old variant's default and is not changed
