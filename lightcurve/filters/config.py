@@ -318,8 +318,7 @@ class UKFConfig(ConfigBase):
 
     def __post_init__(self):
         _choice("variant", self.variant, VARIANTS)
-        if self.alpha is None:
-            object.__setattr__(self, "alpha", UKF_DEFAULT_ALPHA[self.variant])
+        self._fill_variant_defaults()
         object.__setattr__(self, "alpha", _num("alpha", self.alpha, lo=0.0, lo_open=True))
         object.__setattr__(self, "beta", _num("beta", self.beta))
         object.__setattr__(self, "kappa", _num("kappa", self.kappa))
