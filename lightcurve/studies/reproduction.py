@@ -44,7 +44,7 @@ import sys
 from pathlib import Path
 
 from ..io.atomic import atomic_write_text
-from .agreement import NOISE_LEVEL, TABLE_KEYS, order_inversions, table_key
+from .agreement import COMPARED, NOISE_LEVEL, TABLE_KEYS, order_inversions, table_key
 
 __all__ = ["css_section", "bernard_section", "load_summaries", "add_color_spread",
            "write_reproduction", "main"]
@@ -1051,6 +1051,15 @@ def _p_cell(d):
     return f"{100 * p:.1f} %" + (" (noise)" if p >= 0.05 else "")
 
 
+def _crosses(ours: str, other: str, thesis: str) -> bool:
+    """True when the colour ``thesis`` lies strictly between ``ours`` and ``other`` in the
+    order green < yellow < red (only a yellow can)."""
+    r = {c: i for i, c in enumerate(COMPARED)}
+    if not {ours, other, thesis} <= set(r):
+        return False
+    return (r[ours] - r[thesis]) * (r[other] - r[thesis]) < 0
+
+
 def _disagreements(sums):
     out = []
     for name, fig, _ in _TABLES:
@@ -1067,6 +1076,9 @@ def _disagreements(sums):
                    "switch each, two where the label joins two — whose colour for the cell is "
                    "the thesis's; *P(thesis)*: probability of the thesis's colour in an "
                    "independent 100-run Monte Carlo of our filter, \"noise\" from 5 %; "
+                   "*crossed by*: ablations that carry the cell past the thesis's colour "
+                   "(ours red, the ablation's green, the thesis's yellow, or the reverse: the "
+                   "switch moves the cell the thesis's way, too far); "
                    "*within the noise of*: ablations with another colour under which the "
                    "thesis's has a probability of at least 5 %; *published out of order*: "
                    "the published colour is better than that of a strictly easier published "
@@ -1074,11 +1086,12 @@ def _disagreements(sums):
         out.append("| filter | dynamics | sites | σθ (°) | σω (°/s) | r (%) | ours | thesis | "
                    "outside 3σ | P(thesis) | flipped by |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|")
+        causes = {"flipped": 0, "crossed": 0, "noise": 0, "none": 0}
         for d in s["agreement"]["disagree"]:
             key = {k: d[k] for k in _KEYS}
             c = _cell(s, **key)
             o = " ".join(map(str, c["outside_3sigma"])) if c else "–"
-            flips, near = [], []
+            flips, crosses, near = [], [], []
             for lab, a in abl.items():
                 ac = _cell(a, **key)
                 if ac is None or not ac.get("runs"):
@@ -1086,14 +1099,22 @@ def _disagreements(sums):
                 if ac["color"] == d["thesis_color"]:
                     flips.append(f"{lab} ({ac['color']}, {max(ac['outside_3sigma'])} max)")
                     continue
+                if _crosses(d["color"], ac["color"], d["thesis_color"]):
+                    crosses.append(f"{lab} ({ac['color']}, {max(ac['outside_3sigma'])} max)")
                 pa = (ac.get("color_probability") or {}).get(d["thesis_color"], 0.0)
                 if pa >= NOISE_LEVEL:
                     near.append(f"{lab} ({ac['color']}, {max(ac['outside_3sigma'])} max; "
                                 f"P(thesis) {100 * pa:.0f} %)")
             why = ", ".join(flips) if flips else ("none of the tested ablations" if abl
                                                   else "no ablation run")
+            if crosses:
+                why += "; crossed by: " + ", ".join(crosses)
             if near:
                 why += "; within the noise of: " + ", ".join(near)
+            p_own = d.get("thesis_color_probability")
+            causes["flipped" if flips else "crossed" if crosses else
+                   "noise" if near or (p_own is not None and p_own >= NOISE_LEVEL)
+                   else "none"] += 1
             easier = inv.get(table_key(d), [])
             if easier:
                 why += "; published out of order: " + ", ".join(
@@ -1102,6 +1123,14 @@ def _disagreements(sums):
                        f"{d['sigma_theta_deg']:g} | {d['sigma_omega_deg_s']:g} | "
                        f"{d['r_percent']:g} | {d['color']} | {d['thesis_color']} | {o} | "
                        f"{_p_cell(d)} | {why} |")
+        out.append("")
+        n_dis = len(s["agreement"]["disagree"])
+        out.append(f"Of the {n_dis} disagreeing cells, a tested switch gives the thesis's colour "
+                   f"in {causes['flipped']}. Of the other {n_dis - causes['flipped']}, a switch "
+                   f"carries {causes['crossed']} past it, {causes['noise']} "
+                   f"{'is' if causes['noise'] == 1 else 'are'} within Monte Carlo noise (of our "
+                   f"filter or of a switch), and {causes['none']} "
+                   f"{'has' if causes['none'] == 1 else 'have'} no measured cause.")
         if abl:
             out.append("")
             out.append("Ablation tables (agreement over the cells each ablation ran): " + "; ".join(

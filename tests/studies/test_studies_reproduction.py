@@ -155,8 +155,8 @@ def test_monte_carlo_spread_block_and_ablations_within_noise(tmp_path):
     assert "| Fig. 9.4 (LEO, fast spin) | 1/3 | 2.2/3 (75 %) |" in md
     assert "| 1.2/3 | 1 of 2 |" in md
     row5 = next(ln for ln in md.splitlines() if ln.startswith("| UKF | controlled | 1 | 5 |"))
-    assert "| 2.0 % | none of the tested ablations; within the noise of: a (green, 0 max; " \
-           "P(thesis) 20 %) |" in row5
+    assert "| 2.0 % | none of the tested ablations; crossed by: a (green, 0 max), b (green, " \
+           "0 max); within the noise of: a (green, 0 max; P(thesis) 20 %) |" in row5
     row10 = next(ln for ln in md.splitlines() if ln.startswith("| UKF | controlled | 1 | 10 |"))
     assert "| 30.0 % (noise) |" in row10
 
@@ -284,3 +284,31 @@ def test_second_observatory_claim_reads_both_slow_cases(tmp_path):
     assert row(3.0).endswith("| median RSS two sites / one site: fast 1.00, nadir 0.50, "
                              "inertial 0.60 | agrees |")
     assert row(4.0).endswith("nadir 0.50, inertial 0.80 | disagrees |")
+
+
+def test_disagreeing_cells_flipped_crossed_or_unexplained(tmp_path):
+    # per disagreeing cell: an ablation with the thesis's colour flips it; one on the far side
+    # of a published yellow (ours red, ablation green) crosses it; the table's closing line
+    # counts the cells by the first of flipped / crossed / within noise / none that applies
+    base = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "red", "green", 0.3),
+            _cell("ukf", "controlled", 1, 5.0, 0.02, 1.0, "red", "yellow", 0.3),
+            _cell("ukf", "controlled", 1, 10.0, 0.02, 1.0, "green", "yellow", 0.3),
+            _cell("ukf", "controlled", 1, 10.0, 0.2, 1.0, "red", "yellow", 0.3),
+            _cell("ukf", "controlled", 2, 3.0, 0.02, 1.0, "green", "green", 0.3)]
+    abl = [_cell("ukf", "controlled", 1, 3.0, 0.02, 1.0, "green", "green", 0.3),
+           _cell("ukf", "controlled", 1, 5.0, 0.02, 1.0, "green", "yellow", 0.3),
+           _cell("ukf", "controlled", 1, 10.0, 0.02, 1.0, "red", "yellow", 0.3),
+           _cell("ukf", "controlled", 1, 10.0, 0.2, 1.0, "red", "yellow", 0.3)]
+    md = bernard_section([_write(tmp_path, "thesis-fig9-4", base),
+                          _write(tmp_path, "thesis-fig9-4-ablation-a", abl)])
+    rows = {tuple(ln.split(" | ")[3:5]): ln for ln in md.splitlines()
+            if ln.startswith("| UKF | controlled | 1 |")}
+    assert rows[("3", "0.02")].endswith("| a (green, 0 max) |")
+    assert rows[("5", "0.02")].endswith(
+        "| none of the tested ablations; crossed by: a (green, 0 max) |")
+    assert rows[("10", "0.02")].endswith(
+        "| none of the tested ablations; crossed by: a (red, 0 max) |")
+    assert rows[("10", "0.2")].endswith("| none of the tested ablations |")
+    assert ("Of the 4 disagreeing cells, a tested switch gives the thesis's colour in 1. Of "
+            "the other 3, a switch carries 2 past it, 0 are within Monte Carlo noise (of our "
+            "filter or of a switch), and 1 has no measured cause.") in md
