@@ -1086,7 +1086,7 @@ def _disagreements(sums):
         out.append("| filter | dynamics | sites | σθ (°) | σω (°/s) | r (%) | ours | thesis | "
                    "outside 3σ | P(thesis) | flipped by |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|")
-        causes = {"flipped": 0, "crossed": 0, "noise": 0, "none": 0}
+        causes = {"flipped": 0, "crossed": 0, "noise": 0, "none": 0, "out_of_order": 0}
         for d in s["agreement"]["disagree"]:
             key = {k: d[k] for k in _KEYS}
             c = _cell(s, **key)
@@ -1112,10 +1112,12 @@ def _disagreements(sums):
             if near:
                 why += "; within the noise of: " + ", ".join(near)
             p_own = d.get("thesis_color_probability")
-            causes["flipped" if flips else "crossed" if crosses else
-                   "noise" if near or (p_own is not None and p_own >= NOISE_LEVEL)
-                   else "none"] += 1
+            cause = ("flipped" if flips else "crossed" if crosses else
+                     "noise" if near or (p_own is not None and p_own >= NOISE_LEVEL)
+                     else "none")
             easier = inv.get(table_key(d), [])
+            causes[cause] += 1
+            causes["out_of_order"] += cause == "none" and bool(easier)
             if easier:
                 why += "; published out of order: " + ", ".join(
                     f"σθ {e[3]:g}°, σω {e[4]:g}°/s is {pub[e]}" for e in easier)
@@ -1130,7 +1132,10 @@ def _disagreements(sums):
                    f"carries {causes['crossed']} past it, {causes['noise']} "
                    f"{'is' if causes['noise'] == 1 else 'are'} within Monte Carlo noise (of our "
                    f"filter or of a switch), and {causes['none']} "
-                   f"{'has' if causes['none'] == 1 else 'have'} no measured cause.")
+                   f"{'has' if causes['none'] == 1 else 'have'} no measured cause"
+                   + (f"; {causes['out_of_order']} of these "
+                      f"{'is' if causes['out_of_order'] == 1 else 'are'} published out of order"
+                      if causes["out_of_order"] else "") + ".")
         if abl:
             out.append("")
             out.append("Ablation tables (agreement over the cells each ablation ran): " + "; ".join(

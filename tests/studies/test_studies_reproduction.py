@@ -172,6 +172,10 @@ def test_disagreeing_cell_out_of_published_order(tmp_path):
     assert row.endswith("| no ablation run; published out of order: σθ 3°, σω 0.02°/s is red |")
     row = next(ln for ln in md.splitlines() if ln.startswith("| MEKF | controlled | 2 | 5 | 0.02 |"))
     assert row.endswith("| no ablation run |")
+    assert ("Of the 2 disagreeing cells, a tested switch gives the thesis's colour in 0. Of the "
+            "other 2, a switch carries 0 past it, 0 are within Monte Carlo noise (of our filter "
+            "or of a switch), and 2 have no measured cause; 1 of these is published out of "
+            "order.") in md
 
 
 
