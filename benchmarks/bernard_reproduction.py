@@ -10,13 +10,15 @@ runs already stored in ``OUT/<name>``, so an interrupted regeneration goes on wh
 With ``--reflection-kf`` the §10.4/§10.7/§10.8 runs (``benchmarks/reflection_kf.py``, a few
 seconds each) are run too, once per filter variant: the thesis variant with the eq. 5.8 diffuse
 term (``OUT/reflection_kf-thesis.json``), then the robust variant with the physical form
-(``OUT/reflection_kf-robust.json``); a file already there is reused.
+(``OUT/reflection_kf-robust.json``); a file already there is reused. With ``--spikes`` the
+§9.4.5 spike counts of the thesis truths (``benchmarks/bernard_spikes.py``, ≈ 35 s) go to
+``OUT/spikes.json`` (reused when there).
 
 Prints one line per study (name, runs per cell, wall seconds) and the total; ``--list`` prints
 the studies and stops.
 
     python benchmarks/bernard_reproduction.py -o OUT [--workers 2] [--skip NAME ...]
-        [--reflection-kf] [--doc docs/reproduction.md] [--list]
+        [--reflection-kf] [--spikes] [--doc docs/reproduction.md] [--list]
 """
 
 from __future__ import annotations
@@ -56,6 +58,8 @@ def main() -> int:
                     help="study names to leave out (default: thesis-fig9-4-bpf)")
     ap.add_argument("--reflection-kf", action="store_true",
                     help="also run benchmarks/reflection_kf.py for the ch. 10 rows")
+    ap.add_argument("--spikes", action="store_true",
+                    help="also run benchmarks/bernard_spikes.py for the sec. 9.4.5 row")
     ap.add_argument("--doc", type=Path, default=ROOT / "docs" / "reproduction.md",
                     help="reproduction file whose Bernard section is rewritten "
                     "(default: docs/reproduction.md)")
@@ -94,6 +98,17 @@ def main() -> int:
                 kf.write_text(r.stdout)
                 print(f"reflection_kf ({variant}): {time.perf_counter() - t0:.0f} s", flush=True)
             extra.append(str(kf))
+    if a.spikes:
+        sp = a.output / "spikes.json"
+        if not sp.exists():
+            t0 = time.perf_counter()
+            r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bernard_spikes.py"),
+                                "-o", str(sp)], env=env, capture_output=True, text=True)
+            if r.returncode != 0:
+                sys.stderr.write(r.stderr)
+                return r.returncode
+            print(f"bernard_spikes: {time.perf_counter() - t0:.0f} s", flush=True)
+        extra += ["--spikes", str(sp)]
     cmd = [sys.executable, "-m", "lightcurve", "reproduction", "--only", "bernard", "-o", str(a.doc)]
     for p in files:
         cmd += ["--study", str(a.output / p.stem)]

@@ -11,7 +11,8 @@ def _cmd_reproduction(args) -> int:
     """Read the summary.json of finished studies (lightcurve compare -o DIR) and write, per source
     document, every claim we can test with our number, the document's and agrees / disagrees /
     not testable (Bernard 2021: Fig. 9.4 and B.1-B.4 cell by cell, the seven conclusions of sec.
-    9.4, the particle filter of Fig. 9.5-9.7, the reflection models of ch. 10).
+    9.4, the spikes of the uncontrolled fast-spinning curves of sec. 9.4.5, the particle filter of
+    Fig. 9.5-9.7, the reflection models of ch. 10).
     """
     from ..studies.reproduction import (bernard_section, css_section, load_summaries,
                                         write_reproduction)
@@ -19,7 +20,8 @@ def _cmd_reproduction(args) -> int:
     dirs = list(args.study or [])
     # every named folder must hold a study summary: checked before anything is written
     sums = load_summaries(dirs, strict=True)
-    sections = [bernard_section(summaries=sums, reflection_kf_json=args.reflection_kf),
+    sections = [bernard_section(summaries=sums, reflection_kf_json=args.reflection_kf,
+                                spikes_json=args.spikes),
                 css_section(list(args.css or []), timing=args.css_timing,
                             tables4=args.css_tables4, sun_models=args.css_sun_models,
                             table44=args.css_table44, faults=list(args.css_faults or []),
@@ -61,6 +63,10 @@ def register(sub) -> None:
                    help="the JSON line printed by benchmarks/reflection_kf.py (sec. 10.4/10.7/"
                    "10.8; one file per filter variant, e.g. --variant thesis and robust; "
                    "repeatable, several per option allowed)")
+    p.add_argument("--spikes", default=None, metavar="FILE",
+                   help="the JSON line of python benchmarks/bernard_spikes.py (sec. 9.4.5, Fig. "
+                   "9.19: the specular spikes of the controlled and uncontrolled fast-spinning "
+                   "truths)")
     p.add_argument("--only", choices=sorted(SECTIONS), default=None,
                    help="write this source document's section only and keep the other sections "
                    "as they stand in the existing output file (rerun one document's studies "

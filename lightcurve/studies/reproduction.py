@@ -7,15 +7,17 @@ One function per section, each returning Markdown text:
   robust variant beside it, and the thesis's qualitative claims marked agrees / disagrees /
   not run.
 * :func:`bernard_section` — Bernard (2021): Fig. 9.4 and B.1–B.4 cell by cell (with the
-  ablations that flip a disagreeing cell), the seven conclusions of §9.4, the particle filter of
-  Fig. 9.5–9.7, the reflection models of §10.4/10.7/10.8 (rules below).
+  ablations that flip a disagreeing cell), the seven conclusions of §9.4, the spikes of the
+  uncontrolled fast-spinning curves (§9.4.5, Fig. 9.19), the particle filter of Fig. 9.5–9.7,
+  the reflection models of §10.4/10.7/10.8 (rules below).
 
 :func:`write_reproduction` joins sections into the file (atomic write); with ``--only
 bernard`` (or ``css``) it rewrites that section and keeps the other as it stands in the file.
 Command line (``python -m lightcurve.studies.reproduction`` takes the same arguments)::
 
     lightcurve reproduction -o docs/reproduction.md --css DIR [DIR ...] \
-        --study DIR [DIR ...] [--reflection-kf FILE [FILE ...]] [--only {bernard,css}]
+        --study DIR [DIR ...] [--reflection-kf FILE [FILE ...]] [--spikes FILE] \
+        [--only {bernard,css}]
 
 where each ``--css`` folder is the output of ``lightcurve
 css study`` and each ``--study`` folder the output of ``lightcurve compare`` (its
@@ -27,7 +29,9 @@ Bernard section — it reads the ``summary.json`` of ``thesis-fig9-4`` and
 and ``thesis-bpf-*`` (Fig. 9.5–9.7), and the JSON lines of ``benchmarks/reflection_kf.py``
 (§10.4/§10.7/§10.8; one per filter variant, the thesis variant's rows first; "less accurate
 than with perfect knowledge" compares the median final RSS attitude error of the Model 3 runs
-with runs whose truth parameters are the filter's). Rules, stated once: a table agrees when at least 85 % of the cells both ran have
+with runs whose truth parameters are the filter's), and the JSON line of
+``benchmarks/bernard_spikes.py`` (§9.4.5: agrees when the controlled truths have spikes and at
+most half of the uncontrolled ones have any). Rules, stated once: a table agrees when at least 85 % of the cells both ran have
 the same colour; fewer than 100 runs per cell make it *indicative*; "better / more accurate"
 compares median final RSS attitude errors of the UKF; the Monte Carlo spread of each colour
 is :func:`lightcurve.studies.metrics.color_probability` (computed from the run files when a
@@ -1365,8 +1369,8 @@ def _claim_table(rows):
     return out
 
 
-def _read_reflection_kf(path) -> dict:
-    """The JSON line printed by ``benchmarks/reflection_kf.py`` (its last line), read from
+def _read_benchmark_json(path, benchmark: str) -> dict:
+    """The JSON line printed by ``benchmarks/<benchmark>.py`` (its last line), read from
     ``path``; InputError naming the file when it is not such an output."""
     from ..errors import InputError
     from ..io.safe_open import read_text
@@ -1376,18 +1380,60 @@ def _read_reflection_kf(path) -> dict:
         kf = json.loads(text.splitlines()[-1])
     except (ValueError, IndexError):
         kf = None
-    if not isinstance(kf, dict) or kf.get("benchmark") != "reflection_kf":
-        raise InputError(f"{path}: not the JSON line of benchmarks/reflection_kf.py (its last "
-                         "line must be a JSON object with \"benchmark\": \"reflection_kf\")")
+    if not isinstance(kf, dict) or kf.get("benchmark") != benchmark:
+        raise InputError(f"{path}: not the JSON line of benchmarks/{benchmark}.py (its last "
+                         f"line must be a JSON object with \"benchmark\": \"{benchmark}\")")
     return kf
 
 
-def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None) -> str:
+def _read_reflection_kf(path) -> dict:
+    """The JSON line printed by ``benchmarks/reflection_kf.py``, read from ``path``."""
+    return _read_benchmark_json(path, "reflection_kf")
+
+
+def _spike_rows(sp) -> list:
+    """Claim rows of §9.4.5 from the JSON line of ``benchmarks/bernard_spikes.py`` (``sp``; None:
+    not testable): the Fig. 9.19 case (GEO, CubeSat) first, then the other fast-spinning cases,
+    which the text's explanation covers. Agrees when the controlled truths have spikes (median
+    count ≥ 1) and at most half of the uncontrolled truths have any."""
+    claim = ("§9.4.5, Fig. 9.19 (GEO, CubeSat): the large spikes of the controlled "
+             "fast-spinning curve are not present in the uncontrolled one")
+    if sp is None:
+        return [(claim, "–", "not testable (no benchmarks/bernard_spikes.py output given)")]
+    cases = sp.get("cases", [])
+    studies = list(dict.fromkeys(c["study"] for c in cases))
+    by = {(c["study"], c["dynamics"]): c for c in cases}
+    studies.sort(key=lambda n: (by.get((n, "controlled"), {}).get("regime"),
+                                by.get((n, "controlled"), {}).get("shape")) != ("GEO", "CubeSat"))
+    rows = []
+    for name in studies:
+        con, unc = by.get((name, "controlled")), by.get((name, "uncontrolled"))
+        if con is None or unc is None:
+            continue
+        fig = (con["regime"], con["shape"]) == ("GEO", "CubeSat")
+        text = claim if fig else (f"§9.4.5, the same by the text's explanation (every "
+                                  f"fast-spinning case): {con['regime']}, {con['shape']}")
+        n_unc = sum(1 for k in unc["spikes"] if k > 0)
+        ours = (f"spikes > {sp['brighter_mag']:g} mag above the local median, median over "
+                f"{len(con['spikes'])} truths: controlled {_median(con['spikes']):g} (largest "
+                f"{_median(con['largest_mag']):.1f} mag), uncontrolled "
+                f"{_median(unc['spikes']):g} (largest {_median(unc['largest_mag']):.1f} mag); "
+                f"uncontrolled truths with a spike: {n_unc} of {len(unc['spikes'])}")
+        if not _median(con["spikes"]) >= 1:
+            rows.append((text, ours, "not testable (no spikes in the controlled truths)"))
+        else:
+            rows.append((text, ours, _verdict(n_unc <= 0.5 * len(unc["spikes"]))))
+    return rows
+
+
+def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None,
+                    spikes_json=None) -> str:
     """The Bernard (2021) section of docs/reproduction.md (module docstring) as Markdown.
 
     ``study_dirs``: study output folders (read with :func:`load_summaries`), or ``summaries``:
     their summaries already read; ``reflection_kf_json``: path, or list of paths, of the JSON
-    lines printed by ``benchmarks/reflection_kf.py`` (one per filter variant; or None). A file
+    lines printed by ``benchmarks/reflection_kf.py`` (one per filter variant; or None);
+    ``spikes_json``: path of the JSON line of ``benchmarks/bernard_spikes.py`` (or None). A file
     that is not such an output raises InputError."""
     sums = load_summaries(study_dirs) if summaries is None else summaries
     for name, _, _ in _TABLES:   # the published tables' colour spread (run files if needed)
@@ -1398,6 +1444,7 @@ def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None) -
     # reproduction first: the thesis variant's rows before the robust variant's
     kfs = sorted((_read_reflection_kf(p) for p in paths),
                  key=lambda k: k.get("variant", "robust") != "thesis")
+    sp = None if spikes_json is None else _read_benchmark_json(spikes_json, "bernard_spikes")
     out = ["## Bernard (2021): attitude and reflection-parameter estimation from lightcurves", "",
            "Generated by `lightcurve reproduction` from the study outputs listed at the end; "
            "rules in `lightcurve/studies/reproduction.py`. Thesis variant = Bernard's ch. 7 "
@@ -1410,6 +1457,11 @@ def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None) -
     out += _disagreements(sums)
     out += ["", "### The seven conclusions of §9.4", ""]
     out += _claim_table(_bernard_claims(sums))
+    out += ["", "### The uncontrolled truth's lightcurve, §9.4.5", ""]
+    out += _claim_table(_spike_rows(sp))
+    if sp is not None:
+        out += ["", "The `glints-hidden` ablations of the tables above hide these spike epochs "
+                "from the filters (the same rule; the truth keeps them)."]
     out += ["", "### Particle filter, Fig. 9.5–9.7", ""]
     out += _claim_table(_bpf_rows(sums))
     out += ["", "### Reflection-parameter models, §10.4, §10.7, §10.8", ""]
@@ -1421,6 +1473,10 @@ def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None) -
         out += ["", "Outputs of `benchmarks/reflection_kf.py` used: " + ", ".join(
             f"{k.get('variant', 'robust')} variant ({k.get('cook_torrance', 'physical')} "
             f"Cook–Torrance form, {len(k.get('seeds', []))} seeds)" for k in kfs)]
+    if sp is not None:
+        out += ["", f"Output of `benchmarks/bernard_spikes.py` used: {sp.get('runs')} truths per "
+                f"study and dynamics, spikes more than {sp.get('brighter_mag'):g} mag above the "
+                "local median"]
     return "\n".join(out + [""])
 
 

@@ -122,30 +122,35 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
 GLINT_HALF_WINDOW = 4
 
 
-def hide_glints(curve, brighter_mag: float):
-    """``curve`` without its specular spikes: the epochs whose noise-free magnitude
-    (``truth_mag``) is more than ``brighter_mag`` mag brighter than the median of the noise-free
-    magnitudes of the same site's epochs within ±:data:`GLINT_HALF_WINDOW` epochs of it (the
-    window is shortened at the ends of a site's run; a local median, so that the slow
-    brightening over a pass is not taken for a spike). Diagnostic of study option
-    ``hide_glints_mag``: Bernard §9.4.5 states that the large spikes of the controlled
-    fast-spinning curves are not present in the uncontrolled ones (Fig. 9.19), while the
-    uncontrolled truth simulated here keeps them. Needs a simulated curve (``truth_mag``)."""
+def glint_height(curve) -> np.ndarray:
+    """Per epoch, how many magnitudes the noise-free magnitude (``truth_mag``) is brighter than
+    the median of the noise-free magnitudes of the same site's epochs within
+    ±:data:`GLINT_HALF_WINDOW` epochs of it (the window is shortened at the ends of a site's
+    run; a local median, so that the slow brightening over a pass is not taken for a spike).
+    Positive: brighter than its neighbourhood (mag). Needs a simulated curve (``truth_mag``)."""
     if curve.truth_mag is None:
-        raise InputError("hiding the glint epochs needs the noise-free magnitudes of a "
+        raise InputError("finding the glint epochs needs the noise-free magnitudes of a "
                          "simulated curve", field="truth_mag")
     m = np.asarray(curve.truth_mag, float)
     site = (np.zeros(len(m), int) if getattr(curve, "site", None) is None
             else np.asarray(curve.site).reshape(-1))
-    hide = np.zeros(len(m), bool)
+    height = np.zeros(len(m))
     h = GLINT_HALF_WINDOW
     for s in np.unique(site):
         idx = np.flatnonzero(site == s)
         ms = m[idx]
         for j, k in enumerate(idx):
-            ref = np.nanmedian(ms[max(0, j - h):j + h + 1])
-            hide[k] = ms[j] < ref - float(brighter_mag)
-    return curve.subset(~hide)
+            height[k] = np.nanmedian(ms[max(0, j - h):j + h + 1]) - ms[j]
+    return height
+
+
+def hide_glints(curve, brighter_mag: float):
+    """``curve`` without its specular spikes: the epochs whose :func:`glint_height` exceeds
+    ``brighter_mag`` (mag). Diagnostic of study option ``hide_glints_mag``: Bernard §9.4.5
+    states that the large spikes of the controlled fast-spinning curves are not present in the
+    uncontrolled ones (Fig. 9.19), while the uncontrolled truth simulated here keeps them.
+    Needs a simulated curve (``truth_mag``)."""
+    return curve.subset(~(glint_height(curve) > float(brighter_mag)))
 
 
 @functools.lru_cache(maxsize=32)

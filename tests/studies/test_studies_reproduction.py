@@ -316,3 +316,45 @@ def test_disagreeing_cells_flipped_crossed_or_unexplained(tmp_path):
     assert ("Of the 4 disagreeing cells, a tested switch gives the thesis's colour in 1. Of "
             "the other 3, a switch carries 2 past it, 0 are within Monte Carlo noise (of our "
             "filter or of a switch), and 1 has no measured cause.") in md
+
+
+def _spikes(con, unc, regime="GEO", shape="CubeSat", study="thesis-fig-b3-geo-cubesat"):
+    """A hand-made benchmarks/bernard_spikes.py output: spike counts per truth."""
+    case = dict(study=study, regime=regime, shape=shape, sites=1, sigma_omega_deg_s=0.02,
+                r_percent=1.0, spike_times_s_run0=[])
+    return {"benchmark": "bernard_spikes", "runs": len(con), "brighter_mag": 2.0,
+            "cases": [dict(case, dynamics="controlled", spikes=con, largest_mag=[7.0] * len(con)),
+                      dict(case, dynamics="uncontrolled", spikes=unc,
+                           largest_mag=[1.0] * len(unc))]}
+
+
+def test_spike_claim_of_section_9_4_5(tmp_path, capsys):
+    # §9.4.5 / Fig. 9.19: the controlled curve's large spikes are not present in the uncontrolled
+    # one — agrees when at most half of the uncontrolled truths have a spike; the Fig. 9.19 case
+    # (GEO, CubeSat) is the first row
+    md = bernard_section([])
+    row = next(ln for ln in md.splitlines() if ln.startswith("| §9.4.5"))
+    assert row.endswith("| – | not testable (no benchmarks/bernard_spikes.py output given) |")
+    sp = _spikes([5, 5, 5, 5], [0, 0, 1, 2])
+    leo = _spikes([8, 8, 8, 8], [8, 8, 8, 0], "LEO", "CubeSat", "thesis-fig9-4")
+    sp["cases"] = leo["cases"] + sp["cases"]
+    md = bernard_section([], spikes_json=_dump(tmp_path / "sp.json", sp))
+    rows = [ln for ln in md.splitlines() if ln.startswith("| §9.4.5")]
+    assert rows[0].startswith("| §9.4.5, Fig. 9.19 (GEO, CubeSat)")
+    assert rows[0].endswith("controlled 5 (largest 7.0 mag), uncontrolled 0.5 (largest 1.0 "
+                            "mag); uncontrolled truths with a spike: 2 of 4 | agrees |")
+    assert "every fast-spinning case): LEO, CubeSat" in rows[1]
+    assert rows[1].endswith("uncontrolled truths with a spike: 3 of 4 | disagrees |")
+    none = _spikes([0, 0, 1], [0, 0, 0])
+    md = bernard_section([], spikes_json=_dump(tmp_path / "none.json", none))
+    assert "| not testable (no spikes in the controlled truths) |" in md
+    # another benchmark's output: one line naming the file, exit 2, the document kept
+    out = tmp_path / "reproduction.md"
+    assert main(["reproduction", "-o", str(out)]) == 0
+    before = out.read_text()
+    bad = _dump(tmp_path / "bad.json", {"benchmark": "reflection_kf"})
+    capsys.readouterr()
+    assert main(["reproduction", "--spikes", str(bad), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(bad) in err[0] and "bernard_spikes" in err[0]
+    assert out.read_text() == before

@@ -449,3 +449,46 @@ def test_bpf_open_settings_sweep_changes_only_its_two_settings(tmp_path):
     assert [(t.cell, t.run, t.sim_seed, t.filter_seed) for t in t0] == \
         [(t.cell, t.run, t.sim_seed, t.filter_seed) for t in t1]
     assert mod.main(["--roughening", "-1", "-o", str(tmp_path / "o")]) == 2
+
+
+def test_spike_benchmark_finds_the_plus_x_glints_of_the_fig_9_19_case(tmp_path):
+    """benchmarks/bernard_spikes.py on the Fig. 9.19 case (B.3: GEO, CubeSat, one site,
+    σω 0.02°/s, 1 %). §9.3.5 puts the +X facet normal (m = 0.04, Table 9.2) on the Sun–Socorro
+    bisector at t = 0 and the body spins at the constant rate [2, 1, 3.6]°/s, so the +X glint
+    recurs once per spin period 360°/|ω| (the bisector barely moves in GEO): the spikes of the
+    controlled truth fall on the 5 s samples nearest k·360°/|ω|, k = 0, 1, …"""
+    mod = _benchmark("bernard_spikes")
+    out = tmp_path / "spikes.json"
+    assert mod.main(["--studies", "thesis-fig-b3-geo-cubesat", "--runs", "2", "-o",
+                     str(out)]) == 0
+    sp = json.loads(out.read_text())
+    assert sp["benchmark"] == "bernard_spikes" and sp["runs"] == 2
+    by = {c["dynamics"]: c for c in sp["cases"]}
+    period = 360.0 / np.linalg.norm([2.0, 1.0, 3.6])
+    expect = [5.0 * round(k * period / 5.0) for k in range(int(360 // period) + 1)]
+    assert expect == [0.0, 85.0, 170.0, 255.0, 340.0]
+    assert by["controlled"]["spike_times_s_run0"] == expect
+    assert by["controlled"]["spikes"] == [5, 5]
+    assert all(h > 5.0 for h in by["controlled"]["largest_mag"])   # far above the 2 mag rule
+    # the specified uncontrolled truth keeps them (the §9.4.5 disagreement of the document)
+    assert by["uncontrolled"]["spike_times_s_run0"] == expect
+    with pytest.raises(SystemExit) as exc:   # argparse's usage error
+        mod.main(["--runs", "0"])
+    assert exc.value.code == 2
+
+
+def test_glint_height_is_the_brightening_over_the_local_median_per_site():
+    """lightcurve.studies.runner.glint_height: median of the same site's epochs within ±4
+    minus the epoch's magnitude (hand-computed here); sites never mix."""
+    from types import SimpleNamespace
+
+    from lightcurve.errors import InputError
+    from lightcurve.studies.runner import glint_height
+
+    m = np.array([10.0, 10, 10, 5, 10, 10, 10, 20, 20, 19, 20])
+    site = np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1])
+    h = glint_height(SimpleNamespace(truth_mag=m, site=site))
+    assert h[3] == 5.0 and np.all(h[[0, 1, 2, 4, 5, 6]] == 0.0)
+    assert h[9] == 1.0 and np.all(h[[7, 8, 10]] == 0.0)
+    with pytest.raises(InputError, match="truth_mag"):
+        glint_height(SimpleNamespace(truth_mag=None, site=None))
