@@ -144,13 +144,19 @@ def glint_height(curve) -> np.ndarray:
     return height
 
 
-def hide_glints(curve, brighter_mag: float):
+def hide_glints(curve, brighter_mag: float, after_s: float | None = None):
     """``curve`` without its specular spikes: the epochs whose :func:`glint_height` exceeds
-    ``brighter_mag`` (mag). Diagnostic of study option ``hide_glints_mag``: Bernard §9.4.5
-    states that the large spikes of the controlled fast-spinning curves are not present in the
-    uncontrolled ones (Fig. 9.19), while the uncontrolled truth simulated here keeps them.
-    Needs a simulated curve (``truth_mag``)."""
-    return curve.subset(~(glint_height(curve) > float(brighter_mag)))
+    ``brighter_mag`` (mag) — with ``after_s``, only those later than ``after_s`` seconds after
+    the curve's first epoch. Diagnostic of study options ``hide_glints_mag`` and
+    ``hide_glints_after_s``: Bernard §9.4.5 states that the large spikes of the controlled
+    fast-spinning curves are not present in the uncontrolled ones (Fig. 9.19), because the
+    disturbance torques move the attitude off the ideal conditions over time, while the
+    uncontrolled truth simulated here keeps them. Needs a simulated curve (``truth_mag``)."""
+    hide = glint_height(curve) > float(brighter_mag)
+    if after_s is not None:
+        t = np.asarray(curve.t, float)
+        hide &= t - t.min() > float(after_s)
+    return curve.subset(~hide)
 
 
 @functools.lru_cache(maxsize=32)
@@ -205,7 +211,7 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
                          tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
                          opts.get("truth_acs_mode", ""))
         if "hide_glints_mag" in opts:
-            lc = hide_glints(lc, float(opts["hide_glints_mag"]))
+            lc = hide_glints(lc, float(opts["hide_glints_mag"]), opts.get("hide_glints_after_s"))
         kw = {}
         if c.filter == "bpf" and "particles" in opts:
             kw["particles"] = int(opts["particles"])

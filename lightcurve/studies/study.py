@@ -51,6 +51,9 @@ grid of settings; every combination of the grid values is one *cell*, and each c
                                           # mag brighter than the median of the same site's
                                           # epochs within ±4 of it (the specular spikes;
                                           # lightcurve.studies.runner.hide_glints)
+    hide_glints_after_s = 0.0             # DIAGNOSTIC, with hide_glints_mag: hide only the
+                                          # spikes later than this many seconds after the
+                                          # first epoch (0: the glint at the start is seen)
 
 A study may name the thesis's published table of its grid (``[study] thesis_table =
 "tables/bernard2021-fig9-4.toml"``, relative to the study file;
@@ -490,6 +493,11 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
         opts["filter_drift_horizon_s"] = o.float("filter_drift_horizon_s", min=1.0, max=1e8)
     if o.has("hide_glints_mag"):
         opts["hide_glints_mag"] = o.float("hide_glints_mag", min=0.0, min_open=True, max=30.0)
+    if o.has("hide_glints_after_s"):
+        if "hide_glints_mag" not in opts:
+            raise InputError("hide_glints_after_s needs hide_glints_mag (which spikes to hide)",
+                             file=path, field="options.hide_glints_after_s")
+        opts["hide_glints_after_s"] = o.float("hide_glints_after_s", min=0.0, max=1e6)
     o.check_unknown()
     # per-filter settings ([filters.mekf], [filters.ukf], [filters.bpf]): the filters'
     # configuration objects validate them (lightcurve.filters.config)

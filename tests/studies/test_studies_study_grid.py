@@ -217,6 +217,15 @@ def test_hide_glints_option_hides_the_spike_epochs_from_the_filters_only(tmp_pat
         p.write_text(text + f"[options]\nhide_glints_mag = {bad}\n")
         with pytest.raises(InputError, match="options.hide_glints_mag"):
             load_study(p)
+    # hide_glints_after_s: only with hide_glints_mag, and not negative
+    for opts in ("hide_glints_after_s = 0.0", "hide_glints_mag = 2.0\nhide_glints_after_s = -1.0"):
+        p.write_text(text + f"[options]\n{opts}\n")
+        with pytest.raises(InputError, match="options.hide_glints_after_s"):
+            load_study(p)
+    p.write_text(text + "[options]\nhide_glints_mag = 2.0\nhide_glints_after_s = 0.0\n")
+    t = load_study(p).tasks(1)[0]
+    r = execute_task(t)   # the glint at t = 0 is seen now, the rest as before
+    np.testing.assert_array_equal(r["t"], lc.t[sorted(set(keep) | {0})])
 
 
 def test_hide_glints_finds_spikes_per_site_and_not_a_pass_trend():
@@ -232,6 +241,7 @@ def test_hide_glints_finds_spikes_per_site_and_not_a_pass_trend():
         truth_mag: np.ndarray
         site: np.ndarray
         kept: np.ndarray = None
+        t: np.ndarray = None
 
         def subset(self, mask):
             return Curve(self.truth_mag[mask], self.site[mask], np.asarray(mask))
@@ -249,3 +259,10 @@ def test_hide_glints_finds_spikes_per_site_and_not_a_pass_trend():
     out = hide_glints(Curve(mag, site), 2.0)
     assert np.flatnonzero(~out.kept).tolist() == [0, 15, 22]  # site 1's ends, site 0's spike
     assert hide_glints(Curve(mag, site), 6.0).kept.all()       # no spike of 6 mag
+    # hide_glints_after_s: only the spikes later than that after the first epoch (5 s cadence,
+    # starting at t = 100 s): after 0 s keeps the first epoch's, after 75 s also the one at 175 s
+    t = 100.0 + 5.0 * np.arange(32)
+    out = hide_glints(Curve(mag, site, t=t), 2.0, after_s=0.0)
+    assert np.flatnonzero(~out.kept).tolist() == [15, 22]
+    out = hide_glints(Curve(mag, site, t=t), 2.0, after_s=75.0)
+    assert np.flatnonzero(~out.kept).tolist() == [22]
