@@ -353,8 +353,10 @@ def test_spike_claim_of_section_9_4_5(tmp_path, capsys):
     assert main(["reproduction", "-o", str(out)]) == 0
     before = out.read_text()
     bad = _dump(tmp_path / "bad.json", {"benchmark": "reflection_kf"})
-    capsys.readouterr()
-    assert main(["reproduction", "--spikes", str(bad), "-o", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and str(bad) in err[0] and "bernard_spikes" in err[0]
-    assert out.read_text() == before
+    broken = dict(sp, cases=[{k: v for k, v in c.items() if k != "spikes"} for c in sp["cases"]])
+    for f in (bad, _dump(tmp_path / "broken.json", broken)):
+        capsys.readouterr()
+        assert main(["reproduction", "--spikes", str(f), "-o", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(f) in err[0] and "bernard_spikes" in err[0], err
+        assert out.read_text() == before
