@@ -253,11 +253,15 @@ def test_chapter10_rows_per_variant_against_perfect_knowledge(tmp_path, capsys):
     before = out.read_text()
     bad = tmp_path / "bad.json"
     bad.write_text('{"benchmark": "css"}\n')
-    capsys.readouterr()
-    assert main(["reproduction", "--reflection-kf", str(paths[0]), str(bad), "-o", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and str(bad) in err[0] and "reflection_kf" in err[0]
-    assert out.read_text() == before
+    broken = _dump(tmp_path / "broken.json", {"benchmark": "reflection_kf", "variant": "thesis",
+                                              "sec10_8": {"geo_sth3_model1_ukf": {"runs": 10}}})
+    for f in (bad, broken):
+        capsys.readouterr()
+        assert main(["reproduction", "--reflection-kf", str(paths[0]), str(f), "-o",
+                     str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(f) in err[0] and "reflection_kf" in err[0], err
+        assert out.read_text() == before
 
 
 def _dump(path, obj):
@@ -353,8 +357,10 @@ def test_spike_claim_of_section_9_4_5(tmp_path, capsys):
     assert main(["reproduction", "-o", str(out)]) == 0
     before = out.read_text()
     bad = _dump(tmp_path / "bad.json", {"benchmark": "reflection_kf"})
-    capsys.readouterr()
-    assert main(["reproduction", "--spikes", str(bad), "-o", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and str(bad) in err[0] and "bernard_spikes" in err[0]
-    assert out.read_text() == before
+    broken = dict(sp, cases=[{k: v for k, v in c.items() if k != "spikes"} for c in sp["cases"]])
+    for f in (bad, _dump(tmp_path / "broken.json", broken)):
+        capsys.readouterr()
+        assert main(["reproduction", "--spikes", str(f), "-o", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(f) in err[0] and "bernard_spikes" in err[0], err
+        assert out.read_text() == before
