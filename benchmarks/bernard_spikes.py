@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from lightcurve.io.atomic import atomic_write_text  # noqa: E402
-from lightcurve.studies.runner import _lightcurve, glint_height  # noqa: E402
+from lightcurve.studies.runner import glint_height, task_lightcurve  # noqa: E402
 from lightcurve.studies.study import load_study  # noqa: E402
 
 #: the thesis Monte Carlo studies and what they fly (regime, shape)
@@ -55,17 +55,9 @@ def truths(study, dynamics: str, runs: int):
     if not cells:
         return []
     cell = cells[0]    # the truth does not depend on the filter or on σθ
-    out = []
-    for t in study.tasks(runs):
-        if t.cell != cell:
-            continue
-        opts = dict(t.options)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            out.append(_lightcurve(t.scenario_text, t.scenario_file, float(cell.r_percent),
-                                   int(t.sim_seed), tuple(t.library_dirs), tuple(t.site_dirs),
-                                   opts.get("cook_torrance", ""), opts.get("truth_acs_mode", "")))
-    return out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return [task_lightcurve(t) for t in study.tasks(runs) if t.cell == cell]
 
 
 def main(argv=None) -> int:

@@ -1055,13 +1055,16 @@ def _p_cell(d):
     return f"{100 * p:.1f} %" + (" (noise)" if p >= 0.05 else "")
 
 
+#: rank of each compared colour, green < yellow < red
+_RANK = {c: i for i, c in enumerate(COMPARED)}
+
+
 def _crosses(ours: str, other: str, thesis: str) -> bool:
     """True when the colour ``thesis`` lies strictly between ``ours`` and ``other`` in the
     order green < yellow < red (only a yellow can)."""
-    r = {c: i for i, c in enumerate(COMPARED)}
-    if not {ours, other, thesis} <= set(r):
+    if not {ours, other, thesis} <= set(_RANK):
         return False
-    return (r[ours] - r[thesis]) * (r[other] - r[thesis]) < 0
+    return (_RANK[ours] - _RANK[thesis]) * (_RANK[other] - _RANK[thesis]) < 0
 
 
 def _disagreements(sums):

@@ -118,6 +118,18 @@ def _lightcurve(text: str, file: str, r_percent: float, sim_seed: int,
         return simulate(sc, seed=sim_seed)
 
 
+def task_lightcurve(task):
+    """The simulated lightcurve of one :class:`~lightcurve.studies.study.RunTask` (its cell's
+    noise level, the task's simulation seed and the study's truth options ``cook_torrance`` and
+    ``truth_acs_mode``), cached per process: every filter and initial-error setting of a run
+    index gets the same curve. Before any ``hide_glints_mag`` (that acts on the filters' view)."""
+    opts = dict(task.options)
+    return _lightcurve(task.scenario_text, task.scenario_file, float(task.cell.r_percent),
+                       int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
+                       tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
+                       opts.get("truth_acs_mode", ""))
+
+
 #: half-width (epochs) of the running median that :func:`hide_glints` compares each epoch with
 GLINT_HALF_WINDOW = 4
 
@@ -206,10 +218,7 @@ def execute_task(task: RunTask, device: str = "cpu") -> dict:
            "status": "ok", "error": ""}
     try:
         opts = dict(task.options)
-        lc = _lightcurve(task.scenario_text, task.scenario_file, float(c.r_percent),
-                         int(task.sim_seed), tuple(getattr(task, "library_dirs", ())),
-                         tuple(getattr(task, "site_dirs", ())), opts.get("cook_torrance", ""),
-                         opts.get("truth_acs_mode", ""))
+        lc = task_lightcurve(task)
         if "hide_glints_mag" in opts:
             lc = hide_glints(lc, float(opts["hide_glints_mag"]), opts.get("hide_glints_after_s"))
         kw = {}
