@@ -148,11 +148,14 @@ def glint_height(curve) -> np.ndarray:
             else np.asarray(curve.site).reshape(-1))
     height = np.zeros(len(m))
     h = GLINT_HALF_WINDOW
+    pad = np.full(h, np.nan)     # NaN padding: nanmedian then shortens the end windows
     for s in np.unique(site):
         idx = np.flatnonzero(site == s)
-        ms = m[idx]
-        for j, k in enumerate(idx):
-            height[k] = np.nanmedian(ms[max(0, j - h):j + h + 1]) - ms[j]
+        win = np.lib.stride_tricks.sliding_window_view(np.concatenate([pad, m[idx], pad]),
+                                                       2 * h + 1)
+        with warnings.catch_warnings():     # an all-NaN window gives NaN (no spike)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            height[idx] = np.nanmedian(win, axis=1) - m[idx]
     return height
 
 

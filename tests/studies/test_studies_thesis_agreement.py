@@ -492,3 +492,25 @@ def test_glint_height_is_the_brightening_over_the_local_median_per_site():
     assert h[9] == 1.0 and np.all(h[[7, 8, 10]] == 0.0)
     with pytest.raises(InputError, match="truth_mag"):
         glint_height(SimpleNamespace(truth_mag=None, site=None))
+
+
+def test_glint_height_matches_a_plain_loop_on_long_runs_with_gaps():
+    """glint_height against a plain per-epoch loop written here (median of the same site's
+    epochs within ±4, the window shortened at the ends, NaN epochs ignored): long two-site
+    runs with unlit (NaN) epochs, fixed seed."""
+    from types import SimpleNamespace
+
+    from lightcurve.studies.runner import glint_height
+
+    rng = np.random.default_rng(7)
+    m = 12 + rng.normal(0, 1.5, 150)
+    m[rng.choice(150, 20, replace=False)] = np.nan
+    site = np.repeat([0, 1, 0], [60, 50, 40])
+    ref = np.empty(150)
+    for s in (0, 1):
+        idx = np.flatnonzero(site == s)
+        for j, k in enumerate(idx):
+            ref[k] = np.nanmedian(m[idx][max(0, j - 4):j + 5]) - m[k]
+    h = glint_height(SimpleNamespace(truth_mag=m, site=site))
+    np.testing.assert_array_equal(np.isnan(h), np.isnan(ref))
+    np.testing.assert_allclose(h[~np.isnan(h)], ref[~np.isnan(ref)], rtol=0, atol=1e-12)
