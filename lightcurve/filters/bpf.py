@@ -70,14 +70,13 @@ from ..memory import check_allocation
 from ..threads import limited_threads
 from . import _bpf_kernels as BK
 from ._common import GRP_A, GRP_F, FilterProblem, Recorder, attach_bias, psd_sqrt
-from .config import ConfigBase, register_filter_config
+from .config import VARIANTS, ConfigBase, register_filter_config
 from .gating import InnovationGate
 from .result import Estimate, FLAG_COLLAPSE, FLAG_NAN, FLAG_RESAMPLED
 
 __all__ = ["BPFConfig", "run_bpf", "run_bpf_numpy", "VARIANTS", "REJUVENATIONS", "RESAMPLERS",
            "TEMPER_SOLVERS"]
 
-VARIANTS = ("robust", "thesis")
 RESAMPLERS = ("systematic", "multinomial")
 REJUVENATIONS = ("auto", "joint", "separate", "table7.9", "none")
 RNGS = ("philox", "numpy")
@@ -159,9 +158,6 @@ class BPFConfig(ConfigBase):
     device: str = "cpu"
 
     def __post_init__(self):
-        if self.variant not in VARIANTS:
-            raise InputError(f"variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}",
-                             field="variant")
         self._fill_variant_defaults()
         n = self.particles
         if isinstance(n, bool) or int(n) != n or n < 2:

@@ -98,8 +98,10 @@ class ConfigBase:
     VARIANT_DEFAULTS: ClassVar[dict] = {}
 
     def _fill_variant_defaults(self):
-        """Set every field of :attr:`VARIANT_DEFAULTS` left None to the default of
-        ``self.variant`` (call from ``__post_init__`` after validating ``variant``)."""
+        """Check ``self.variant`` (InputError naming the allowed variants) and set every field
+        of :attr:`VARIANT_DEFAULTS` left None to that variant's default (call first in
+        ``__post_init__``)."""
+        _choice("variant", self.variant, VARIANTS)
         for k, v in self.VARIANT_DEFAULTS.get(self.variant, {}).items():
             if getattr(self, k) is None:
                 object.__setattr__(self, k, v)
@@ -317,7 +319,6 @@ class UKFConfig(ConfigBase):
     variant: str = "robust"
 
     def __post_init__(self):
-        _choice("variant", self.variant, VARIANTS)
         self._fill_variant_defaults()
         object.__setattr__(self, "alpha", _num("alpha", self.alpha, lo=0.0, lo_open=True))
         object.__setattr__(self, "beta", _num("beta", self.beta))

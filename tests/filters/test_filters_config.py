@@ -218,3 +218,17 @@ alpha = 0.5
     f.write_text(f.read_text().replace("roughening = 0.1", "roughening = -1.0"))
     with pytest.raises(InputError, match="filters.bpf.roughening"):
         load_study(f)
+
+
+@pytest.mark.parametrize("cls", ["MEKFConfig", "UKFConfig", "BPFConfig"])
+def test_an_unknown_variant_is_one_error_naming_the_field_value_and_allowed_variants(cls):
+    """Every filter configuration refuses a variant other than robust / thesis with the same
+    InputError (field, value, allowed), before any variant default is filled in."""
+    from lightcurve.filters import config as C
+    from lightcurve.filters.bpf import BPFConfig
+
+    klass = BPFConfig if cls == "BPFConfig" else getattr(C, cls)
+    with pytest.raises(InputError) as exc:
+        klass(variant="thesys")
+    assert (exc.value.field, exc.value.value) == ("variant", "thesys")
+    assert exc.value.allowed == "robust, thesis"
