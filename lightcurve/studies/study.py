@@ -87,6 +87,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..filters.config import VARIANTS
 from ..filters.reflection import REFLECTION_CHOICES as _FILTER_REFLECTION_CHOICES
 from ..io.tomlio import Section, load_toml
 
@@ -471,7 +472,7 @@ def load_study(path, library_dirs=None, site_dirs=None) -> Study:
     if o.has("acs_mode"):
         opts["acs_mode"] = o.str("acs_mode", choices=("random_walk", "jitter"))
     if o.has("variant"):
-        opts["variant"] = o.str("variant", choices=("robust", "thesis"))
+        opts["variant"] = o.str("variant", choices=VARIANTS)
     if o.has("cook_torrance"):
         opts["cook_torrance"] = o.str("cook_torrance", choices=("physical", "thesis"))
     if o.has("gate"):
