@@ -1389,11 +1389,6 @@ def _read_benchmark_json(path, benchmark: str) -> dict:
     return kf
 
 
-def _read_reflection_kf(path) -> dict:
-    """The JSON line printed by ``benchmarks/reflection_kf.py``, read from ``path``."""
-    return _read_benchmark_json(path, "reflection_kf")
-
-
 def _rows_of(rows, data, files, benchmark: str) -> list:
     """``rows(data)``; a missing or malformed field of the benchmark output read from ``files``
     becomes one InputError naming them (instead of a traceback)."""
@@ -1458,7 +1453,7 @@ def bernard_section(study_dirs=(), reflection_kf_json=None, *, summaries=None,
     paths = [reflection_kf_json] if isinstance(reflection_kf_json, (str, Path)) \
         else list(reflection_kf_json or [])
     # reproduction first: the thesis variant's rows before the robust variant's
-    kfs = sorted((_read_reflection_kf(p) for p in paths),
+    kfs = sorted((_read_benchmark_json(p, "reflection_kf") for p in paths),
                  key=lambda k: k.get("variant", "robust") != "thesis")
     sp = None if spikes_json is None else _read_benchmark_json(spikes_json, "bernard_spikes")
     spike_rows = _rows_of(_spike_rows, sp, spikes_json, "bernard_spikes")
